@@ -1,0 +1,10 @@
+"""acscal: calibration of articulated camera systems."""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("acscal")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]

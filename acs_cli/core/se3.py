@@ -1,0 +1,199 @@
+"""Rigid transforms, rotations and their conversions (pure numpy/scipy).
+
+Conventions (see ``docs/conventions.md``):
+
+- ``T_a_b`` is a 4x4 homogeneous transform mapping points from frame ``b`` into frame
+  ``a``: ``p_a = T_a_b @ p_b``; so ``T_a_c = T_a_b @ T_b_c``.
+- Stacks of transforms have shape ``(n, 4, 4)``, of rotations ``(n, 3, 3)``.
+- Quaternions are ``(x, y, z, w)`` (TUM and scipy order), unit norm.
+- Roll, pitch and yaw (degrees) follow ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
+- Rotation perturbations are applied on the right (body frame): ``R @ Exp(theta)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from acs_cli.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+#: Largest ``|R^T R - I|`` entry accepted as a rotation matrix.
+ORTHONORMAL_TOL = 1e-6
+
+
+def check_vectors(v: ArrayLike, name: str = "vectors", dim: int = 3) -> FloatArray:
+    """Validate a stack of vectors of shape ``(n, dim)`` (a single ``(dim,)`` is promoted)."""
+    arr = np.asarray(v, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise InputError(f"{name} must have shape (n, {dim}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    return arr
+
+
+def check_rotations(R: ArrayLike, name: str = "rotations", tol: float = ORTHONORMAL_TOL) -> FloatArray:
+    """Validate a stack of rotation matrices of shape ``(n, 3, 3)``.
+
+    Raises
+    ------
+    InputError
+        If the shape is wrong, a value is not finite, or a matrix is not a proper rotation.
+    """
+    arr = np.asarray(R, dtype=float)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (3, 3):
+        raise InputError(f"{name} must have shape (n, 3, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    err = np.abs(np.einsum("nji,njk->nik", arr, arr) - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero((err > tol) | (np.linalg.det(arr) <= 0))
+    if bad.size:
+        raise InputError(
+            f"{name}[{bad[0]}] is not a rotation matrix (|R^T R - I| = {err[bad[0]]:.2e}, "
+            f"{bad.size} such)"
+        )
+    return arr
+
+
+def check_transforms(T: ArrayLike, name: str = "transforms", tol: float = ORTHONORMAL_TOL) -> FloatArray:
+    """Validate a stack of rigid transforms of shape ``(n, 4, 4)``."""
+    arr = np.asarray(T, dtype=float)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (4, 4):
+        raise InputError(f"{name} must have shape (n, 4, 4), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    if np.abs(arr[:, 3, :] - [0.0, 0.0, 0.0, 1.0]).max(initial=0.0) > tol:
+        raise InputError(f"{name} must have a last row of [0, 0, 0, 1]")
+    check_rotations(arr[:, :3, :3], name=f"{name} rotation", tol=tol)
+    return arr
+
+
+def skew(v: ArrayLike) -> FloatArray:
+    """Cross-product matrices ``[v]x`` of shape ``(n, 3, 3)`` (or ``(3, 3)`` for one vector)."""
+    arr = np.asarray(v, dtype=float)
+    single = arr.ndim == 1
+    arr = np.atleast_2d(arr)
+    out = np.zeros((arr.shape[0], 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -arr[:, 2], arr[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = arr[:, 2], -arr[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -arr[:, 1], arr[:, 0]
+    return out[0] if single else out
+
+
+def transforms_from_rt(R: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Stack rotations ``(n, 3, 3)`` and translations ``(n, 3)`` into ``(n, 4, 4)``."""
+    R_arr = np.asarray(R, dtype=float)
+    t_arr = np.asarray(t, dtype=float)
+    single = R_arr.ndim == 2
+    R_arr = R_arr.reshape(-1, 3, 3)
+    t_arr = t_arr.reshape(-1, 3)
+    if R_arr.shape[0] != t_arr.shape[0]:
+        raise InputError(f"got {R_arr.shape[0]} rotations but {t_arr.shape[0]} translations")
+    T = np.zeros((R_arr.shape[0], 4, 4))
+    T[:, :3, :3] = R_arr
+    T[:, :3, 3] = t_arr
+    T[:, 3, 3] = 1.0
+    return T[0] if single else T
+
+
+def invert_transforms(T: ArrayLike) -> FloatArray:
+    """Inverse of rigid transforms: ``T_b_a`` from ``T_a_b``; shape ``(n, 4, 4)`` or ``(4, 4)``."""
+    arr = np.asarray(T, dtype=float)
+    Rt = np.swapaxes(arr[..., :3, :3], -1, -2)
+    out = np.zeros_like(arr)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, arr[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def transform_points(T: ArrayLike, p: ArrayLike) -> FloatArray:
+    """Apply transforms ``(n, 4, 4)`` to points ``(n, 3)`` (or one point to all), giving ``(n, 3)``."""
+    arr = np.asarray(T, dtype=float)
+    pts = np.asarray(p, dtype=float)
+    return np.einsum("...ij,...j->...i", arr[..., :3, :3], pts) + arr[..., :3, 3]
+
+
+def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
+    """``Exp``: rotation vectors (axis times angle, radians) ``(n, 3)`` to matrices ``(n, 3, 3)``."""
+    arr = np.asarray(rotvec, dtype=float)
+    return np.asarray(Rotation.from_rotvec(arr.reshape(-1, 3)).as_matrix()).reshape(*arr.shape[:-1], 3, 3)
+
+
+def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
+    """``Log``: rotation matrices ``(n, 3, 3)`` to rotation vectors (radians) ``(n, 3)``."""
+    arr = np.asarray(R, dtype=float)
+    return np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_rotvec()).reshape(*arr.shape[:-2], 3)
+
+
+def quat_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
+    """Unit quaternions ``(x, y, z, w)`` with ``w >= 0`` from rotation matrices ``(n, 3, 3)``."""
+    arr = np.asarray(R, dtype=float)
+    q = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_quat())
+    q = np.where(q[:, 3:4] < 0, -q, q)
+    return q.reshape(*arr.shape[:-2], 4)
+
+
+def matrix_from_quat_xyzw(q: ArrayLike, tol: float = 1e-3) -> FloatArray:
+    """Rotation matrices ``(n, 3, 3)`` from unit quaternions ``(x, y, z, w)`` of shape ``(n, 4)``.
+
+    Raises
+    ------
+    InputError
+        If a quaternion is not finite or its norm differs from 1 by more than ``tol``.
+    """
+    arr = check_vectors(q, "quaternions", dim=4)
+    norm = np.linalg.norm(arr, axis=1)
+    bad = np.flatnonzero(np.abs(norm - 1.0) > tol)
+    if bad.size:
+        raise InputError(f"quaternion {bad[0]} has norm {norm[bad[0]]:.6f}, not 1 ({bad.size} such)")
+    return np.asarray(Rotation.from_quat(arr / norm[:, None]).as_matrix())
+
+
+def rpy_deg_from_matrix(R: ArrayLike) -> FloatArray:
+    """Roll, pitch, yaw in degrees with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``."""
+    arr = np.asarray(R, dtype=float)
+    ypr = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True))
+    return ypr[:, ::-1].reshape(*arr.shape[:-2], 3)
+
+
+def matrix_from_rpy_deg(rpy: ArrayLike) -> FloatArray:
+    """Inverse of :func:`rpy_deg_from_matrix`: ``(n, 3)`` roll, pitch, yaw (deg) to ``(n, 3, 3)``."""
+    arr = np.asarray(rpy, dtype=float)
+    flat = arr.reshape(-1, 3)[:, ::-1]
+    return np.asarray(Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()).reshape(*arr.shape[:-1], 3, 3)
+
+
+def project_to_rotation(M: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Nearest rotation (Frobenius) to 3x3 matrices ``M`` and their singular values.
+
+    Zhang's appendix C: with ``M = U D V^T``, ``R = U V^T`` (a reflection is flipped into a
+    rotation by negating the last singular direction).
+
+    Returns
+    -------
+    R : ndarray, shape (..., 3, 3)
+    singular_values : ndarray, shape (..., 3)
+    """
+    arr = np.asarray(M, dtype=float)
+    U, s, Vt = np.linalg.svd(arr)
+    d = np.sign(np.linalg.det(U @ Vt))
+    D = np.ones(arr.shape[:-2] + (3,))
+    D[..., 2] = d
+    R = np.einsum("...ij,...j,...jk->...ik", U, D, Vt)
+    return R, s
+
+
+def rotation_angle_deg(R: ArrayLike) -> FloatArray:
+    """Rotation angle in degrees of each matrix in ``(n, 3, 3)``."""
+    arr = np.asarray(R, dtype=float)
+    c = (np.trace(arr, axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))

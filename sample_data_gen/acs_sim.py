@@ -1,0 +1,211 @@
+"""Synthetic articulated camera systems and their trajectories (the paper's section 5).
+
+A two-camera rig: camera A and camera B on two bodies joined at a joint O. The joint is at
+``o_a`` in A's frame and ``o_b`` in B's frame (both constant). An articulation is a rotation
+``Q`` about the joint, expressed in A's frame, so that for a point ``p_b`` of B's frame
+
+    p_a = o_a + Q @ R0 @ (p_b - o_b)
+
+i.e. ``T_a_b(Q) = [Q R0, o_a - Q R0 o_b]``. A hinge restricts ``Q`` to rotations about one
+axis. Sequences are written as ``T_world_cam`` stacks (``(n, 4, 4)``), as in TUM files.
+
+Noise model: each pose ``T_world_cam = [R, t]`` becomes ``[R Exp(n_r), t + n_t]`` with
+``n_r ~ N(0, sigma_rot^2 I)`` (radians, per axis, body frame) and ``n_t ~ N(0, sigma_trans^2 I)``
+(metres). Unknown scale: translations in the written file are ``mu * (t + n_t)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from acs_cli.core import se3
+
+FloatArray = se3.FloatArray
+
+
+def random_unit_vectors(rng: np.random.Generator, n: int) -> FloatArray:
+    """``(n, 3)`` directions uniform on the sphere."""
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def random_rotations(rng: np.random.Generator, n: int, max_angle_deg: float = 180.0) -> FloatArray:
+    """``(n, 3, 3)`` rotations about uniform axes with angles uniform in ``[0, max_angle_deg]``."""
+    angles = np.radians(rng.uniform(0.0, max_angle_deg, size=n))
+    return se3.matrix_from_rotvec(random_unit_vectors(rng, n) * angles[:, None])
+
+
+def random_transform(rng: np.random.Generator, translation_scale: float = 5.0) -> FloatArray:
+    """One random rigid transform ``(4, 4)``: any rotation, translation in a cube."""
+    R = random_rotations(rng, 1)[0]
+    t = rng.uniform(-translation_scale, translation_scale, size=3)
+    return se3.transforms_from_rt(R, t)
+
+
+@dataclass(frozen=True)
+class SyntheticRig:
+    """Ground truth of a two-camera ACS.
+
+    Attributes
+    ----------
+    o_a, o_b : ndarray, shape (3,)
+        The joint in camera A's and camera B's frame (metres).
+    R0 : ndarray, shape (3, 3)
+        Relative rotation ``R_a_b`` at zero articulation.
+    hinge_axis_a : ndarray of shape (3,) or None
+        Unit hinge axis in A's frame; ``None`` for a ball (3-DOF) joint.
+    """
+
+    o_a: FloatArray
+    o_b: FloatArray
+    R0: FloatArray
+    hinge_axis_a: FloatArray | None = None
+
+    def T_a_b(self, Q: FloatArray) -> FloatArray:
+        """``(n, 4, 4)`` relative poses ``T_a_b`` for articulations ``Q`` ``(n, 3, 3)``."""
+        R = Q @ self.R0
+        t = self.o_a - np.einsum("nij,j->ni", R, self.o_b)
+        return se3.transforms_from_rt(R, t)
+
+    def articulations(self, rng: np.random.Generator, n: int, max_angle_deg: float) -> FloatArray:
+        """``(n, 3, 3)`` random articulations: ball joint or hinge about ``hinge_axis_a``."""
+        if self.hinge_axis_a is None:
+            return random_rotations(rng, n, max_angle_deg)
+        angles = np.radians(rng.uniform(-max_angle_deg, max_angle_deg, size=n))
+        return se3.matrix_from_rotvec(angles[:, None] * self.hinge_axis_a)
+
+
+def make_rig(
+    rng: np.random.Generator,
+    joint_range: tuple[float, float] = (1.0, 2.0),
+    hinge: bool = False,
+) -> SyntheticRig:
+    """A random rig with ``|o_a|, |o_b|`` uniform in ``joint_range`` (metres), as in section 5."""
+    dirs = random_unit_vectors(rng, 2)
+    norms = rng.uniform(*joint_range, size=2)
+    axis = random_unit_vectors(rng, 1)[0] if hinge else None
+    return SyntheticRig(
+        o_a=dirs[0] * norms[0],
+        o_b=dirs[1] * norms[1],
+        R0=random_rotations(rng, 1)[0],
+        hinge_axis_a=axis,
+    )
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """True trajectories of the two cameras of a rig (``T_world_cam``, metres).
+
+    ``T_wa_a`` is expressed in world A, ``T_wb_b`` in world B; ``T_wb_wa`` maps world A
+    to world B (the identity when both cameras see one shared world, as with overlap).
+    ``joint_in_world_a`` is the joint's fixed world position for fixed-joint sequences.
+    """
+
+    kind: str
+    T_wa_a: FloatArray
+    T_wb_b: FloatArray
+    T_wb_wa: FloatArray
+    T_a_b: FloatArray
+    joint_in_world_a: FloatArray | None = None
+    timestamps: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n(self) -> int:
+        return int(self.T_wa_a.shape[0])
+
+    def T_b_a(self, reference: int = 0) -> FloatArray:
+        """True ``T_b_a`` at frame ``reference`` (the paper's ``H_BA``)."""
+        return se3.invert_transforms(self.T_a_b[reference])
+
+
+def _finish(
+    kind: str,
+    rng: np.random.Generator,
+    T_w_a: FloatArray,
+    T_a_b: FloatArray,
+    shared_world: bool,
+    joint_w: FloatArray | None = None,
+    fps: float = 10.0,
+) -> Sequence:
+    T_w_b = T_w_a @ T_a_b
+    T_wa_w = np.eye(4) if shared_world else random_transform(rng)
+    T_wb_w = T_wa_w if shared_world else random_transform(rng)
+    T_wb_wa = T_wb_w @ se3.invert_transforms(T_wa_w)
+    n = T_w_a.shape[0]
+    joint_wa = None if joint_w is None else se3.transform_points(T_wa_w, joint_w)
+    return Sequence(
+        kind=kind,
+        T_wa_a=T_wa_w @ T_w_a,
+        T_wb_b=T_wb_w @ T_w_b,
+        T_wb_wa=T_wb_wa,
+        T_a_b=T_a_b,
+        joint_in_world_a=joint_wa,
+        timestamps=np.arange(n) / fps,
+    )
+
+
+def general_sequence(
+    rng: np.random.Generator,
+    rig: SyntheticRig,
+    n: int = 30,
+    *,
+    max_rotation_deg: float = 90.0,
+    max_articulation_deg: float = 60.0,
+    translation_range: float = 1.5,
+    shared_world: bool = False,
+) -> Sequence:
+    """General motion: camera A moves freely, the joint articulates at random.
+
+    With ``shared_world`` both trajectories are in one world (the overlap scenario of
+    Algorithm I); otherwise each is in its own random world (Algorithms III and IV).
+    """
+    R = random_rotations(rng, n, max_rotation_deg)
+    t = rng.uniform(-translation_range, translation_range, size=(n, 3))
+    T_w_a = se3.transforms_from_rt(R, t)
+    T_a_b = rig.T_a_b(rig.articulations(rng, n, max_articulation_deg))
+    return _finish("overlap" if shared_world else "general", rng, T_w_a, T_a_b, shared_world)
+
+
+def fixed_joint_sequence(
+    rng: np.random.Generator,
+    rig: SyntheticRig,
+    n: int = 30,
+    *,
+    max_rotation_deg: float = 60.0,
+    max_articulation_deg: float = 60.0,
+) -> Sequence:
+    """Fixed-joint motion (Algorithm II): the joint stays at one world point.
+
+    Camera A rotates about the joint; the rig articulates, so B rotates about it too.
+    Each trajectory is expressed in its own world.
+    """
+    joint_w = rng.uniform(-1.0, 1.0, size=3)
+    R = random_rotations(rng, n, max_rotation_deg)
+    t = joint_w - np.einsum("nij,j->ni", R, rig.o_a)
+    T_w_a = se3.transforms_from_rt(R, t)
+    T_a_b = rig.T_a_b(rig.articulations(rng, n, max_articulation_deg))
+    return _finish("fixed_joint", rng, T_w_a, T_a_b, shared_world=False, joint_w=joint_w)
+
+
+def add_pose_noise(
+    rng: np.random.Generator,
+    T_world_cam: FloatArray,
+    sigma_rot_deg: float,
+    sigma_trans: float,
+) -> FloatArray:
+    """Noisy copies of poses ``(n, 4, 4)``: ``[R Exp(n_r), t + n_t]`` (see module doc)."""
+    n = T_world_cam.shape[0]
+    dR = se3.matrix_from_rotvec(rng.normal(scale=np.radians(sigma_rot_deg), size=(n, 3)))
+    out = T_world_cam.copy()
+    out[:, :3, :3] = T_world_cam[:, :3, :3] @ dR
+    out[:, :3, 3] += rng.normal(scale=sigma_trans, size=(n, 3))
+    return out
+
+
+def scale_translations(T_world_cam: FloatArray, mu: float) -> FloatArray:
+    """Poses with translations multiplied by ``mu`` (a monocular SLAM's unknown scale)."""
+    out = T_world_cam.copy()
+    out[:, :3, 3] *= mu
+    return out
