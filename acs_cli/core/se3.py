@@ -12,13 +12,15 @@ Conventions (see ``docs/conventions.md``):
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from acs_cli.errors import InputError
 
-FloatArray = NDArray[np.float64]
+FloatArray = NDArray[np.floating[Any]]
 
 #: Largest ``|R^T R - I|`` entry accepted as a rotation matrix.
 ORTHONORMAL_TOL = 1e-6
@@ -36,7 +38,9 @@ def check_vectors(v: ArrayLike, name: str = "vectors", dim: int = 3) -> FloatArr
     return arr
 
 
-def check_rotations(R: ArrayLike, name: str = "rotations", tol: float = ORTHONORMAL_TOL) -> FloatArray:
+def check_rotations(
+    R: ArrayLike, name: str = "rotations", tol: float = ORTHONORMAL_TOL
+) -> FloatArray:
     """Validate a stack of rotation matrices of shape ``(n, 3, 3)``.
 
     Raises
@@ -61,7 +65,9 @@ def check_rotations(R: ArrayLike, name: str = "rotations", tol: float = ORTHONOR
     return arr
 
 
-def check_transforms(T: ArrayLike, name: str = "transforms", tol: float = ORTHONORMAL_TOL) -> FloatArray:
+def check_transforms(
+    T: ArrayLike, name: str = "transforms", tol: float = ORTHONORMAL_TOL
+) -> FloatArray:
     """Validate a stack of rigid transforms of shape ``(n, 4, 4)``."""
     arr = np.asarray(T, dtype=float)
     if arr.ndim == 2:
@@ -86,6 +92,21 @@ def skew(v: ArrayLike) -> FloatArray:
     out[:, 1, 0], out[:, 1, 2] = arr[:, 2], -arr[:, 0]
     out[:, 2, 0], out[:, 2, 1] = -arr[:, 1], arr[:, 0]
     return out[0] if single else out
+
+
+def rotate(R: ArrayLike, v: ArrayLike) -> FloatArray:
+    """``R_i @ v`` for a stack ``R`` ``(n, 3, 3)`` and one vector ``v`` ``(3,)``: ``(n, 3)``."""
+    arr = np.asarray(R, dtype=float)
+    return np.asarray((arr.reshape(-1, 3) @ np.asarray(v, dtype=float)).reshape(-1, 3))
+
+
+def left_multiply(A: ArrayLike, M: ArrayLike) -> FloatArray:
+    """``A @ M_i`` for one ``A`` ``(3, 3)`` and a stack ``M`` ``(n, 3, k)``: ``(n, 3, k)``."""
+    return np.asarray(
+        np.tensordot(
+            np.asarray(M, dtype=float), np.asarray(A, dtype=float), axes=([1], [1])
+        ).transpose(0, 2, 1)
+    )
 
 
 def transforms_from_rt(R: ArrayLike, t: ArrayLike) -> FloatArray:
@@ -116,22 +137,26 @@ def invert_transforms(T: ArrayLike) -> FloatArray:
 
 
 def transform_points(T: ArrayLike, p: ArrayLike) -> FloatArray:
-    """Apply transforms ``(n, 4, 4)`` to points ``(n, 3)`` (or one point to all), giving ``(n, 3)``."""
+    """Apply transforms ``(n, 4, 4)`` to points ``(n, 3)`` (or one point to all): ``(n, 3)``."""
     arr = np.asarray(T, dtype=float)
     pts = np.asarray(p, dtype=float)
     return np.einsum("...ij,...j->...i", arr[..., :3, :3], pts) + arr[..., :3, 3]
 
 
 def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
-    """``Exp``: rotation vectors (axis times angle, radians) ``(n, 3)`` to matrices ``(n, 3, 3)``."""
+    """``Exp``: rotation vectors (axis x angle, radians) ``(n, 3)`` to matrices ``(n, 3, 3)``."""
     arr = np.asarray(rotvec, dtype=float)
-    return np.asarray(Rotation.from_rotvec(arr.reshape(-1, 3)).as_matrix()).reshape(*arr.shape[:-1], 3, 3)
+    return np.asarray(Rotation.from_rotvec(arr.reshape(-1, 3)).as_matrix()).reshape(
+        *arr.shape[:-1], 3, 3
+    )
 
 
 def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
     """``Log``: rotation matrices ``(n, 3, 3)`` to rotation vectors (radians) ``(n, 3)``."""
     arr = np.asarray(R, dtype=float)
-    return np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_rotvec()).reshape(*arr.shape[:-2], 3)
+    return np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_rotvec()).reshape(
+        *arr.shape[:-2], 3
+    )
 
 
 def quat_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
@@ -154,22 +179,26 @@ def matrix_from_quat_xyzw(q: ArrayLike, tol: float = 1e-3) -> FloatArray:
     norm = np.linalg.norm(arr, axis=1)
     bad = np.flatnonzero(np.abs(norm - 1.0) > tol)
     if bad.size:
-        raise InputError(f"quaternion {bad[0]} has norm {norm[bad[0]]:.6f}, not 1 ({bad.size} such)")
+        raise InputError(
+            f"quaternion {bad[0]} has norm {norm[bad[0]]:.6f}, not 1 ({bad.size} such)"
+        )
     return np.asarray(Rotation.from_quat(arr / norm[:, None]).as_matrix())
 
 
 def rpy_deg_from_matrix(R: ArrayLike) -> FloatArray:
-    """Roll, pitch, yaw in degrees with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``."""
+    """Roll, pitch, yaw (deg) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``."""
     arr = np.asarray(R, dtype=float)
     ypr = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True))
     return ypr[:, ::-1].reshape(*arr.shape[:-2], 3)
 
 
 def matrix_from_rpy_deg(rpy: ArrayLike) -> FloatArray:
-    """Inverse of :func:`rpy_deg_from_matrix`: ``(n, 3)`` roll, pitch, yaw (deg) to ``(n, 3, 3)``."""
+    """Inverse of :func:`rpy_deg_from_matrix`: roll, pitch, yaw (deg) to rotation matrices."""
     arr = np.asarray(rpy, dtype=float)
     flat = arr.reshape(-1, 3)[:, ::-1]
-    return np.asarray(Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()).reshape(*arr.shape[:-1], 3, 3)
+    return np.asarray(Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()).reshape(
+        *arr.shape[:-1], 3, 3
+    )
 
 
 def project_to_rotation(M: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -186,7 +215,7 @@ def project_to_rotation(M: ArrayLike) -> tuple[FloatArray, FloatArray]:
     arr = np.asarray(M, dtype=float)
     U, s, Vt = np.linalg.svd(arr)
     d = np.sign(np.linalg.det(U @ Vt))
-    D = np.ones(arr.shape[:-2] + (3,))
+    D = np.ones((*arr.shape[:-2], 3))
     D[..., 2] = d
     R = np.einsum("...ij,...j,...jk->...ik", U, D, Vt)
     return R, s

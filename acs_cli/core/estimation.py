@@ -1,0 +1,330 @@
+"""Weighted least squares with estimated noise levels, shared by every refined estimator.
+
+Each refined estimator stacks one 3-vector residual a frame, ``r_i`` (``(n, 3)``), whose
+covariance is modelled with two unknown variance components
+
+    Sigma_i = theta_t I + theta_r L_i
+
+``theta_t`` for translation noise and ``theta_r`` for rotation noise seen through a lever
+arm, e.g. ``L_i = R_i [o]x [o]x^T R_i^T`` for a joint at ``o``. Frames are weighted by
+``Sigma_i^{-1}``; the variance components are estimated from the residuals by maximum
+likelihood. The solver is Levenberg-Marquardt over a small parameter vector with analytic
+Jacobians ``(n, 3, p)``; all per-frame work is batched (no Python loop over frames).
+
+Gross outliers are rejected: after convergence, frames whose Mahalanobis distance
+``r_i^T Sigma_i^{-1} r_i`` exceeds the chi-square(3) quantile with tail probability
+``OUTLIER_ALPHA / n`` (so that a clean recording of any length loses a frame with
+probability about ``OUTLIER_ALPHA``) are dropped and the fit repeated, at most
+``MAX_OUTLIER_FRACTION`` of the frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from acs_cli.core.se3 import FloatArray
+
+NDArrayBool = np.ndarray
+
+#: Chance that a clean recording loses one frame to outlier rejection (see module doc).
+OUTLIER_ALPHA = 0.01
+#: Largest share of frames that may be rejected as outliers.
+MAX_OUTLIER_FRACTION = 0.3
+#: Variance components are kept above this fraction of the largest one (numerical floor).
+_VARIANCE_FLOOR = 1e-8
+
+
+def batched_inv3(S: FloatArray) -> FloatArray:
+    """Inverses of ``(n, 3, 3)`` matrices by cofactors (fast for large ``n``)."""
+    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 0, 2]
+    d, e, f = S[:, 1, 0], S[:, 1, 1], S[:, 1, 2]
+    g, h, i = S[:, 2, 0], S[:, 2, 1], S[:, 2, 2]
+    A = e * i - f * h
+    B = -(d * i - f * g)
+    Cc = d * h - e * g
+    det = a * A + b * B + c * Cc
+    out = np.empty_like(S)
+    out[:, 0, 0], out[:, 1, 0], out[:, 2, 0] = A, B, Cc
+    out[:, 0, 1] = -(b * i - c * h)
+    out[:, 1, 1] = a * i - c * g
+    out[:, 2, 1] = -(a * h - b * g)
+    out[:, 0, 2] = b * f - c * e
+    out[:, 1, 2] = -(a * f - c * d)
+    out[:, 2, 2] = a * e - b * d
+    return out / det[:, None, None]
+
+
+def normal_equations(r: FloatArray, J: FloatArray, W: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``H = sum J_i^T W_i J_i`` ``(p, p)`` and ``g = sum J_i^T W_i r_i`` ``(p,)``."""
+    p = J.shape[2]
+    WJ = np.matmul(W, J).reshape(-1, p)
+    Jf = J.reshape(-1, p)
+    return Jf.T @ WJ, WJ.T @ r.reshape(-1)
+
+
+def mahalanobis_sq(r: FloatArray, W: FloatArray) -> FloatArray:
+    """``r_i^T W_i r_i`` for ``r`` ``(n, 3)`` and ``W`` ``(n, 3, 3)``."""
+    return np.einsum("na,na->n", np.einsum("nab,nb->na", W, r), r)
+
+
+def covariances(theta: FloatArray, L: FloatArray) -> FloatArray:
+    """``Sigma_i = theta_t I + theta_r L_i`` ``(n, 3, 3)`` from lever shapes ``L`` ``(n, 3, 3)``."""
+    S = theta[1] * L
+    S[:, 0, 0] += theta[0]
+    S[:, 1, 1] += theta[0]
+    S[:, 2, 2] += theta[0]
+    return S
+
+
+def fit_variance_components(
+    r: FloatArray,
+    L: FloatArray,
+    n_params: int = 0,
+    theta0: FloatArray | None = None,
+    iterations: int = 50,
+) -> FloatArray:
+    """Maximum-likelihood noise levels ``theta = (theta_t, theta_r)`` by Fisher scoring.
+
+    The residual covariance is ``Sigma_i = theta_t I + theta_r L_i``: isotropic translation
+    noise plus rotation noise seen through a lever arm.
+
+    Parameters
+    ----------
+    r : ndarray, shape (n, 3)
+        Residuals.
+    L : ndarray, shape (n, 3, 3)
+        Lever shapes (covariance of the residual per unit rotation variance).
+    n_params : int
+        Parameters fitted to the same residuals; the estimate is scaled by
+        ``3n / (3n - n_params)`` to undo the usual downward bias of ML variances.
+    theta0 : ndarray, shape (2,), optional
+        Starting point (a previous estimate); equal shares of the residual power otherwise.
+
+    Returns
+    -------
+    theta : ndarray, shape (2,)
+        ``theta_t`` (units of ``r`` squared) and ``theta_r`` (radians squared).
+    """
+    n = r.shape[0]
+    dof = 3 * n
+    bias = dof / (dof - n_params) if dof > n_params else 1.0
+    ms = float(np.mean(np.sum(r * r, axis=1))) + 1e-300
+    if theta0 is None:
+        trL = float(np.trace(L, axis1=1, axis2=2).mean())
+        theta = np.array([ms / 6.0, ms / (2.0 * max(trL, 1e-300))])
+    else:
+        theta = np.maximum(np.asarray(theta0, dtype=float) / bias, 1e-300)
+        iterations = min(iterations, 3)  # warm start: the caller iterates anyway
+    for _ in range(iterations):
+        Si = batched_inv3(covariances(theta, L))
+        SiL = np.matmul(Si, L)
+        # Fisher information F_kl = sum_i tr(Si C_k Si C_l) with C_0 = I, C_1 = L
+        F = np.array(
+            [
+                [np.sum(Si * Si), np.sum(Si * np.swapaxes(SiL, 1, 2))],
+                [0.0, np.sum(SiL * np.swapaxes(SiL, 1, 2))],
+            ]
+        )
+        F[1, 0] = F[0, 1]
+        u = np.einsum("nab,nb->na", Si, r)
+        q = np.array([np.sum(u * u), np.einsum("na,nab,nb->", u, L, u)])
+        try:
+            new = np.linalg.solve(F, q)
+        except np.linalg.LinAlgError:
+            new = np.linalg.lstsq(F, q, rcond=None)[0]
+        floor = _VARIANCE_FLOOR * max(float(new.max()), ms * 1e-12)
+        new = np.maximum(new, floor)
+        done = np.max(np.abs(new - theta) / np.maximum(theta, 1e-300)) < 1e-4
+        theta = new
+        if done:
+            break
+    return np.asarray(theta * bias, dtype=float)
+
+
+@dataclass
+class LeastSquaresProblem:
+    """A refined estimator's problem, as callables of the parameter vector ``x`` ``(p,)``.
+
+    Attributes
+    ----------
+    residuals : (x, jac) -> (r (n, 3), J (n, 3, p) or None)
+        Per-frame residuals and, when ``jac`` is true, their Jacobian (all frames; the
+        solver masks).
+    noise_shapes : x -> L (n, 3, 3)
+        Lever shapes of the per-frame residuals: ``Sigma_i = theta_t I + theta_r L_i``.
+    priors : x -> (r_p (m,), J_p (m, p), W_p (m, m)), optional
+        Extra residual rows with a known information matrix (e.g. a joint from an
+        earlier calibration with its covariance).
+    retract : (x, dx) -> x, optional
+        How a step is applied (default ``x + dx``); rotations use ``R Exp(dx)``.
+    """
+
+    residuals: Callable[[FloatArray, bool], tuple[FloatArray, FloatArray | None]]
+    noise_shapes: Callable[[FloatArray], FloatArray]
+    priors: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]] | None = None
+    retract: Callable[[FloatArray, FloatArray], FloatArray] | None = None
+
+
+@dataclass
+class LeastSquaresResult:
+    """The solution of a :class:`LeastSquaresProblem`.
+
+    Attributes
+    ----------
+    x : ndarray, shape (p,)
+    covariance : ndarray, shape (p, p)
+        Inverse of the final information matrix (noise levels estimated).
+    theta : ndarray, shape (k,)
+        Estimated variance components.
+    residuals : ndarray, shape (n, 3)
+        Residuals of every frame at ``x`` (rejected frames included).
+    mahalanobis_sq : ndarray, shape (n,)
+        ``r_i^T Sigma_i^{-1} r_i`` of every frame.
+    inliers : ndarray of bool, shape (n,)
+    iterations : int
+    converged : bool
+    """
+
+    x: FloatArray
+    covariance: FloatArray
+    theta: FloatArray
+    residuals: FloatArray
+    mahalanobis_sq: FloatArray
+    inliers: NDArrayBool
+    iterations: int
+    converged: bool
+    information: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+def _rows(a: FloatArray, mask: NDArrayBool) -> FloatArray:
+    """``a[mask]`` without a copy when every frame is kept."""
+    return a if mask.all() else a[mask]
+
+
+def _cost(problem: LeastSquaresProblem, x: FloatArray, mask: NDArrayBool, W: FloatArray) -> float:
+    r, _ = problem.residuals(x, False)
+    c = float(np.sum(_rows(mahalanobis_sq(r, W), mask)))
+    if problem.priors is not None:
+        rp, _, Wp = problem.priors(x)
+        c += float(rp @ Wp @ rp)
+    return c
+
+
+def outlier_threshold(n: int) -> float:
+    """Squared Mahalanobis distance above which one of ``n`` frames is an outlier."""
+    return float(chi2.isf(OUTLIER_ALPHA / max(n, 1), 3))
+
+
+def solve(
+    problem: LeastSquaresProblem,
+    x0: FloatArray,
+    *,
+    theta: FloatArray | None = None,
+    reject_outliers: bool = True,
+    max_outer: int = 30,
+    max_rounds: int = 5,
+) -> LeastSquaresResult:
+    """Iteratively reweighted Levenberg-Marquardt with variance-component estimation.
+
+    Parameters
+    ----------
+    problem : LeastSquaresProblem
+    x0 : ndarray, shape (p,)
+        Initial parameters.
+    theta : ndarray, shape (k,), optional
+        Fixed variance components (known noise levels); estimated when ``None``.
+    reject_outliers : bool
+        Drop frames beyond :func:`outlier_threshold` and refit, at most ``max_rounds`` times.
+    """
+    retract = problem.retract or (lambda x, dx: x + dx)
+    x = np.asarray(x0, dtype=float).copy()
+    p = x.size
+    r, _ = problem.residuals(x, False)
+    n = r.shape[0]
+    mask = np.ones(n, dtype=bool)
+    fixed_theta = theta is not None
+    th = np.asarray(theta, dtype=float) if theta is not None else None
+    lam = 1e-6
+    it = 0
+    converged = False
+    max_reject = int(np.floor(MAX_OUTLIER_FRACTION * n))
+    threshold = outlier_threshold(n)
+
+    def weights(x: FloatArray, th: FloatArray | None) -> tuple[FloatArray, FloatArray]:
+        L = problem.noise_shapes(x)
+        if not fixed_theta:
+            r, _ = problem.residuals(x, False)
+            th = fit_variance_components(_rows(r, mask), _rows(L, mask), p, th)
+        assert th is not None  # for mypy: fixed or just fitted
+        return th, batched_inv3(covariances(th, L))
+
+    for _round in range(max_rounds + 1):
+        th, W = weights(x, th)
+        converged = False
+        for _outer in range(max_outer):
+            it += 1
+            cost = _cost(problem, x, mask, W)
+            x_start = x.copy()
+            for _inner in range(10):
+                r, J = problem.residuals(x, True)
+                assert J is not None  # for mypy: asked for
+                H, g = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
+                if problem.priors is not None:
+                    rp, Jp, Wp = problem.priors(x)
+                    H = H + Jp.T @ Wp @ Jp
+                    g = g + Jp.T @ Wp @ rp
+                accepted = False
+                for _try in range(20):
+                    A = H + lam * np.diag(np.diag(H) + 1e-12)
+                    try:
+                        dx = -np.linalg.solve(A, g)
+                    except np.linalg.LinAlgError:
+                        dx = -np.linalg.lstsq(A, g, rcond=None)[0]
+                    x_new = retract(x, dx)
+                    cost_new = _cost(problem, x_new, mask, W)
+                    if cost_new <= cost:
+                        x, cost, accepted = x_new, cost_new, True
+                        lam = max(lam / 10.0, 1e-12)
+                        break
+                    lam *= 10.0
+                if not accepted or np.linalg.norm(dx) < 1e-10 * (1.0 + np.linalg.norm(x)):
+                    break
+            th_old = th
+            th, W = weights(x, th)
+            moved = float(np.linalg.norm(x - x_start)) / (1.0 + float(np.linalg.norm(x)))
+            change = float(np.max(np.abs(th - th_old) / np.maximum(th_old, 1e-300)))
+            if moved < 1e-8 and change < 1e-3:
+                converged = True
+                break
+        if not reject_outliers:
+            break
+        r, _ = problem.residuals(x, False)
+        d2 = mahalanobis_sq(r, W)
+        room = max_reject - int((~mask).sum())
+        candidates = np.flatnonzero(mask & (d2 > threshold))
+        if candidates.size == 0 or room <= 0:
+            break
+        worst = candidates[np.argsort(d2[candidates])[::-1][:room]]
+        mask[worst] = False
+    r, J = problem.residuals(x, True)
+    assert J is not None  # for mypy: asked for
+    H, _ = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
+    if problem.priors is not None:
+        _, Jp, Wp = problem.priors(x)
+        H = H + Jp.T @ Wp @ Jp
+    cov = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
+    return LeastSquaresResult(
+        x=x,
+        covariance=cov,
+        theta=np.asarray(th, dtype=float),
+        residuals=r,
+        mahalanobis_sq=mahalanobis_sq(r, W),
+        inliers=mask,
+        iterations=it,
+        converged=converged,
+        information=H,
+    )

@@ -1,0 +1,345 @@
+"""Joint position from camera trajectories: the paper's Algorithms I and II, and ours.
+
+Algorithm II (fixed joint, section 3.1). While the joint stays at one world point ``p_w``,
+every pose ``T_w_c[i] = [R_i, t_i]`` of a camera satisfies
+
+    R_i o + t_i = p_w                                             (our form of eq. (11))
+
+where ``o`` is the joint in the camera's frame. The paper writes it relative to the first
+frame, ``(R^i - I) o = -T^i`` with ``H^i = inv(T_w_c[0]) T_w_c[i]`` (eq. (11)-(12)), which
+treats the first pose as exact; we keep ``p_w`` as an unknown instead, so that every frame
+counts alike, and weight each frame by the covariance its pose noise induces.
+
+Algorithm I (overlap, section 2). With both cameras in one world,
+
+    R_wa_i o_a + t_wa_i = R_wb_i o_b + t_wb_i                     (eq. (8))
+
+Both are linear in the unknowns; the refined estimators are weighted least squares whose
+weights (pose noise levels) are estimated from the data (:mod:`acs_cli.core.estimation`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from acs_cli.core import estimation, se3
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import DegenerateMotionError, InputError
+
+#: Smallest ratio of the weakest to the strongest direction of the rotation design
+#: (singular values of the stacked, centred rotations) for the joint to be observable.
+#: Below it the motion is (close to) a rotation about one axis: a hinge.
+HINGE_RATIO = 0.1
+#: Smallest RMS spread of the rotations (radians, about 3 degrees) for a joint to be observable.
+MIN_ROTATION_SPREAD = 0.05
+
+METHODS = ("refined", "paper")
+
+
+@dataclass(frozen=True)
+class JointEstimate:
+    """The joint in one or two cameras' frames.
+
+    Attributes
+    ----------
+    position_in_a : ndarray, shape (3,)
+        Joint in camera A's frame (the paper's ``O_A``), trajectory A's units.
+    covariance_a : ndarray, shape (3, 3)
+    position_in_b, covariance_b : ndarray or None
+        Joint in camera B's frame (``O_B``) and its covariance, when B was given.
+    scenario : str
+        ``"fixed_joint"`` or ``"overlap"``.
+    method : str
+        ``"refined"`` or ``"paper"``.
+    residual_rms : dict
+        RMS of the per-frame constraint residual norm, per camera (``"a"``, ``"b"``) for
+        fixed-joint, ``"ab"`` for overlap; trajectory units.
+    inliers : dict
+        Boolean masks ``(n,)`` of the frames used, keyed like ``residual_rms``.
+    noise : dict
+        Estimated pose noise: ``sigma_rot_deg`` and ``sigma_trans`` per key (refined only).
+    position_in_world : dict
+        Fixed-joint only: the joint's world position in each trajectory's world.
+    """
+
+    position_in_a: FloatArray
+    covariance_a: FloatArray
+    position_in_b: FloatArray | None
+    covariance_b: FloatArray | None
+    scenario: str
+    method: str
+    residual_rms: dict[str, float]
+    inliers: dict[str, np.ndarray]
+    noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    position_in_world: dict[str, FloatArray] = field(default_factory=dict)
+
+    @property
+    def std_a(self) -> FloatArray:
+        return np.sqrt(np.diag(self.covariance_a))
+
+    @property
+    def std_b(self) -> FloatArray | None:
+        return None if self.covariance_b is None else np.sqrt(np.diag(self.covariance_b))
+
+
+@dataclass(frozen=True)
+class PivotEstimate:
+    """Fixed-joint result for one camera (see :func:`estimate_pivot`)."""
+
+    position_in_cam: FloatArray
+    covariance: FloatArray
+    position_in_world: FloatArray
+    residual_rms: float
+    inliers: np.ndarray
+    noise: dict[str, float]
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+
+
+def _rotation_design_check(R: FloatArray, what: str) -> None:
+    """Raise :class:`DegenerateMotionError` when rotations ``(n, 3, 3)`` cannot fix a point.
+
+    The joint is fixed by how the rotations differ from their mean: stacked, centred
+    rotations ``R_i - mean(R)`` must have three clearly non-zero singular values.
+    """
+    n = R.shape[0]
+    D = (R - R.mean(axis=0)).reshape(-1, 3)
+    _, s, Vt = np.linalg.svd(D, full_matrices=False)
+    spread = float(s[0] / np.sqrt(n))
+    if spread < MIN_ROTATION_SPREAD:
+        raise DegenerateMotionError(
+            f"{what}: too little rotation (RMS spread {np.degrees(spread):.2f} deg); the joint "
+            "cannot be located. Record motion that turns the camera about the joint by tens "
+            "of degrees about at least two different axes.",
+            details={"rotation_spread_deg": float(np.degrees(spread))},
+        )
+    ratio = float(s[2] / s[0])
+    if ratio < HINGE_RATIO:
+        axis = Vt[2]
+        raise DegenerateMotionError(
+            f"{what}: the rotations are all about one axis (a hinge; weakest/strongest "
+            f"direction {ratio:.3f} < {HINGE_RATIO}), so the joint can be anywhere on that "
+            f"axis [{axis[0]:+.3f} {axis[1]:+.3f} {axis[2]:+.3f}] (camera frame). Record "
+            "motion about a second axis, or use the hinge axis instead of a point.",
+            details={"hinge_axis": axis.tolist(), "singular_value_ratio": ratio},
+        )
+
+
+def _noise_dict(theta: FloatArray) -> dict[str, float]:
+    """Variance components ``(theta_t, theta_r)`` to ``sigma_trans`` and ``sigma_rot_deg``."""
+    return {
+        "sigma_trans": float(np.sqrt(theta[0])),
+        "sigma_rot_deg": float(np.degrees(np.sqrt(theta[1]))),
+    }
+
+
+def lever_shapes(R: FloatArray, o: FloatArray) -> FloatArray:
+    """Covariance shape ``R_i [o]x [o]x^T R_i^T`` ``(n, 3, 3)`` of ``R_i Exp(n) o`` per unit
+    rotation variance (the lever arm ``o`` turns rotation noise into position noise)."""
+    v = se3.rotate(R, o)
+    out = -v[:, :, None] * v[:, None, :]
+    d = np.einsum("na,na->n", v, v)
+    out[:, 0, 0] += d
+    out[:, 1, 1] += d
+    out[:, 2, 2] += d
+    return out  # [v]x [v]x^T = |v|^2 I - v v^T
+
+
+def estimate_pivot(
+    T_w_c: FloatArray, method: str = "refined", what: str = "camera"
+) -> PivotEstimate:
+    """Joint in one camera's frame from a fixed-joint motion (Algorithm II).
+
+    Parameters
+    ----------
+    T_w_c : ndarray, shape (n, 4, 4)
+        Poses ``T_world_cam`` (any world; one that is fixed during the motion).
+    method : {"refined", "paper"}
+        ``"paper"``: eq. (12) relative to the first frame, by linear least squares.
+        ``"refined"``: the world joint ``p_w`` as an unknown, frames weighted by their
+        estimated noise, gross outliers rejected.
+    what : str
+        Name used in messages.
+
+    Returns
+    -------
+    PivotEstimate
+
+    Raises
+    ------
+    DegenerateMotionError
+        Too few frames, too little rotation, or rotation about a single axis.
+    """
+    _check_method(method)
+    T = se3.check_transforms(T_w_c, name=f"{what} poses")
+    n = T.shape[0]
+    if n < 3:
+        raise DegenerateMotionError(
+            f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
+        )
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    _rotation_design_check(R, what)
+    if method == "paper":
+        # eq. (11)-(12): H^i = inv(T_0) T_i, (R^i - I) O = -T^i, i = 1..n-1
+        H = se3.invert_transforms(T[0]) @ T[1:]
+        M = (H[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+        rhs = -H[:, :3, 3].reshape(-1)
+        o, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+        res = (M @ o - rhs).reshape(-1, 3)
+        dof = max(res.size - 3, 1)
+        s2 = float(np.sum(res**2) / dof)
+        cov = s2 * np.linalg.inv(M.T @ M)
+        p_w = se3.transform_points(T[0], o)
+        rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+        inl = np.ones(n, dtype=bool)
+        return PivotEstimate(o, cov, p_w, rms, inl, {})
+    # refined: unknowns x = (o, p_w); residual r_i = R_i o + t_i - p_w, linear in x
+    J = np.concatenate([R, np.broadcast_to(-np.eye(3), (n, 3, 3))], axis=2)
+
+    def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+        return se3.rotate(R, x[:3]) + t - x[3:], J
+
+    def noise_shapes(x: FloatArray) -> FloatArray:
+        return lever_shapes(R, x[:3])
+
+    x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), -t.reshape(-1), rcond=None)
+    sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
+    inl = sol.inliers
+    rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
+    return PivotEstimate(
+        position_in_cam=sol.x[:3],
+        covariance=sol.covariance[:3, :3],
+        position_in_world=sol.x[3:],
+        residual_rms=rms,
+        inliers=inl,
+        noise=_noise_dict(sol.theta),
+    )
+
+
+def estimate_joint_fixed(
+    T_wa_a: FloatArray, T_wb_b: FloatArray | None = None, method: str = "refined"
+) -> JointEstimate:
+    """Algorithm II for one or two cameras, each trajectory in its own world.
+
+    Parameters
+    ----------
+    T_wa_a : ndarray, shape (n, 4, 4)
+        Camera A's poses ``T_world_a`` during a fixed-joint motion.
+    T_wb_b : ndarray, shape (m, 4, 4), optional
+        Camera B's poses in its own world (need not be paired with A's).
+    method : {"refined", "paper"}
+    """
+    a = estimate_pivot(T_wa_a, method, "camera A")
+    b = None if T_wb_b is None else estimate_pivot(T_wb_b, method, "camera B")
+    rms = {"a": a.residual_rms}
+    inl = {"a": a.inliers}
+    noise = {"a": a.noise} if a.noise else {}
+    world = {"a": a.position_in_world}
+    if b is not None:
+        rms["b"], inl["b"], world["b"] = b.residual_rms, b.inliers, b.position_in_world
+        if b.noise:
+            noise["b"] = b.noise
+    return JointEstimate(
+        position_in_a=a.position_in_cam,
+        covariance_a=a.covariance,
+        position_in_b=None if b is None else b.position_in_cam,
+        covariance_b=None if b is None else b.covariance,
+        scenario="fixed_joint",
+        method=method,
+        residual_rms=rms,
+        inliers=inl,
+        noise=noise,
+        position_in_world=world,
+    )
+
+
+def estimate_joint_overlap(
+    T_w_a: FloatArray, T_w_b: FloatArray, method: str = "refined"
+) -> JointEstimate:
+    """Algorithm I: the joint from paired poses of two cameras in one world.
+
+    Parameters
+    ----------
+    T_w_a, T_w_b : ndarray, shape (n, 4, 4)
+        Paired poses ``T_world_a`` and ``T_world_b`` in the same world frame.
+    method : {"refined", "paper"}
+        ``"paper"``: linear least squares of eq. (9). ``"refined"``: the same constraint
+        weighted by the covariance that both cameras' pose noise induces, noise levels
+        estimated, outliers rejected.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Too few frames, or a relative rotation between the cameras that does not change
+        enough (a rigid pair: no articulation), or that changes about one axis only.
+    """
+    _check_method(method)
+    Ta = se3.check_transforms(T_w_a, name="camera A poses")
+    Tb = se3.check_transforms(T_w_b, name="camera B poses")
+    if Ta.shape[0] != Tb.shape[0]:
+        raise InputError(
+            f"overlap needs paired poses; got {Ta.shape[0]} for A and {Tb.shape[0]} for B"
+        )
+    n = Ta.shape[0]
+    if n < 3:
+        raise DegenerateMotionError(f"{n} paired poses; an overlap calibration needs at least 3")
+    Ra, ta, Rb, tb = Ta[:, :3, :3], Ta[:, :3, 3], Tb[:, :3, :3], Tb[:, :3, 3]
+    # observability: the articulation R_a_b(i) = R_wa^T R_wb must vary (about 2+ axes)
+    R_ab = np.einsum("nji,njk->nik", Ra, Rb)
+    try:
+        _rotation_design_check(R_ab, "relative rotation between A and B")
+    except DegenerateMotionError as exc:
+        raise DegenerateMotionError(
+            "the joint cannot be observed: "
+            + exc.message
+            + " A rigid pair (no articulation) has no joint to find; move the joint "
+            "between frames.",
+            details=exc.details,
+        ) from None
+    J = np.concatenate([Ra, -Rb], axis=2)  # eq. (9): [R_wa, -R_wb] [o_a; o_b] = t_wb - t_wa
+    rhs = tb - ta
+    x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), rhs.reshape(-1), rcond=None)
+    if method == "paper":
+        res = np.einsum("nij,j->ni", J, x0) - rhs
+        dof = max(res.size - 6, 1)
+        cov = float(np.sum(res**2) / dof) * np.linalg.inv(J.reshape(-1, 6).T @ J.reshape(-1, 6))
+        rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+        return JointEstimate(
+            x0[:3],
+            cov[:3, :3],
+            x0[3:],
+            cov[3:, 3:],
+            "overlap",
+            "paper",
+            {"ab": rms},
+            {"ab": np.ones(n, dtype=bool)},
+        )
+
+    def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+        return J @ x - rhs, J
+
+    def noise_shapes(x: FloatArray) -> FloatArray:
+        return lever_shapes(Ra, x[:3]) + lever_shapes(Rb, x[3:])
+
+    sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
+    inl = sol.inliers
+    rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
+    # theta_t covers both cameras' translation noise: report one camera's share
+    theta = sol.theta.copy()
+    theta[0] /= 2.0
+    return JointEstimate(
+        position_in_a=sol.x[:3],
+        covariance_a=sol.covariance[:3, :3],
+        position_in_b=sol.x[3:],
+        covariance_b=sol.covariance[3:, 3:],
+        scenario="overlap",
+        method="refined",
+        residual_rms={"ab": rms},
+        inliers={"ab": inl},
+        noise={"ab": _noise_dict(theta)},
+    )

@@ -1,0 +1,687 @@
+"""Relative pose of non-overlapping cameras from the joint constraint (Algorithms III, IV).
+
+Each camera's trajectory is known in its own world: ``T_wa_a[i]`` and ``T_wb_b[i]``. At
+every instant the joint is one physical point, so its positions in the two worlds,
+
+    j_a[i] = R_wa_i o_a + t_wa_i        j_b[i] = R_wb_i o_b + t_wb_i,
+
+are related by one constant similarity ``X = T_wb_wa`` (rotation ``R_X``, translation
+``t_X``, and scale ``phi_ba = mu_B / mu_A`` when each trajectory has its own unknown scale):
+
+    j_b[i] = phi R_X j_a[i] + t_X.
+
+The relative pose at the reference instant ``k`` follows as
+``T_b_a = inv(T_wb_b[k]) X T_wa_a[k]`` (the paper's ``H_BA``).
+
+The paper (eq. (24)) writes the same constraint with motions relative to the reference
+frame, ``H_A^i = inv(T_wa_a[k]) T_wa_a[i]``, solves it linearly for ``R_BA`` (9 entries) and
+``T_BA``, projects onto a rotation (with ``phi = trace(D) / 3`` under unknown scale, eq.
+(43)) and refines roll, pitch, yaw, ``T_BA``, ``O_A`` (and ``phi``) by Levenberg-Marquardt
+(eq. (25), (44)). That form takes the reference frame as exact. Ours treats every frame
+alike, estimates the joint in both cameras together with ``X`` (priors from a fixed-joint
+calibration when given), weights frames by their noise, and finally corrects the two
+reference poses by the joint constraint before composing ``T_b_a``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from acs_cli.core import estimation, se3
+from acs_cli.core.joint import METHODS, lever_shapes
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import DegenerateMotionError, InputError
+
+#: Smallest ratio of the second to the first singular value of the centred joint
+#: trajectory (in world A) for the rotation between the worlds to be observable.
+COLLINEAR_RATIO = 0.02
+#: Fewest paired frames for a relative pose from a known joint, and for self-calibration.
+MIN_FRAMES = 5
+MIN_FRAMES_SELF_CALIBRATION = 14
+
+
+@dataclass(frozen=True)
+class JointPrior:
+    """A joint from an earlier calibration, used as a prior.
+
+    Attributes
+    ----------
+    position_in_a, position_in_b : ndarray (3,) or None
+    covariance_a, covariance_b : ndarray (3, 3) or None
+        ``None`` means "exact" for the paper's method and a tight prior for ours.
+    metric : bool
+        True when the positions are in metres while the trajectories have unknown scales
+        (``--joint-metric``): then ``mu_a`` and ``mu_b`` are estimated too.
+    """
+
+    position_in_a: FloatArray | None = None
+    position_in_b: FloatArray | None = None
+    covariance_a: FloatArray | None = None
+    covariance_b: FloatArray | None = None
+    metric: bool = False
+
+
+@dataclass(frozen=True)
+class RelposeEstimate:
+    """Relative pose of camera B with respect to camera A at the reference instant.
+
+    Attributes
+    ----------
+    T_b_a : ndarray, shape (4, 4)
+        Maps points of camera A's frame into camera B's at the reference instant; its
+        translation is in B's units (metres under known scale).
+    covariance : ndarray, shape (6, 6)
+        Of ``(rotation perturbation of R_b_a on the right (rad), t_b_a)``.
+    reference : int
+    phi_ba, phi_std : float
+        Relative scale ``mu_B / mu_A`` (1 and 0 under known scale).
+    mu_a, mu_b, mu_a_std, mu_b_std : float or None
+        Absolute scales, when a metric joint was given under unknown scale.
+    position_in_a, position_in_b : ndarray (3,)
+        Joint in A's frame (A's units) and B's frame (B's units).
+    covariance_a, covariance_b : ndarray (3, 3)
+    T_wb_wa : ndarray, shape (4, 4)
+        Rotation and translation of the similarity from world A to world B.
+    residual_rms : float
+        RMS of the joint-constraint residual (B's units) over the frames used.
+    inliers : ndarray of bool, shape (n,)
+    noise : dict
+    method : str
+    unknown_scale, self_calibrated : bool
+    """
+
+    T_b_a: FloatArray
+    covariance: FloatArray
+    reference: int
+    phi_ba: float
+    phi_std: float
+    position_in_a: FloatArray
+    position_in_b: FloatArray
+    covariance_a: FloatArray
+    covariance_b: FloatArray
+    T_wb_wa: FloatArray
+    residual_rms: float
+    inliers: np.ndarray
+    method: str
+    unknown_scale: bool
+    self_calibrated: bool
+    mu_a: float | None = None
+    mu_b: float | None = None
+    mu_a_std: float | None = None
+    mu_b_std: float | None = None
+    noise: dict[str, float] = field(default_factory=dict)
+    residuals: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def T_a_b(self) -> FloatArray:
+        """Pose of camera B in camera A's frame (the paper's tables' relative pose)."""
+        return np.asarray(se3.invert_transforms(self.T_b_a))
+
+    @property
+    def rpy_deg(self) -> FloatArray:
+        """Roll, pitch, yaw (deg) of ``R_a_b`` (the paper's ``~R_BA = R_BA^T``)."""
+        return np.asarray(se3.rpy_deg_from_matrix(self.T_a_b[:3, :3]))
+
+    @property
+    def translation_b_in_a(self) -> FloatArray:
+        """``t_a_b = -R_BA^T T_BA`` (the paper's ``~T_BA``), B's units."""
+        return np.asarray(self.T_a_b[:3, 3])
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _kron_rows(v: FloatArray) -> FloatArray:
+    """``K(v)`` ``(n, 3, 9)`` with ``K(v) vec(M) = M v`` for row-major ``vec(M)``."""
+    n = v.shape[0]
+    K = np.zeros((n, 3, 9))
+    for r in range(3):  # three rows of a 3x3 matrix, not frames
+        K[:, r, 3 * r : 3 * r + 3] = v
+    return K
+
+
+def _lstsq_scaled(A: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least squares with column equilibration; returns the solution and singular values."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    x, _, _, s = np.linalg.lstsq(A / scale, b, rcond=None)
+    return x / scale, s
+
+
+def similarity_from_points(
+    P: FloatArray, Q: FloatArray, with_scale: bool
+) -> tuple[FloatArray, FloatArray, float]:
+    """Umeyama: ``R, t, s`` minimising ``sum |Q_i - (s R P_i + t)|^2`` for ``(n, 3)`` points."""
+    mp, mq = P.mean(axis=0), Q.mean(axis=0)
+    Pc, Qc = P - mp, Q - mq
+    Sigma = Qc.T @ Pc / P.shape[0]
+    U, D, Vt = np.linalg.svd(Sigma)
+    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ S @ Vt
+    s = float(np.trace(np.diag(D) @ S) / np.mean(np.sum(Pc**2, axis=1))) if with_scale else 1.0
+    return R, mq - s * R @ mp, s
+
+
+def _check_inputs(
+    T_wa_a: FloatArray, T_wb_b: FloatArray, reference: int
+) -> tuple[FloatArray, FloatArray]:
+    Ta = se3.check_transforms(T_wa_a, name="camera A poses")
+    Tb = se3.check_transforms(T_wb_b, name="camera B poses")
+    if Ta.shape[0] != Tb.shape[0]:
+        raise InputError(
+            f"relpose needs paired poses; got {Ta.shape[0]} for A and {Tb.shape[0]} for B"
+        )
+    n = Ta.shape[0]
+    if not -n <= reference < n:
+        raise InputError(f"reference frame {reference} is outside the {n} paired frames")
+    return Ta, Tb
+
+
+def _check_spread(j_a: FloatArray, what: str = "joint trajectory") -> None:
+    c = j_a - j_a.mean(axis=0)
+    s = np.linalg.svd(c, compute_uv=False)
+    if s[0] <= 0 or s[1] / s[0] < COLLINEAR_RATIO:
+        raise DegenerateMotionError(
+            f"the {what} is (nearly) a straight line (singular value ratio "
+            f"{(s[1] / s[0]) if s[0] > 0 else 0.0:.4f} < {COLLINEAR_RATIO}); the rotation about it "
+            "is not determined. Move the rig along a curved path, turning and translating in "
+            "different directions.",
+            details={"singular_values": s.tolist()},
+        )
+
+
+# ----------------------------------------------------------------------------- paper
+
+
+def _paper(
+    Ta: FloatArray, Tb: FloatArray, o_a: FloatArray, reference: int, unknown_scale: bool
+) -> tuple[FloatArray, FloatArray, FloatArray, float, FloatArray, FloatArray]:
+    """Algorithms III / IV as published. Returns ``R_BA, T_BA, O_A, phi, residuals, cov``."""
+    Ha = se3.invert_transforms(Ta[reference]) @ Ta  # H_A^i
+    Hb = se3.invert_transforms(Tb[reference]) @ Tb  # H_B^i
+    RA, TA, RB, TB = Ha[:, :3, :3], Ha[:, :3, 3], Hb[:, :3, :3], Hb[:, :3, 3]
+    n = Ta.shape[0]
+    # eq. (24), linear in vec(R_BA) and T_BA:
+    # [R_B^i K(O_A) - K(R_A^i O_A + T_A^i)] vec(R_BA) + (R_B^i - I) T_BA = -T_B^i
+    KO = _kron_rows(np.broadcast_to(o_a, (n, 3)))
+    A_rot = np.einsum("nij,njk->nik", RB, KO) - _kron_rows(np.einsum("nij,j->ni", RA, o_a) + TA)
+    A = np.concatenate([A_rot, RB - np.eye(3)], axis=2).reshape(-1, 12)
+    x, _ = _lstsq_scaled(A, -TB.reshape(-1))
+    # eq. (38)-(43): R = U V^T, phi = trace(D) / 3
+    R0, s = se3.project_to_rotation(x[:9].reshape(3, 3))
+    phi0 = float(np.sum(s) / 3.0) if unknown_scale else 1.0
+    rpy0 = np.radians(se3.rpy_deg_from_matrix(R0))
+
+    def unpack(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+        R = se3.matrix_from_rpy_deg(np.degrees(p[:3]))
+        return R, p[3:6], p[6:9], (float(p[9]) if unknown_scale else 1.0)
+
+    def res(p: FloatArray) -> FloatArray:
+        # eq. (25) / (44)
+        R, T, O, phi = unpack(p)
+        ja = np.einsum("nij,j->ni", RA, O) + TA
+        r = phi * np.einsum("nij,j->ni", RB, R @ O) + np.einsum("nij,j->ni", RB - np.eye(3), T)
+        return np.asarray((r - phi * ja @ R.T + TB).reshape(-1))
+
+    def jac(p: FloatArray) -> FloatArray:
+        R, _T, O, phi = unpack(p)
+        eps = 1e-7
+        ja = np.einsum("nij,j->ni", RA, O) + TA
+        cols = []
+        for k in range(3):  # three Euler angles, not frames
+            dp = np.zeros(3)
+            dp[k] = eps
+            dR = (
+                se3.matrix_from_rpy_deg(np.degrees(p[:3] + dp))
+                - se3.matrix_from_rpy_deg(np.degrees(p[:3] - dp))
+            ) / (2 * eps)
+            cols.append(phi * (np.einsum("nij,j->ni", RB, dR @ O) - ja @ dR.T))
+        Jr = np.stack(cols, axis=2)
+        JT = RB - np.eye(3)
+        JO = phi * (np.einsum("nij,jk->nik", RB, R) - np.einsum("ij,njk->nik", R, RA))
+        blocks = [Jr, JT, JO]
+        if unknown_scale:
+            blocks.append((np.einsum("nij,j->ni", RB, R @ O) - ja @ R.T)[:, :, None])
+        return np.concatenate(blocks, axis=2).reshape(3 * n, -1)
+
+    p0 = np.concatenate([rpy0, x[9:], o_a] + ([[phi0]] if unknown_scale else []))
+    sol = least_squares(res, p0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    R, T, O, phi = unpack(sol.x)
+    r = sol.fun.reshape(-1, 3)
+    Jm = sol.jac
+    dof = max(r.size - Jm.shape[1], 1)
+    cov = float(np.sum(r**2) / dof) * np.linalg.pinv(Jm.T @ Jm)
+    return R, T, O, phi, r, cov
+
+
+# ----------------------------------------------------------------------------- ours
+
+
+def _initial_lifted(
+    Ta: FloatArray, Tb: FloatArray, o_a: FloatArray | None
+) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
+    """Linear initialisation of ``R_X, t_X, phi, o_a, o_b`` needing no joint.
+
+    ``j_b = M j_a + t_X`` with ``M = phi R_X`` is bilinear in ``M`` and ``o_a``; lifting the
+    products ``W[r, j, k] = M[r, j] o_a[k]`` to 27 unknowns makes it linear in
+    ``(W, M, o_b, t_X)`` (42 unknowns, 3 equations a frame). With ``o_a`` known, ``M j_a`` is
+    linear directly (15 unknowns).
+    """
+    n = Ta.shape[0]
+    Ra, ta, Rb, tb = Ta[:, :3, :3], Ta[:, :3, 3], Tb[:, :3, :3], Tb[:, :3, 3]
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    if o_a is None:
+        AW = np.zeros((n, 3, 27))
+        for r in range(3):  # the 3 rows of M, not frames
+            AW[:, r, 9 * r : 9 * r + 9] = Ra.reshape(n, 9)
+        A = np.concatenate([AW, _kron_rows(ta), -Rb, eye], axis=2).reshape(-1, 42)
+        x, _ = _lstsq_scaled(A, tb.reshape(-1))
+        W, M, o_b, t_X = x[:27].reshape(3, 3, 3), x[27:36].reshape(3, 3), x[36:39], x[39:42]
+        o_a = np.einsum("rj,rjk->k", M, W) / float(np.sum(M * M))
+    else:
+        j_a = np.einsum("nij,j->ni", Ra, o_a) + ta
+        A = np.concatenate([_kron_rows(j_a), -Rb, eye], axis=2).reshape(-1, 15)
+        x, _ = _lstsq_scaled(A, tb.reshape(-1))
+        M, o_b, t_X = x[:9].reshape(3, 3), x[9:12], x[12:15]
+    R_X, s = se3.project_to_rotation(M)
+    return R_X, t_X, float(np.mean(s)), np.asarray(o_a), o_b
+
+
+class _Layout:
+    """Index layout of the refined parameter vector."""
+
+    def __init__(self, unknown_scale: bool, metric: bool):
+        self.rot, self.t, self.oa, self.ob = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+        k = 12
+        self.logphi = k if unknown_scale else None
+        k += int(unknown_scale)
+        self.logmu = k if (unknown_scale and metric) else None
+        k += int(unknown_scale and metric)
+        self.size = k
+
+
+def estimate_relpose(
+    T_wa_a: FloatArray,
+    T_wb_b: FloatArray,
+    prior: JointPrior | None = None,
+    *,
+    unknown_scale: bool = False,
+    reference: int = 0,
+    method: str = "refined",
+    reject_outliers: bool = True,
+) -> RelposeEstimate:
+    """Relative pose (and scale) of two cameras joined by a joint, from general motion.
+
+    Parameters
+    ----------
+    T_wa_a, T_wb_b : ndarray, shape (n, 4, 4)
+        Paired poses ``T_world_cam`` of camera A and B, each in its own world.
+    prior : JointPrior, optional
+        The joint from a fixed-joint calibration. Without it (or with neither position)
+        the joint is self-calibrated from this motion (ours only; the paper needs ``O_A``).
+    unknown_scale : bool
+        Each trajectory's translations carry an unknown factor (Algorithm IV).
+    reference : int
+        Frame index at which ``T_b_a`` is reported (negative counts from the end).
+    method : {"refined", "paper"}
+
+    Returns
+    -------
+    RelposeEstimate
+
+    Raises
+    ------
+    InputError
+        Mismatched inputs, or ``method="paper"`` without ``prior.position_in_a``.
+    DegenerateMotionError
+        Too few frames or a motion that does not determine the answer.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    Ta, Tb = _check_inputs(T_wa_a, T_wb_b, reference)
+    n = Ta.shape[0]
+    reference = reference % n
+    prior = prior or JointPrior()
+    self_cal = prior.position_in_a is None and prior.position_in_b is None
+    need = MIN_FRAMES_SELF_CALIBRATION if self_cal else MIN_FRAMES
+    if n < need:
+        raise DegenerateMotionError(
+            f"{n} paired frames; {'self-calibration' if self_cal else 'a relative pose'} needs at "
+            f"least {need} frames of general motion"
+        )
+    if method == "paper":
+        return _estimate_paper(Ta, Tb, prior, unknown_scale, reference)
+    return _estimate_refined(Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers)
+
+
+def _estimate_paper(
+    Ta: FloatArray, Tb: FloatArray, prior: JointPrior, unknown_scale: bool, reference: int
+) -> RelposeEstimate:
+    if prior.position_in_a is None:
+        raise InputError("the paper's method needs the joint in camera A (joint.position_in_a)")
+    o_a_in = np.asarray(prior.position_in_a, dtype=float)
+    mu_a = None
+    if prior.metric and unknown_scale:
+        raise InputError(
+            "the paper's method takes the joint in camera A's own (scaled) units; with a "
+            "metric joint use the refined method"
+        )
+    n = Ta.shape[0]
+    R, T, O, phi, r, cov = _paper(Ta, Tb, o_a_in, reference, unknown_scale)
+    _check_spread(se3.transform_points(Ta, O))
+    T_b_a = se3.transforms_from_rt(R, T)
+    # covariance of (R perturbation, T): rpy -> right perturbation by finite differences
+    G = np.zeros((6, cov.shape[0]))
+    eps = 1e-7
+    rpy = np.radians(se3.rpy_deg_from_matrix(R))
+    for k in range(3):  # Euler angles
+        dp = np.zeros(3)
+        dp[k] = eps
+        G[:3, k] = se3.rotvec_from_matrix(R.T @ se3.matrix_from_rpy_deg(np.degrees(rpy + dp))) / eps
+    G[3:, 3:6] = np.eye(3)
+    cov6 = G @ cov @ G.T
+    O_b = phi * R @ O + T
+    JOb = np.concatenate([-phi * R @ se3.skew(O) @ G[:3, :3], np.eye(3), phi * R], axis=1)
+    if unknown_scale:
+        JOb = np.concatenate([JOb, (R @ O)[:, None]], axis=1)
+    cov_b = JOb @ cov[: JOb.shape[1], : JOb.shape[1]] @ JOb.T
+    T_wb_wa = Tb[reference] @ T_b_a @ se3.invert_transforms(Ta[reference])
+    return RelposeEstimate(
+        T_b_a=T_b_a,
+        covariance=cov6,
+        reference=reference,
+        phi_ba=phi,
+        phi_std=float(np.sqrt(cov[9, 9])) if unknown_scale else 0.0,
+        position_in_a=O,
+        position_in_b=O_b,
+        covariance_a=cov[6:9, 6:9],
+        covariance_b=cov_b,
+        T_wb_wa=T_wb_wa,
+        residual_rms=float(np.sqrt(np.mean(np.sum(r**2, axis=1)))),
+        inliers=np.ones(n, dtype=bool),
+        method="paper",
+        unknown_scale=unknown_scale,
+        self_calibrated=False,
+        mu_a=mu_a,
+        residuals=r,
+    )
+
+
+def _estimate_refined(
+    Ta: FloatArray,
+    Tb: FloatArray,
+    prior: JointPrior,
+    unknown_scale: bool,
+    reference: int,
+    self_cal: bool,
+    reject_outliers: bool,
+) -> RelposeEstimate:
+    n = Ta.shape[0]
+    Ra, ta, Rb, tb = Ta[:, :3, :3], Ta[:, :3, 3], Tb[:, :3, :3], Tb[:, :3, 3]
+    metric = bool(prior.metric and unknown_scale)
+    L = _Layout(unknown_scale, metric)
+
+    # ---- initialisation
+    pa = None if prior.position_in_a is None else np.asarray(prior.position_in_a, float)
+    pb = None if prior.position_in_b is None else np.asarray(prior.position_in_b, float)
+    if pa is not None and pb is not None and not metric:
+        j_a = se3.transform_points(Ta, pa)
+        j_b = se3.transform_points(Tb, pb)
+        _check_spread(j_a)
+        R_X, t_X, phi = similarity_from_points(j_a, j_b, unknown_scale)
+        o_a, o_b = pa, pb
+    elif pa is not None and not metric:
+        R_X, t_X, phi, o_a, o_b = _initial_lifted(Ta, Tb, pa)
+    else:
+        R_X, t_X, phi, o_a, o_b = _initial_lifted(Ta, Tb, None)
+    if not unknown_scale:
+        phi = 1.0
+    mu0 = 1.0
+    if metric:
+        # o_a (A units) = mu_a * metric joint: least squares on whichever is known
+        pairs = [(o_a, pa)] if pa is not None else []
+        pairs += [(o_b / phi, pb)] if pb is not None else []
+        num = sum(float(u @ v) for u, v in pairs)
+        den = sum(float(v @ v) for _, v in pairs)
+        mu0 = max(num / den, 1e-6) if den > 0 else 1.0
+        if pa is not None:
+            o_a = mu0 * pa
+        if pb is not None:
+            o_b = phi * mu0 * pb
+    x0 = np.zeros(L.size)
+    x0[L.rot] = se3.rotvec_from_matrix(R_X)
+    x0[L.t], x0[L.oa], x0[L.ob] = t_X, o_a, o_b
+    if L.logphi is not None:
+        x0[L.logphi] = np.log(max(phi, 1e-9))
+    if L.logmu is not None:
+        x0[L.logmu] = np.log(mu0)
+
+    def unpack(
+        x: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float, float]:
+        R = se3.matrix_from_rotvec(x[L.rot])
+        ph = float(np.exp(x[L.logphi])) if L.logphi is not None else 1.0
+        mu = float(np.exp(x[L.logmu])) if L.logmu is not None else 1.0
+        return R, x[L.t], x[L.oa], x[L.ob], ph, mu
+
+    def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+        R, t, oa, ob, ph, _ = unpack(x)
+        j_a = se3.rotate(Ra, oa) + ta
+        Rja = j_a @ R.T
+        r = se3.rotate(Rb, ob) + tb - ph * Rja - t
+        if not jac:
+            return r, None
+        J = np.zeros((n, 3, L.size))
+        J[:, :, L.rot] = ph * (se3.skew(Rja).reshape(-1, 3) @ R).reshape(
+            n, 3, 3
+        )  # R [j]x = [R j]x R
+        J[:, :, L.t] = -np.eye(3)
+        J[:, :, L.oa] = -ph * se3.left_multiply(R, Ra)
+        J[:, :, L.ob] = Rb
+        if L.logphi is not None:
+            J[:, :, L.logphi] = -ph * Rja
+        return r, J
+
+    def noise_shapes(x: FloatArray) -> FloatArray:
+        R, _, oa, ob, ph, _ = unpack(x)
+        return lever_shapes(Rb, ob) + ph**2 * lever_shapes(se3.left_multiply(R, Ra), oa)
+
+    def retract(x: FloatArray, dx: FloatArray) -> FloatArray:
+        out = x + dx
+        out[L.rot] = se3.rotvec_from_matrix(
+            se3.matrix_from_rotvec(x[L.rot]) @ se3.matrix_from_rotvec(dx[L.rot])
+        )
+        return out
+
+    prior_rows = _prior_rows(prior, L, metric)
+    problem = estimation.LeastSquaresProblem(residuals, noise_shapes, prior_rows, retract)
+    sol = estimation.solve(problem, x0, reject_outliers=reject_outliers)
+    R_X, t_X, o_a, o_b, phi, mu = unpack(sol.x)
+    j_a = se3.transform_points(Ta, o_a)
+    _check_spread(j_a[sol.inliers])
+    _check_information(sol.information, L, self_cal)
+
+    # ---- the reference poses, corrected by the joint constraint (ML of the nuisance poses)
+    theta_t, theta_r = sol.theta
+    T_b_a, J_ref, P_post = _reference_pose(
+        Ta[reference], Tb[reference], R_X, t_X, phi, o_a, o_b, theta_t, theta_r
+    )
+    cov6 = _relpose_covariance(Ta[reference], Tb[reference], sol, L, J_ref, P_post, unpack)
+    cov = sol.covariance
+    phi_std = float(phi * np.sqrt(cov[L.logphi, L.logphi])) if L.logphi is not None else 0.0
+    mu_a = mu_b = mu_a_std = mu_b_std = None
+    if L.logmu is not None:
+        mu_a = mu
+        mu_b = phi * mu
+        mu_a_std = float(mu * np.sqrt(cov[L.logmu, L.logmu]))
+        var_lb = cov[L.logmu, L.logmu] + cov[L.logphi, L.logphi] + 2 * cov[L.logmu, L.logphi]
+        mu_b_std = float(mu_b * np.sqrt(max(var_lb, 0.0)))
+    inl = sol.inliers
+    X = se3.transforms_from_rt(R_X, t_X)
+    return RelposeEstimate(
+        T_b_a=T_b_a,
+        covariance=cov6,
+        reference=reference,
+        phi_ba=phi,
+        phi_std=phi_std,
+        position_in_a=o_a,
+        position_in_b=o_b,
+        covariance_a=cov[L.oa, L.oa],
+        covariance_b=cov[L.ob, L.ob],
+        T_wb_wa=X,
+        residual_rms=float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1)))),
+        inliers=inl,
+        method="refined",
+        unknown_scale=unknown_scale,
+        self_calibrated=self_cal,
+        mu_a=mu_a,
+        mu_b=mu_b,
+        mu_a_std=mu_a_std,
+        mu_b_std=mu_b_std,
+        noise={
+            "sigma_trans": float(np.sqrt(theta_t / 2.0)),
+            "sigma_rot_deg": float(np.degrees(np.sqrt(theta_r))),
+        },
+        residuals=sol.residuals,
+    )
+
+
+#: Standard deviation (in the trajectory's units) assumed for a prior joint given without one.
+_DEFAULT_PRIOR_STD = 1e-6
+
+
+def _prior_rows(prior: JointPrior, L: _Layout, metric: bool):
+    """Residual rows of the joint prior (see :class:`estimation.LeastSquaresProblem`)."""
+    items = []
+    for pos, cov, sl in (
+        (prior.position_in_a, prior.covariance_a, L.oa),
+        (prior.position_in_b, prior.covariance_b, L.ob),
+    ):
+        if pos is not None:
+            C = np.eye(3) * _DEFAULT_PRIOR_STD**2 if cov is None else np.asarray(cov, float)
+            C = C + np.eye(3) * 1e-12 * max(1.0, float(np.trace(C)))
+            items.append((np.asarray(pos, float), np.linalg.inv(C), sl))
+    if not items:
+        return None
+
+    def rows(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        rs, Js, Ws = [], [], []
+        ph = float(np.exp(x[L.logphi])) if L.logphi is not None else 1.0
+        mu = float(np.exp(x[L.logmu])) if L.logmu is not None else 1.0
+        for pos, W, sl in items:
+            J = np.zeros((3, L.size))
+            if metric:
+                # o_a = mu m_a, o_b = phi mu m_b: residual o / (mu [phi]) - m
+                f = mu * (ph if sl == L.ob else 1.0)
+                r = x[sl] / f - pos
+                J[:, sl] = np.eye(3) / f
+                J[:, L.logmu] = -x[sl] / f
+                if sl == L.ob:
+                    J[:, L.logphi] = -x[sl] / f
+            else:
+                r = x[sl] - pos
+                J[:, sl] = np.eye(3)
+            rs.append(r)
+            Js.append(J)
+            Ws.append(W)
+        Wb = np.zeros((3 * len(Ws), 3 * len(Ws)))
+        for k, W in enumerate(Ws):  # at most two priors
+            Wb[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = W
+        return np.concatenate(rs), np.concatenate(Js), Wb
+
+    return rows
+
+
+def _check_information(H: FloatArray, L: _Layout, self_cal: bool) -> None:
+    """Degenerate when the information about the relative rotation or the joint vanishes."""
+    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    Hn = H / np.outer(d, d)
+    w = np.linalg.eigvalsh(Hn)
+    if w[0] < 1e-9 * w[-1]:
+        raise DegenerateMotionError(
+            "the motion does not determine the relative pose"
+            + (" and the joint (self-calibration)" if self_cal else "")
+            + f" (normalised information condition {w[-1] / max(w[0], 1e-300):.1e}). Record "
+            "general motion: the rig turning about several axes while it moves and bends.",
+            details={"information_eigenvalues": w.tolist()},
+        )
+
+
+def _reference_pose(
+    Ta_ref: FloatArray,
+    Tb_ref: FloatArray,
+    R_X: FloatArray,
+    t_X: FloatArray,
+    phi: float,
+    o_a: FloatArray,
+    o_b: FloatArray,
+    theta_t: float,
+    theta_r: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``T_b_a`` at the reference instant from reference poses corrected by the constraint.
+
+    The two measured reference poses must put the joint at one point: their correction
+    ``delta = (rot_a, t_a, rot_b, t_b)`` is the minimum of ``delta^T P^-1 delta`` subject to the
+    linearised constraint ``c + A delta = 0``, with ``P`` the pose noise (translation noise
+    split evenly between the cameras). Returns ``T_b_a``, the Jacobian ``(6, 12)`` of
+    ``T_b_a`` with respect to ``delta`` and the posterior covariance ``(12, 12)`` of ``delta``.
+    """
+    Ra, ta, Rb, tb = Ta_ref[:3, :3], Ta_ref[:3, 3], Tb_ref[:3, :3], Tb_ref[:3, 3]
+    c = Rb @ o_b + tb - phi * R_X @ (Ra @ o_a + ta) - t_X
+    A = np.concatenate(
+        [phi * R_X @ Ra @ se3.skew(o_a), -phi * R_X, -Rb @ se3.skew(o_b), np.eye(3)], axis=1
+    )
+    var_ta = theta_t / (2.0 * phi**2)
+    var_tb = theta_t / 2.0
+    P = np.diag([theta_r] * 3 + [var_ta] * 3 + [theta_r] * 3 + [var_tb] * 3)
+    S = A @ P @ A.T
+    K = P @ A.T @ np.linalg.inv(S)
+    delta = -K @ c
+    P_post = P - K @ A @ P
+
+    def compose(d: FloatArray) -> FloatArray:
+        Ra_ = Ra @ se3.matrix_from_rotvec(d[0:3])
+        Rb_ = Rb @ se3.matrix_from_rotvec(d[6:9])
+        R_ba = Rb_.T @ R_X @ Ra_
+        t_ba = Rb_.T @ (phi * R_X @ (ta + d[3:6]) + t_X - (tb + d[9:12]))
+        return se3.transforms_from_rt(R_ba, t_ba)
+
+    T0 = compose(delta)
+    Jd = np.zeros((6, 12))
+    eps = 1e-7
+    for k in range(12):  # 12 pose-correction coordinates
+        dd = delta.copy()
+        dd[k] += eps
+        Tk = compose(dd)
+        Jd[:3, k] = se3.rotvec_from_matrix(T0[:3, :3].T @ Tk[:3, :3]) / eps
+        Jd[3:, k] = (Tk[:3, 3] - T0[:3, 3]) / eps
+    return T0, Jd, P_post
+
+
+def _relpose_covariance(Ta_ref, Tb_ref, sol, L, J_ref, P_post, unpack):
+    """Covariance ``(6, 6)`` of ``T_b_a``: the similarity's uncertainty and the reference poses'."""
+    R_X, _t_X, _o_a, _o_b, _phi, _ = unpack(sol.x)
+    theta_t, theta_r = sol.theta
+
+    def tba(x: FloatArray) -> FloatArray:
+        Rx, tx, oa, ob, ph, _ = unpack(x)
+        T, _, _ = _reference_pose(Ta_ref, Tb_ref, Rx, tx, ph, oa, ob, theta_t, theta_r)
+        return T
+
+    T0 = tba(sol.x)
+    G = np.zeros((6, L.size))
+    eps = 1e-7
+    for k in range(L.size):  # parameters, not frames
+        dx = np.zeros(L.size)
+        dx[k] = eps
+        x1 = sol.x + dx
+        if k < 3:
+            x1 = sol.x.copy()
+            x1[L.rot] = se3.rotvec_from_matrix(R_X @ se3.matrix_from_rotvec(dx[L.rot]))
+        Tk = tba(x1)
+        G[:3, k] = se3.rotvec_from_matrix(T0[:3, :3].T @ Tk[:3, :3]) / eps
+        G[3:, k] = (Tk[:3, 3] - T0[:3, 3]) / eps
+    return G @ sol.covariance @ G.T + J_ref @ P_post @ J_ref.T

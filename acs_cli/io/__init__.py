@@ -1,0 +1,1 @@
+"""File formats: trajectories, YAML/NPZ artifacts and exports (never prints)."""

@@ -1,0 +1,289 @@
+"""YAML artifacts: a header (schema, tool, inputs with SHA-256, method, units, frames) + a body.
+
+Every artifact starts with the keys :func:`make_header` returns; the stage's results follow.
+:func:`read_yaml_artifact` checks that an artifact is the expected kind, not from a newer
+acscal, and holds the keys a stage needs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+from collections.abc import Mapping, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+import acs_cli
+from acs_cli.errors import InputError
+from acs_cli.io.atomic import atomic_write_text
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "get_path",
+    "make_header",
+    "read_yaml_artifact",
+    "sha256_of",
+    "to_plain",
+    "write_yaml_artifact",
+]
+
+#: Version of the artifact schemas this acscal writes (and the newest it reads).
+SCHEMA_VERSION = 1
+
+_CHUNK = 1 << 20
+_MISSING: Any = object()
+
+
+def _hash_file(path: Path, h: Any) -> None:
+    with open(path, "rb") as fh:
+        while chunk := fh.read(_CHUNK):
+            h.update(chunk)
+
+
+def sha256_of(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's content, or of a folder's files.
+
+    For a folder, the hash covers every regular file below it (symlinked folders are not
+    followed) in sorted order of relative POSIX path: each contributes its path, a NUL and
+    the SHA-256 of its content.
+
+    Raises
+    ------
+    InputError
+        If the path does not exist or cannot be read.
+    """
+    p = Path(path)
+    try:
+        if p.is_dir():
+            files: list[tuple[str, Path]] = []
+            for root, dirs, names in os.walk(p):
+                dirs.sort()
+                for name in names:
+                    f = Path(root) / name
+                    if f.is_file():
+                        files.append((f.relative_to(p).as_posix(), f))
+            h = hashlib.sha256()
+            for rel, f in sorted(files):
+                inner = hashlib.sha256()
+                _hash_file(f, inner)
+                h.update(rel.encode("utf-8", "surrogateescape") + b"\0" + inner.digest())
+            return h.hexdigest()
+        h = hashlib.sha256()
+        _hash_file(p, h)
+        return h.hexdigest()
+    except FileNotFoundError as exc:
+        raise InputError("no such file", path=p) from exc
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
+
+
+def make_header(
+    kind: str,
+    inputs: Mapping[str, str | Path],
+    method: str,
+    units: Mapping[str, Any],
+    frames: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The header every artifact starts with.
+
+    Parameters
+    ----------
+    kind : str
+        The artifact's kind, e.g. ``"joint"``; the schema is ``"acscal/<kind>"``.
+    inputs : mapping of str to path
+        The files (or folders) the artifact derives from, by role (``"traj_a"``, ...);
+        each is recorded with its path and SHA-256.
+    method : str
+        The estimator and its options, in words.
+    units : mapping
+        The unit of each quantity, e.g. ``{"length": "A units", "angles": "deg"}``.
+    frames : mapping
+        The frames the quantities are expressed in.
+
+    Returns
+    -------
+    dict
+        ``schema``, ``schema_version``, ``tool`` (name, version), ``created`` (UTC ISO
+        8601), ``inputs`` (``{name: {path, sha256}}``), ``method``, ``units``, ``frames``.
+
+    Raises
+    ------
+    InputError
+        If an input cannot be read.
+    """
+    return {
+        "schema": f"acscal/{kind}",
+        "schema_version": SCHEMA_VERSION,
+        "tool": {"name": "acscal", "version": acs_cli.__version__},
+        "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "inputs": {
+            str(name): {"path": str(path), "sha256": sha256_of(path)}
+            for name, path in inputs.items()
+        },
+        "method": method,
+        "units": to_plain(dict(units)),
+        "frames": to_plain(dict(frames)),
+    }
+
+
+def to_plain(obj: Any) -> Any:
+    """Recursively convert to YAML/JSON-safe Python: dicts, lists, str, int, float, bool, None.
+
+    numpy arrays become (nested) lists, numpy scalars Python scalars, tuples lists, paths
+    strings, dataclasses dicts; mapping keys become strings.
+
+    Raises
+    ------
+    TypeError
+        For any other object type (a programming error).
+    """
+    if isinstance(obj, np.ndarray):
+        return to_plain(obj.tolist())
+    if isinstance(obj, np.generic):  # before the builtins: np.float64 subclasses float
+        return str(obj) if isinstance(obj, (np.str_, np.bytes_)) else to_plain(obj.item())
+    if obj is None or isinstance(obj, (bool, int, float, str)):
+        return obj
+    if isinstance(obj, Mapping):
+        return {str(k): to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_plain(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return to_plain({f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)})
+    raise TypeError(f"cannot store a {type(obj).__name__} in an artifact")
+
+
+def write_yaml_artifact(
+    path: str | Path, header: Mapping[str, Any], body: Mapping[str, Any]
+) -> None:
+    """Write ``header`` then ``body`` as one YAML mapping, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    header : mapping
+        From :func:`make_header`.
+    body : mapping
+        The results; numpy arrays and scalars are converted with :func:`to_plain`. Lists of
+        numbers are written in flow style (a 4x4 matrix is four ``[a, b, c, d]`` rows).
+
+    Raises
+    ------
+    ValueError
+        If a body key repeats a header key (a programming error).
+    InputError
+        If the destination cannot be written.
+    """
+    clash = sorted(set(header) & set(body))
+    if clash:
+        raise ValueError(f"body keys {clash} clash with the artifact header")
+    doc = to_plain({**header, **body})
+    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, allow_unicode=True)
+    atomic_write_text(path, text)
+
+
+def get_path(
+    d: Mapping[str, Any], key: str, default: Any = _MISSING, *, source: str | Path | None = None
+) -> Any:
+    """The value at a dotted key such as ``"joint.position_in_a"``.
+
+    Parameters
+    ----------
+    d : mapping
+        A nested mapping (an artifact).
+    key : str
+        Dot-separated path of mapping keys.
+    default : optional
+        Returned when the key is missing; without it a missing key raises.
+    source : str or Path, optional
+        The artifact's file, named in the error.
+
+    Raises
+    ------
+    InputError
+        If the key is missing and no ``default`` is given.
+    """
+    node: Any = d
+    for part in key.split("."):
+        if isinstance(node, Mapping) and part in node:
+            node = node[part]
+        else:
+            if default is not _MISSING:
+                return default
+            raise InputError(f"missing key '{key}'", path=source)
+    return node
+
+
+def read_yaml_artifact(path: str | Path, kind: str, required: Sequence[str] = ()) -> dict[str, Any]:
+    """Read an acscal YAML artifact and check its kind, version and keys.
+
+    Parameters
+    ----------
+    path : str or Path
+        The artifact file.
+    kind : str
+        The expected kind: the schema must be ``"acscal/<kind>"``.
+    required : sequence of str
+        Dotted keys that must be present, e.g. ``["joint.position_in_a"]``.
+
+    Returns
+    -------
+    dict
+        The whole artifact (header and body).
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, not YAML, not a mapping, no schema, another stage's
+        artifact, a newer schema_version, or a missing required key.
+    """
+    p = Path(path)
+    expected = f"acscal/{kind}"
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError as exc:
+        raise InputError("no such file", path=p) from exc
+    except IsADirectoryError as exc:
+        raise InputError("is a folder, expected a YAML artifact", path=p) from exc
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
+    try:
+        doc = yaml.safe_load(data)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = None if mark is None else mark.line + 1
+        problem = exc.problem or exc.context or "syntax error"
+        raise InputError(f"not valid YAML: {problem}", path=p, line=line) from exc
+    except Exception as exc:  # bad encodings, deep nesting, ...: all mean "not YAML"
+        raise InputError(f"not valid YAML ({type(exc).__name__})", path=p) from exc
+    if not isinstance(doc, dict):
+        raise InputError(
+            f"not an acscal artifact: expected a YAML mapping, got {type(doc).__name__}", path=p
+        )
+    schema = doc.get("schema")
+    if schema is None:
+        raise InputError(f"not an acscal artifact (no 'schema' key), expected {expected}", path=p)
+    if schema != expected:
+        raise InputError(
+            f"this is a {schema} artifact, expected {expected}: an artifact from another stage?",
+            path=p,
+        )
+    version = doc.get("schema_version")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise InputError(f"'schema_version' must be an integer, got {version!r}", path=p)
+    if version > SCHEMA_VERSION:
+        raise InputError(
+            f"schema_version {version} was written by a newer acscal (this one reads up to "
+            f"{SCHEMA_VERSION}); upgrade acscal",
+            path=p,
+        )
+    for key in required:
+        get_path(doc, key, source=p)
+    return doc

@@ -1,0 +1,804 @@
+"""Camera trajectories: TUM, KITTI, COLMAP text models and acscal NPZ poses.
+
+Every reader returns a :class:`Trajectory` holding ``T_world_cam`` (the camera's pose in its
+world frame: ``p_world = T_world_cam @ p_cam``), whatever the file stores. Every error the
+file can cause is an :class:`~acs_cli.errors.InputError` naming the file and, for text
+formats, the line.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+
+from acs_cli.core import se3
+from acs_cli.errors import InputError
+from acs_cli.io.atomic import atomic_path, atomic_write_text
+
+__all__ = [
+    "FORMATS",
+    "KITTI_ORTHONORMAL_TOL",
+    "NPZ_SCHEMA",
+    "NPZ_SCHEMA_VERSION",
+    "QUAT_NORM_TOL",
+    "Trajectory",
+    "read_colmap",
+    "read_kitti",
+    "read_npz_header",
+    "read_npz_poses",
+    "read_trajectory",
+    "read_tum",
+    "write_kitti",
+    "write_npz_poses",
+    "write_tum",
+]
+
+FloatArray = se3.FloatArray
+
+#: Formats :func:`read_trajectory` accepts.
+FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
+#: Largest accepted ``|norm(q) - 1|`` of a quaternion in a TUM or COLMAP file.
+QUAT_NORM_TOL = 1e-3
+#: Largest accepted ``|R^T R - I|`` entry of a rotation block in a KITTI or NPZ file.
+KITTI_ORTHONORMAL_TOL = 1e-4
+#: ``schema`` of the NPZ the ``acscal poses`` stage writes.
+NPZ_SCHEMA = "acscal/poses"
+#: Newest NPZ schema version this code reads and the one it writes.
+NPZ_SCHEMA_VERSION = 1
+
+_NPZ_RESERVED = (
+    "schema",
+    "schema_version",
+    "T_world_cam",
+    "timestamps",
+    "has_timestamps",
+    "image_names",
+    "header_json",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A camera trajectory: one pose per frame.
+
+    Attributes
+    ----------
+    timestamps : ndarray, shape (n,)
+        Strictly increasing times in seconds, or frame indices when ``has_timestamps`` is
+        False.
+    T_world_cam : ndarray, shape (n, 4, 4)
+        Pose of the camera in the trajectory's world frame (maps camera points to world).
+        Units of the translation are the trajectory's own (metres or an unknown scale).
+    source : str
+        The file the trajectory was read from (used in messages).
+    format : str
+        ``"tum"``, ``"kitti"``, ``"colmap"``, ``"npz"`` or a caller's label.
+    has_timestamps : bool
+        Whether ``timestamps`` are times (pair by timestamp) or indices (pair by index).
+    names : tuple of str
+        Image names, one per pose, when known; else empty.
+
+    Raises
+    ------
+    InputError
+        On construction, if shapes disagree, a value is not finite, a rotation block is not
+        orthonormal (``se3.ORTHONORMAL_TOL``) or the timestamps do not increase. The message
+        names ``source``.
+    """
+
+    timestamps: FloatArray
+    T_world_cam: FloatArray
+    source: str
+    format: str
+    has_timestamps: bool
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        src = self.source
+        try:
+            t = np.asarray(self.timestamps, dtype=float)
+            T = np.asarray(self.T_world_cam, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"poses or timestamps are not numeric ({exc})", path=src) from exc
+        if T.ndim != 3 or T.shape[1:] != (4, 4):
+            raise InputError(f"T_world_cam must have shape (n, 4, 4), got {T.shape}", path=src)
+        n = T.shape[0]
+        if n == 0:
+            raise InputError("the trajectory has no poses", path=src)
+        if t.shape != (n,):
+            raise InputError(
+                f"expected {n} timestamps (one per pose), got shape {t.shape}", path=src
+            )
+        if not np.all(np.isfinite(t)):
+            raise InputError("timestamps contain NaN or inf", path=src)
+        with np.errstate(all="ignore"):
+            bad = np.flatnonzero(np.diff(t) <= 0)
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise InputError(
+                f"timestamps must increase: timestamps[{i}] = {t[i]!r} follows {t[i - 1]!r}",
+                path=src,
+            )
+        if self.names and len(self.names) != n:
+            raise InputError(f"expected {n} image names, got {len(self.names)}", path=src)
+        try:
+            se3.check_transforms(T, name="T_world_cam")
+        except InputError as exc:
+            raise InputError(exc.message, path=src) from exc
+        object.__setattr__(self, "timestamps", t)
+        object.__setattr__(self, "T_world_cam", T)
+        object.__setattr__(self, "names", tuple(str(s) for s in self.names))
+        object.__setattr__(self, "has_timestamps", bool(self.has_timestamps))
+
+    def __len__(self) -> int:
+        return int(self.T_world_cam.shape[0])
+
+    def select(self, idx: ArrayLike) -> Trajectory:
+        """The sub-trajectory at increasing indices ``idx`` (shape ``(m,)``, ``m >= 1``)."""
+        ii = np.asarray(idx, dtype=np.intp)
+        names = tuple(self.names[i] for i in ii) if self.names else ()
+        return Trajectory(
+            timestamps=self.timestamps[ii],
+            T_world_cam=self.T_world_cam[ii],
+            source=self.source,
+            format=self.format,
+            has_timestamps=self.has_timestamps,
+            names=names,
+        )
+
+
+# --------------------------------------------------------------------------------------
+# text helpers
+
+
+def _read_text(path: Path) -> str:
+    """The file's text (UTF-8, optional BOM); every failure is an InputError."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError as exc:
+        raise InputError("no such file", path=path) from exc
+    except IsADirectoryError as exc:
+        raise InputError("is a folder, expected a file", path=path) from exc
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=path) from exc
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError("not a UTF-8 text file", path=path, line=line) from exc
+
+
+def _data_lines(text: str) -> tuple[list[str], list[int]]:
+    """Non-blank lines not starting with ``#`` and their 1-based line numbers."""
+    lines: list[str] = []
+    numbers: list[int] = []
+    for k, raw in enumerate(text.split("\n"), start=1):
+        s = raw.strip()
+        if s and not s.startswith("#"):
+            lines.append(s)
+            numbers.append(k)
+    return lines, numbers
+
+
+def _parse_table(
+    lines: list[str], numbers: list[int], ncols: int, layout: str, path: Path
+) -> FloatArray:
+    """Parse whitespace-separated numbers, ``ncols`` a line, into ``(n, ncols)`` floats.
+
+    Raises an InputError naming the first line with a wrong column count, a token that is
+    not a number, or a NaN/inf.
+    """
+    rows = [s.split() for s in lines]
+    counts = np.fromiter((len(r) for r in rows), dtype=np.intp, count=len(rows))
+    wrong = np.flatnonzero(counts != ncols)
+    if wrong.size:
+        k = int(wrong[0])
+        raise InputError(
+            f"expected {ncols} numbers ({layout}), got {counts[k]}", path=path, line=numbers[k]
+        )
+    try:
+        flat = np.array([float(tok) for row in rows for tok in row], dtype=float)
+    except ValueError:
+        for row, line in zip(rows, numbers, strict=True):
+            for tok in row:
+                try:
+                    float(tok)
+                except ValueError:
+                    shown = tok if len(tok) <= 40 else tok[:37] + "..."
+                    raise InputError(f"not a number: {shown!r}", path=path, line=line) from None
+        raise  # pragma: no cover - the loop above always finds the bad token
+    table = flat.reshape(len(rows), ncols)
+    bad = np.flatnonzero(~np.isfinite(table).all(axis=1))
+    if bad.size:
+        raise InputError("contains NaN or inf", path=path, line=numbers[int(bad[0])])
+    return table
+
+
+def _check_quaternions(q: FloatArray, numbers: list[int], path: Path) -> FloatArray:
+    """Normalised ``(n, 4)`` quaternions; InputError naming a line whose norm is off."""
+    with np.errstate(all="ignore"):
+        norm = np.sqrt(np.sum(q * q, axis=1))
+        bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUAT_NORM_TOL))
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"quaternion norm is {norm[k]:.6g}, not 1 (tolerance {QUAT_NORM_TOL:g})",
+            path=path,
+            line=numbers[k],
+        )
+    return q / norm[:, None]
+
+
+def _check_increasing(t: FloatArray, numbers: list[int], path: Path) -> None:
+    with np.errstate(all="ignore"):
+        bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        what = "repeats" if t[k] == t[k - 1] else "is before"
+        raise InputError(
+            f"timestamp {t[k]!r} {what} the previous one ({t[k - 1]!r} on line "
+            f"{numbers[k - 1]}); timestamps must increase",
+            path=path,
+            line=numbers[k],
+        )
+
+
+def _check_rotation_blocks(
+    R: FloatArray, numbers: list[int] | None, path: Path, what: str
+) -> FloatArray:
+    """Check ``(n, 3, 3)`` blocks are rotations within KITTI_ORTHONORMAL_TOL; re-orthonormalise."""
+    with np.errstate(all="ignore"):
+        err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(R)
+        bad = np.flatnonzero(~(err <= KITTI_ORTHONORMAL_TOL) | ~(det > 0))
+    if bad.size:
+        k = int(bad[0])
+        problem = (
+            "is a reflection (det < 0)"
+            if det[k] <= 0
+            else f"is not orthonormal (|R^T R - I| = {err[k]:.2e} > {KITTI_ORTHONORMAL_TOL:g})"
+        )
+        if numbers is None:
+            raise InputError(f"{what}[{k}] rotation block {problem}", path=path)
+        raise InputError(f"the rotation block {problem}", path=path, line=numbers[k])
+    R_fixed, _ = se3.project_to_rotation(R)
+    return np.asarray(R_fixed, dtype=float)
+
+
+# --------------------------------------------------------------------------------------
+# TUM
+
+
+def read_tum(path: str | Path) -> Trajectory:
+    """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line.
+
+    Lines starting with ``#`` and blank lines are skipped. The pose is ``T_world_cam``
+    (translation in the file's length unit, quaternion ``(x, y, z, w)``; it is normalised).
+
+    Parameters
+    ----------
+    path : str or Path
+        The TUM file.
+
+    Returns
+    -------
+    Trajectory
+        ``timestamps`` (n,) in seconds, ``T_world_cam`` (n, 4, 4), ``has_timestamps=True``.
+
+    Raises
+    ------
+    InputError
+        Missing/unreadable/empty file; a line with a column count other than 8, a token
+        that is not a number, NaN/inf, a quaternion norm off 1 by more than ``1e-3``, or a
+        timestamp not after the previous one (the message names the line).
+    """
+    p = Path(path)
+    lines, numbers = _data_lines(_read_text(p))
+    if not lines:
+        raise InputError("contains no poses (empty TUM file)", path=p)
+    table = _parse_table(lines, numbers, 8, "timestamp tx ty tz qx qy qz qw", p)
+    t = table[:, 0].copy()
+    _check_increasing(t, numbers, p)
+    q = _check_quaternions(table[:, 4:8], numbers, p)
+    R = np.asarray(Rotation.from_quat(q).as_matrix(), dtype=float)
+    T = se3.transforms_from_rt(R, table[:, 1:4]).reshape(-1, 4, 4)
+    return Trajectory(t, T, source=str(p), format="tum", has_timestamps=True)
+
+
+def _check_poses(T_world_cam: ArrayLike, n_expected: int | None = None) -> FloatArray:
+    T = se3.check_transforms(T_world_cam, name="T_world_cam")
+    if n_expected is not None and T.shape[0] != n_expected:
+        raise InputError(f"got {n_expected} timestamps but {T.shape[0]} poses")
+    return T
+
+
+def write_tum(path: str | Path, timestamps: ArrayLike, T_world_cam: ArrayLike) -> None:
+    """Write a TUM trajectory atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    timestamps : array_like, shape (n,)
+        Seconds; written with ``%.9f``.
+    T_world_cam : array_like, shape (n, 4, 4)
+        Camera poses in the world frame. Written as ``tx ty tz qx qy qz qw`` with 15
+        significant digits and ``qw >= 0``, so :func:`read_tum` gives them back to ~1e-12.
+
+    Raises
+    ------
+    InputError
+        Wrong shapes, non-finite values, non-rotations, or an unwritable destination.
+    """
+    t = np.asarray(timestamps, dtype=float).reshape(-1)
+    T = _check_poses(T_world_cam, t.shape[0])
+    if not np.all(np.isfinite(t)):
+        raise InputError("timestamps contain NaN or inf", path=path)
+    q = se3.quat_xyzw_from_matrix(T[:, :3, :3]).reshape(-1, 4)
+    buf = io.StringIO()
+    np.savetxt(
+        buf,
+        np.column_stack([t, T[:, :3, 3], q]),
+        fmt=["%.9f"] + ["%.15g"] * 7,
+        header="timestamp tx ty tz qx qy qz qw",
+    )
+    atomic_write_text(path, buf.getvalue())
+
+
+# --------------------------------------------------------------------------------------
+# KITTI
+
+
+def read_kitti(path: str | Path) -> Trajectory:
+    """Read a KITTI trajectory: 12 numbers a line, the row-major top 3x4 of ``T_world_cam``.
+
+    Returns
+    -------
+    Trajectory
+        ``timestamps`` = frame indices ``0..n-1``, ``has_timestamps=False``,
+        ``T_world_cam`` (n, 4, 4) with rotation blocks re-orthonormalised.
+
+    Raises
+    ------
+    InputError
+        Missing/unreadable/empty file; a line without 12 numbers, a non-number, NaN/inf,
+        or a rotation block that is not orthonormal within ``1e-4`` (naming the line).
+    """
+    p = Path(path)
+    lines, numbers = _data_lines(_read_text(p))
+    if not lines:
+        raise InputError("contains no poses (empty KITTI file)", path=p)
+    table = _parse_table(lines, numbers, 12, "the row-major top 3x4 of T_world_cam", p)
+    M = table.reshape(-1, 3, 4)
+    R = _check_rotation_blocks(M[:, :, :3], numbers, p, "T_world_cam")
+    T = se3.transforms_from_rt(R, M[:, :, 3]).reshape(-1, 4, 4)
+    t = np.arange(T.shape[0], dtype=float)
+    return Trajectory(t, T, source=str(p), format="kitti", has_timestamps=False)
+
+
+def write_kitti(path: str | Path, T_world_cam: ArrayLike) -> None:
+    """Write a KITTI trajectory atomically (12 numbers a line, 15 significant digits).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    T_world_cam : array_like, shape (n, 4, 4)
+        Camera poses in the world frame.
+    """
+    T = _check_poses(T_world_cam)
+    buf = io.StringIO()
+    np.savetxt(buf, T[:, :3, :].reshape(-1, 12), fmt="%.15g")
+    atomic_write_text(path, buf.getvalue())
+
+
+# --------------------------------------------------------------------------------------
+# COLMAP
+
+_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+_DIGITS = re.compile(r"(\d+)")
+
+
+def _natural_key(name: str) -> tuple[list[int | str], str]:
+    parts = _DIGITS.split(name)
+    return [int(s) if k % 2 else s for k, s in enumerate(parts)], name
+
+
+def _colmap_file(path: Path) -> Path:
+    if path.is_dir():
+        f = path / "images.txt"
+        if not f.is_file():
+            hint = (
+                " (found images.bin: convert the binary model with "
+                "`colmap model_converter --output_type TXT`)"
+                if (path / "images.bin").exists()
+                else ""
+            )
+            raise InputError(f"no images.txt in this folder{hint}", path=path)
+        return f
+    return path
+
+
+def read_colmap(path: str | Path) -> Trajectory:
+    """Read camera poses from a COLMAP text model (``images.txt``).
+
+    Each image takes two lines: ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`` and its
+    POINTS2D line (``X Y POINT3D_ID`` triples, possibly empty). The stored pose is
+    ``cam_from_world`` (``T_cam_world``); it is inverted to ``T_world_cam``.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``images.txt`` or a folder containing it.
+
+    Returns
+    -------
+    Trajectory
+        Poses in natural order of image name (``img2`` before ``img10``), ``names`` set.
+        If every name's stem holds a number and these increase, they are the timestamps
+        (``has_timestamps=True``); otherwise timestamps are the indices ``0..n-1``.
+
+    Raises
+    ------
+    InputError
+        No ``images.txt``; an image line with fewer than 10 fields, a non-number, NaN/inf,
+        a bad quaternion or a repeated image name; a POINTS2D line that is not triples;
+        no images.
+    """
+    p = _colmap_file(Path(path))
+    text = _read_text(p)
+    entries: list[tuple[str, int]] = []
+    values: list[list[float]] = []
+    raw_lines = text.split("\n")
+    body = [
+        (k, s.strip()) for k, s in enumerate(raw_lines, start=1) if not s.lstrip().startswith("#")
+    ]
+    i = 0
+    while i < len(body):
+        line_no, s = body[i]
+        if not s:
+            i += 1
+            continue
+        fields = s.split(maxsplit=9)
+        if len(fields) < 10:
+            raise InputError(
+                "expected an image line: IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME "
+                f"(got {len(fields)} fields)",
+                path=p,
+                line=line_no,
+            )
+        try:
+            int(fields[0]), int(fields[8])
+            nums = [float(x) for x in fields[1:8]]
+        except ValueError:
+            raise InputError(
+                "expected an image line: IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME "
+                "(IDs integers, pose numbers)",
+                path=p,
+                line=line_no,
+            ) from None
+        entries.append((fields[9].strip(), line_no))
+        values.append(nums)
+        if i + 1 < len(body):
+            pts_line, pts = body[i + 1]
+            if len(pts.split()) % 3:
+                raise InputError(
+                    "expected the POINTS2D line (X Y POINT3D_ID triples) of the image on "
+                    f"line {line_no}",
+                    path=p,
+                    line=pts_line,
+                )
+        i += 2
+    if not entries:
+        raise InputError("contains no images (empty COLMAP images.txt)", path=p)
+    numbers = [ln for _, ln in entries]
+    table = np.asarray(values, dtype=float)
+    bad = np.flatnonzero(~np.isfinite(table).all(axis=1))
+    if bad.size:
+        raise InputError("contains NaN or inf", path=p, line=numbers[int(bad[0])])
+    seen: dict[str, int] = {}
+    for name, ln in entries:
+        if name in seen:
+            raise InputError(
+                f"image name {name!r} repeats (first on line {seen[name]})", path=p, line=ln
+            )
+        seen[name] = ln
+    q_wxyz = _check_quaternions(table[:, 0:4], numbers, p)
+    R_cam_world = np.asarray(Rotation.from_quat(q_wxyz[:, [1, 2, 3, 0]]).as_matrix(), dtype=float)
+    T_cam_world = se3.transforms_from_rt(R_cam_world, table[:, 4:7]).reshape(-1, 4, 4)
+    with np.errstate(all="ignore"):
+        T_world_cam = se3.invert_transforms(T_cam_world)
+    if not np.all(np.isfinite(T_world_cam)):
+        raise InputError("a translation is too large to invert", path=p)
+
+    names = [name for name, _ in entries]
+    order = sorted(range(len(names)), key=lambda k: _natural_key(names[k]))
+    names_sorted = tuple(names[k] for k in order)
+    T_sorted = T_world_cam[order]
+    stamps: list[float] = []
+    for name in names_sorted:
+        found = _NUMBER.findall(PurePosixPath(name.replace("\\", "/")).stem)
+        if not found:
+            break
+        stamps.append(float(found[-1]))
+    t = np.asarray(stamps, dtype=float)
+    has_t = len(stamps) == len(names_sorted) and bool(np.all(np.isfinite(t)))
+    if has_t:
+        with np.errstate(all="ignore"):
+            has_t = bool(np.all(np.diff(t) > 0))
+    if not has_t:
+        t = np.arange(len(names_sorted), dtype=float)
+    return Trajectory(
+        t, T_sorted, source=str(p), format="colmap", has_timestamps=has_t, names=names_sorted
+    )
+
+
+# --------------------------------------------------------------------------------------
+# NPZ
+
+
+def _load_npz(path: Path) -> dict[str, np.ndarray]:
+    """All arrays of an NPZ archive; any failure is an InputError."""
+    if not path.exists():
+        raise InputError("no such file", path=path)
+    if path.is_dir():
+        raise InputError("is a folder, expected an NPZ file", path=path)
+    try:
+        # Open the file ourselves: np.load leaks its handle when the archive is corrupt.
+        with open(path, "rb") as fh:
+            z = np.load(fh, allow_pickle=False)
+            if not isinstance(z, np.lib.npyio.NpzFile):
+                raise InputError("is a single .npy array, not an NPZ archive", path=path)
+            with z:
+                return {str(k): np.asarray(z[k]) for k in z.files}
+    except InputError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=path) from exc
+    except Exception as exc:  # corrupt archives raise many types (zipfile, zlib, ValueError)
+        raise InputError(
+            f"not a readable NPZ file (truncated or corrupt?): {type(exc).__name__}", path=path
+        ) from exc
+
+
+def _npz_scalar_str(arrays: Mapping[str, np.ndarray], key: str, path: Path) -> str:
+    a = arrays[key]
+    if a.ndim != 0 or a.dtype.kind not in "US":
+        raise InputError(f"'{key}' must be a string", path=path)
+    v = a[()]
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+
+def _npz_numeric(arrays: Mapping[str, np.ndarray], key: str, path: Path) -> FloatArray:
+    a = arrays[key]
+    if a.dtype.kind not in "biuf":
+        raise InputError(f"'{key}' must be numeric, got dtype {a.dtype}", path=path)
+    return np.asarray(a, dtype=float)
+
+
+def _check_npz_schema(arrays: Mapping[str, np.ndarray], path: Path) -> None:
+    if "schema" in arrays:
+        schema = _npz_scalar_str(arrays, "schema", path)
+        if schema != NPZ_SCHEMA:
+            raise InputError(
+                f"this is a {schema} artifact, expected {NPZ_SCHEMA}; check the file is the "
+                "output of `acscal poses`",
+                path=path,
+            )
+    if "schema_version" in arrays:
+        v = arrays["schema_version"]
+        if v.ndim != 0 or v.dtype.kind not in "iu":
+            raise InputError("'schema_version' must be an integer", path=path)
+        if int(v) > NPZ_SCHEMA_VERSION:
+            raise InputError(
+                f"schema_version {int(v)} was written by a newer acscal (this one reads up "
+                f"to {NPZ_SCHEMA_VERSION}); upgrade acscal",
+                path=path,
+            )
+
+
+def read_npz_poses(path: str | Path) -> Trajectory:
+    """Read poses from an NPZ file (written by ``acscal poses`` or a plain one).
+
+    Parameters
+    ----------
+    path : str or Path
+        An NPZ archive with ``T_world_cam`` (n, 4, 4) and optionally ``timestamps`` (n,)
+        seconds, ``image_names`` (n,) str, ``has_timestamps`` (bool), ``schema``
+        (= ``"acscal/poses"``), ``schema_version`` (int) and ``reprojection_rms`` (n,) px.
+
+    Returns
+    -------
+    Trajectory
+        Rotation blocks re-orthonormalised. Without ``timestamps`` the timestamps are the
+        indices and ``has_timestamps`` is False.
+
+    Raises
+    ------
+    InputError
+        Missing, truncated or corrupt file; another artifact's schema; a newer
+        schema_version; missing ``T_world_cam``; wrong shapes or dtypes; non-finite values;
+        rotation blocks not orthonormal within ``1e-4``.
+    """
+    p = Path(path)
+    arrays = _load_npz(p)
+    _check_npz_schema(arrays, p)
+    if "T_world_cam" not in arrays:
+        raise InputError("has no 'T_world_cam' array of shape (n, 4, 4)", path=p)
+    T = _npz_numeric(arrays, "T_world_cam", p)
+    if T.ndim != 3 or T.shape[1:] != (4, 4) or T.shape[0] == 0:
+        raise InputError(f"'T_world_cam' must have shape (n, 4, 4), got {T.shape}", path=p)
+    n = T.shape[0]
+    if not np.all(np.isfinite(T)):
+        k = int(np.flatnonzero(~np.isfinite(T).reshape(n, -1).all(axis=1))[0])
+        raise InputError(f"T_world_cam[{k}] contains NaN or inf", path=p)
+    if np.abs(T[:, 3, :] - [0.0, 0.0, 0.0, 1.0]).max() > KITTI_ORTHONORMAL_TOL:
+        raise InputError("every T_world_cam must have a last row of [0, 0, 0, 1]", path=p)
+    R = _check_rotation_blocks(T[:, :3, :3], None, p, "T_world_cam")
+    T = se3.transforms_from_rt(R, T[:, :3, 3]).reshape(-1, 4, 4)
+
+    if "timestamps" in arrays:
+        t = _npz_numeric(arrays, "timestamps", p)
+        if t.shape != (n,):
+            raise InputError(f"'timestamps' must have shape ({n},), got {t.shape}", path=p)
+        has_t = True
+        if "has_timestamps" in arrays:
+            h = arrays["has_timestamps"]
+            if h.ndim != 0 or h.dtype.kind not in "biu":
+                raise InputError("'has_timestamps' must be a boolean", path=p)
+            has_t = bool(h)
+    else:
+        t = np.arange(n, dtype=float)
+        has_t = False
+
+    names: tuple[str, ...] = ()
+    if "image_names" in arrays:
+        a = arrays["image_names"]
+        if a.dtype.kind not in "US" or a.shape != (n,):
+            raise InputError(f"'image_names' must be {n} strings, got {a.dtype} {a.shape}", path=p)
+        decoded = [v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v) for v in a]
+        if any(decoded):
+            names = tuple(decoded)
+    if "reprojection_rms" in arrays:
+        rms = arrays["reprojection_rms"]
+        if rms.dtype.kind not in "biuf" or rms.shape != (n,):
+            raise InputError(f"'reprojection_rms' must be {n} numbers, got {rms.shape}", path=p)
+    return Trajectory(t, T, source=str(p), format="npz", has_timestamps=has_t, names=names)
+
+
+def read_npz_header(path: str | Path) -> dict[str, Any]:
+    """The artifact header (see ``artifacts.make_header``) stored in an NPZ, or ``{}``."""
+    p = Path(path)
+    arrays = _load_npz(p)
+    if "header_json" not in arrays:
+        return {}
+    try:
+        header = json.loads(_npz_scalar_str(arrays, "header_json", p))
+    except ValueError as exc:
+        raise InputError("'header_json' is not valid JSON", path=p) from exc
+    if not isinstance(header, dict):
+        raise InputError("'header_json' is not a mapping", path=p)
+    return header
+
+
+def write_npz_poses(
+    path: str | Path,
+    traj: Trajectory,
+    extra: Mapping[str, ArrayLike] | None = None,
+    *,
+    header: Mapping[str, Any] | None = None,
+) -> None:
+    """Write an ``acscal/poses`` NPZ atomically (compressed).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file (any suffix; ``.npz`` is customary).
+    traj : Trajectory
+        Written as ``T_world_cam`` (n, 4, 4), ``timestamps`` (n,), ``has_timestamps``,
+        ``image_names`` (n,) (empty strings when unknown).
+    extra : mapping of str to array_like, optional
+        More arrays, e.g. ``reprojection_rms`` (n,) in pixels. Must not use reserved keys
+        or need pickling (object arrays).
+    header : mapping, optional
+        The artifact header (``artifacts.make_header``), stored as JSON in ``header_json``.
+
+    Raises
+    ------
+    ValueError
+        A reserved or non-string key, or an object array, in ``extra`` (a programming error).
+    InputError
+        The destination cannot be written.
+    """
+    n = len(traj)
+    arrays: dict[str, np.ndarray] = {
+        "schema": np.array(NPZ_SCHEMA),
+        "schema_version": np.array(NPZ_SCHEMA_VERSION, dtype=np.int64),
+        "T_world_cam": np.asarray(traj.T_world_cam, dtype=float),
+        "timestamps": np.asarray(traj.timestamps, dtype=float),
+        "has_timestamps": np.array(bool(traj.has_timestamps)),
+        "image_names": np.array(list(traj.names) if traj.names else [""] * n, dtype=str),
+    }
+    if header is not None:
+        from acs_cli.io.artifacts import to_plain
+
+        arrays["header_json"] = np.array(json.dumps(to_plain(dict(header))))
+    for key, value in (extra or {}).items():
+        if not isinstance(key, str) or key in _NPZ_RESERVED:
+            raise ValueError(f"extra key {key!r} is reserved or not a string")
+        arr = np.asarray(value)
+        if arr.dtype.kind == "O":
+            raise ValueError(f"extra array {key!r} has dtype object (would need pickling)")
+        arrays[key] = arr
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------------------
+# dispatch
+
+_READERS: dict[str, Callable[[str | Path], Trajectory]] = {
+    "tum": read_tum,
+    "kitti": read_kitti,
+    "colmap": read_colmap,
+    "npz": read_npz_poses,
+}
+
+
+def _sniff(path: Path) -> str:
+    if path.suffix.lower() == ".npz":
+        return "npz"
+    if path.is_dir() or path.name == "images.txt":
+        return "colmap"
+    lines, _ = _data_lines(_read_text(path))
+    if not lines:
+        raise InputError("contains no poses (empty file)", path=path)
+    ncols = len(lines[0].split())
+    if ncols == 8:
+        return "tum"
+    if ncols == 12:
+        return "kitti"
+    raise InputError(
+        f"cannot tell the trajectory format from a first line of {ncols} numbers (TUM has "
+        "8, KITTI 12); give the format explicitly",
+        path=path,
+    )
+
+
+def read_trajectory(path: str | Path, fmt: str = "auto") -> Trajectory:
+    """Read a trajectory in any supported format.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TUM or KITTI text file, a COLMAP ``images.txt`` or its folder, or an NPZ.
+    fmt : {"auto", "tum", "kitti", "colmap", "npz"}
+        ``"auto"``: ``.npz`` is NPZ; a folder or ``images.txt`` is COLMAP; otherwise the
+        first data line decides: 8 numbers TUM, 12 KITTI.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    InputError
+        A missing file, an unknown ``fmt``, an undecidable format, or a reader's error.
+    """
+    p = Path(path)
+    if fmt not in FORMATS:
+        raise InputError(f"unknown trajectory format {fmt!r}; use one of {', '.join(FORMATS)}")
+    if not p.exists():
+        raise InputError("no such file or folder", path=p)
+    kind = _sniff(p) if fmt == "auto" else fmt
+    return _READERS[kind](p)

@@ -1,0 +1,117 @@
+"""Kalibr camchain and OpenCV FileStorage exports."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from acs_cli.core import se3
+from acs_cli.errors import InputError
+from acs_cli.io.export import read_opencv_yaml, write_camchain_yaml, write_opencv_yaml
+
+
+def test_opencv_yaml_read_back(tmp_path: Path, rng: np.random.Generator) -> None:
+    T = se3.transforms_from_rt(Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3))
+    K = np.array([[500.0, 0, 320], [0, 505.0, 240], [0, 0, 1]])
+    path = tmp_path / "out" / "calib.yaml"
+    write_opencv_yaml(
+        path,
+        {
+            "T_b_a": T,
+            "K": K,
+            "scale_phi_ba": 0.75,
+            "n_frames": 12,
+            "units": "A units",
+            "idx": np.arange(3),
+        },
+    )
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        assert fs.isOpened()
+        np.testing.assert_array_equal(fs.getNode("T_b_a").mat(), T)
+        np.testing.assert_array_equal(fs.getNode("K").mat(), K)
+        assert fs.getNode("scale_phi_ba").real() == 0.75
+        assert int(fs.getNode("n_frames").real()) == 12
+        assert fs.getNode("units").string() == "A units"
+        assert fs.getNode("idx").mat().ravel().tolist() == [0, 1, 2]
+    finally:
+        fs.release()
+    got = read_opencv_yaml(path, ["T_b_a", "scale_phi_ba", "units"])
+    np.testing.assert_array_equal(got["T_b_a"], T)
+    assert got["scale_phi_ba"] == 0.75 and got["units"] == "A units"
+    assert [p.name for p in path.parent.iterdir()] == ["calib.yaml"]
+    with pytest.raises(InputError, match="missing key 'nope'"):
+        read_opencv_yaml(path, ["nope"])
+
+
+def test_opencv_yaml_other_suffix(tmp_path: Path) -> None:
+    path = tmp_path / "calib.txt"
+    write_opencv_yaml(path, {"x": 1.5})
+    assert path.read_text().startswith("%YAML")
+    assert read_opencv_yaml(path, ["x"]) == {"x": 1.5}
+
+
+def test_opencv_yaml_bad_key(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="key"):
+        write_opencv_yaml(tmp_path / "a.yaml", {"a b": 1.0})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_read_opencv_yaml_errors(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="no such file"):
+        read_opencv_yaml(tmp_path / "x.yaml", ["a"])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("%YAML:1.0\n---\na: [1, 2\n")
+    with pytest.raises(InputError):
+        read_opencv_yaml(bad, ["a"])
+
+
+def test_camchain(tmp_path: Path, rng: np.random.Generator) -> None:
+    T = se3.transforms_from_rt(Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3))
+    K = np.array([[500.0, 0, 320], [0, 505.0, 240], [0, 0, 1]])
+    path = tmp_path / "camchain.yaml"
+    write_camchain_yaml(
+        path,
+        [
+            {
+                "name": "cam_a",
+                "intrinsics": K,
+                "distortion_coeffs": [0.1, -0.01, 0, 0],
+                "resolution": [640, 480],
+            },
+            {"name": "cam_b", "T_cn_cnm1": T},
+        ],
+    )
+    doc = yaml.safe_load(path.read_text())
+    assert list(doc) == ["cam0", "cam1"]
+    cam0 = doc["cam0"]
+    assert cam0 == {
+        "camera_model": "pinhole",
+        "intrinsics": [500.0, 505.0, 320.0, 240.0],
+        "distortion_model": "radtan",
+        "distortion_coeffs": [0.1, -0.01, 0.0, 0.0],
+        "resolution": [640, 480],
+        "rostopic": "/cam_a/image_raw",
+    }
+    cam1 = doc["cam1"]
+    assert set(cam1) == {"T_cn_cnm1", "rostopic"}  # unknown intrinsics are omitted
+    np.testing.assert_array_equal(np.array(cam1["T_cn_cnm1"]), T)
+
+
+def test_camchain_errors(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="first camera"):
+        write_camchain_yaml(tmp_path / "c.yaml", [{"name": "a", "T_cn_cnm1": np.eye(4)}])
+    with pytest.raises(InputError, match="name"):
+        write_camchain_yaml(tmp_path / "c.yaml", [{}])
+    with pytest.raises(InputError, match="intrinsics"):
+        write_camchain_yaml(tmp_path / "c.yaml", [{"name": "a", "intrinsics": [1, 2, 3]}])
+    with pytest.raises(InputError, match="T_cn_cnm1"):
+        write_camchain_yaml(
+            tmp_path / "c.yaml", [{"name": "a"}, {"name": "b", "T_cn_cnm1": 2 * np.eye(4)}]
+        )
+    assert list(tmp_path.iterdir()) == []
