@@ -278,19 +278,21 @@ def solve(
                     H = H + Jp.T @ Wp @ Jp
                     g = g + Jp.T @ Wp @ rp
                 accepted = False
+                dx = np.zeros_like(x)
                 for _try in range(20):
                     A = H + lam * np.diag(np.diag(H) + 1e-12)
                     try:
                         dx = -np.linalg.solve(A, g)
                     except np.linalg.LinAlgError:
                         dx = -np.linalg.lstsq(A, g, rcond=None)[0]
-                    x_new = retract(x, dx)
-                    cost_new = _cost(problem, x_new, mask, W)
-                    if cost_new <= cost:
-                        x, cost, accepted = x_new, cost_new, True
-                        lam = max(lam / 10.0, 1e-12)
-                        break
-                    lam *= 10.0
+                    if np.all(np.isfinite(dx)):
+                        x_new = retract(x, dx)
+                        cost_new = _cost(problem, x_new, mask, W)
+                        if np.isfinite(cost_new) and cost_new <= cost:
+                            x, cost, accepted = x_new, cost_new, True
+                            lam = max(lam / 10.0, 1e-12)
+                            break
+                    lam = min(lam * 10.0, 1e12)
                 if not accepted or np.linalg.norm(dx) < 1e-10 * (1.0 + np.linalg.norm(x)):
                     break
             th_old = th

@@ -685,3 +685,38 @@ def _relpose_covariance(Ta_ref, Tb_ref, sol, L, J_ref, P_post, unpack):
         G[:3, k] = se3.rotvec_from_matrix(T0[:3, :3].T @ Tk[:3, :3]) / eps
         G[3:, k] = (Tk[:3, 3] - T0[:3, 3]) / eps
     return G @ sol.covariance @ G.T + J_ref @ P_post @ J_ref.T
+
+
+def paper_pose_std(T_b_a: FloatArray, covariance: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Standard deviations of the paper's reported quantities from ``T_b_a``'s covariance.
+
+    Parameters
+    ----------
+    T_b_a : ndarray, shape (4, 4)
+    covariance : ndarray, shape (6, 6)
+        Of ``(rotation perturbation of R_b_a on the right (rad), t_b_a)``.
+
+    Returns
+    -------
+    rpy_std_deg : ndarray, shape (3,)
+        Of roll, pitch, yaw of ``R_a_b`` (degrees).
+    translation_b_in_a_std : ndarray, shape (3,)
+        Of ``t_a_b = -R_b_a^T t_b_a``.
+    """
+
+    def quantities(d: FloatArray) -> FloatArray:
+        R = T_b_a[:3, :3] @ se3.matrix_from_rotvec(d[:3])
+        t = T_b_a[:3, 3] + d[3:]
+        return np.concatenate([se3.rpy_deg_from_matrix(R.T), -R.T @ t])
+
+    q0 = quantities(np.zeros(6))
+    G = np.zeros((6, 6))
+    eps = 1e-7
+    for k in range(6):  # six pose coordinates
+        d = np.zeros(6)
+        d[k] = eps
+        diff = quantities(d) - q0
+        diff[:3] = (diff[:3] + 180.0) % 360.0 - 180.0
+        G[:, k] = diff / eps
+    std = np.sqrt(np.maximum(np.diag(G @ covariance @ G.T), 0.0))
+    return std[:3], std[3:]

@@ -1,0 +1,1 @@
+"""Typer command line (thin: parses options, calls the stages, prints)."""

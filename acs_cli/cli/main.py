@@ -1,0 +1,328 @@
+"""The ``acscal`` command line: thin Typer commands over the stages.
+
+Errors the user can cause (:class:`acs_cli.errors.AcsError`) become one line on stderr and
+an exit code: 2 for bad input, 3 for motion that cannot determine the answer. Anything
+else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+import acs_cli
+from acs_cli.errors import AcsError, InputError
+
+app = typer.Typer(
+    name="acscal",
+    help="Calibrate articulated camera systems: joints, relative poses and scale factors "
+    "(Chen & Wong's Algorithms I-IV, and beyond).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="rich",
+)
+out = Console(highlight=False)
+err = Console(stderr=True, highlight=False)
+
+
+class Method(str, Enum):
+    refined = "refined"
+    paper = "paper"
+
+
+class TrajFormat(str, Enum):
+    auto = "auto"
+    tum = "tum"
+    kitti = "kitti"
+    colmap = "colmap"
+    npz = "npz"
+
+
+class PairBy(str, Enum):
+    auto = "auto"
+    timestamp = "timestamp"
+    by_index = "index"
+
+
+class ExportFormat(str, Enum):
+    kalibr = "kalibr"
+    opencv = "opencv"
+
+
+MethodOpt = Annotated[
+    Method,
+    typer.Option(
+        "--method",
+        help="refined (default: all constraints, noise-weighted, robust) or paper (as published).",
+    ),
+]
+FormatAOpt = Annotated[TrajFormat, typer.Option("--format-a", help="Format of --poses-a.")]
+FormatBOpt = Annotated[TrajFormat, typer.Option("--format-b", help="Format of --poses-b.")]
+PairByOpt = Annotated[
+    PairBy, typer.Option("--pair-by", help="Pair A's and B's samples by timestamp or index.")
+]
+MaxDtOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--max-dt",
+        help="Largest timestamp difference of a pair, seconds (default: half the median "
+        "frame interval).",
+        min=0.0,
+    ),
+]
+UnitOpt = Annotated[
+    str, typer.Option("--length-unit", help="Unit of the trajectories' translations (label).")
+]
+
+
+def _fmt(v: Any, digits: int = 4) -> str:
+    arr = np.atleast_1d(np.asarray(v, dtype=float))
+    return "[" + ", ".join(f"{x:+.{digits}f}" for x in arr) + "]"
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        out.print(f"acscal {acs_cli.__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version_callback, is_eager=True, help="Show the version."
+        ),
+    ] = False,
+) -> None:
+    """Calibrate articulated camera systems."""
+
+
+@app.command()
+def joint(
+    poses_a: Annotated[
+        Path, typer.Option("--poses-a", help="Camera A's trajectory (TUM, KITTI, COLMAP, NPZ).")
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="joint.yaml to write.")],
+    poses_b: Annotated[
+        Path | None, typer.Option("--poses-b", help="Camera B's trajectory.")
+    ] = None,
+    fixed_joint: Annotated[
+        bool,
+        typer.Option("--fixed-joint", help="Algorithm II: the joint stayed fixed in the world."),
+    ] = False,
+    overlap: Annotated[
+        bool,
+        typer.Option(
+            "--overlap", help="Algorithm I: both trajectories in one world (shared view)."
+        ),
+    ] = False,
+    method: MethodOpt = Method.refined,
+    format_a: FormatAOpt = TrajFormat.auto,
+    format_b: FormatBOpt = TrajFormat.auto,
+    pair_by: PairByOpt = PairBy.auto,
+    max_dt: MaxDtOpt = None,
+    length_unit: UnitOpt = "m",
+) -> None:
+    """Locate the joint in each camera's frame.
+
+    Example (fixed-joint motion, each camera on its own checkerboard):
+
+        acscal joint --fixed-joint --poses-a cam_a.tum --poses-b cam_b.tum -o joint.yaml
+
+    Example (overlapping views of one board):
+
+        acscal joint --overlap --poses-a cam_a.tum --poses-b cam_b.tum -o joint.yaml
+    """
+    from acs_cli.stages.joint import JointConfig, run_joint
+
+    if fixed_joint == overlap:
+        raise InputError("choose one of --fixed-joint and --overlap")
+    cfg = JointConfig(
+        scenario="overlap" if overlap else "fixed_joint",
+        method=method.value,
+        format_a=format_a.value,
+        format_b=format_b.value,
+        pair_by=pair_by.value,
+        max_dt=max_dt,
+        length_unit=length_unit,
+    )
+    run = run_joint(poses_a, poses_b, output, cfg)
+    est = run.estimate
+    table = Table(title=f"joint ({cfg.scenario}, {cfg.method})", title_justify="left")
+    table.add_column("quantity")
+    table.add_column(f"value ({length_unit})")
+    table.add_column("std")
+    table.add_row("position_in_a", _fmt(est.position_in_a), _fmt(est.std_a))
+    if est.position_in_b is not None and est.std_b is not None:
+        table.add_row("position_in_b", _fmt(est.position_in_b), _fmt(est.std_b))
+    for key, rms in est.residual_rms.items():
+        table.add_row(f"residual RMS ({key})", f"{rms:.4g}", "")
+    out.print(table)
+    for w in run.warnings:
+        err.print(f"[yellow]warning:[/] {w}")
+    out.print(f"wrote {output}")
+
+
+@app.command()
+def relpose(
+    poses_a: Annotated[Path, typer.Option("--poses-a", help="Camera A's trajectory.")],
+    poses_b: Annotated[Path, typer.Option("--poses-b", help="Camera B's trajectory.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="relpose.yaml to write.")],
+    joint_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--joint", help="joint.yaml from `acscal joint` (in the trajectories' units)."
+        ),
+    ] = None,
+    joint_metric: Annotated[
+        Path | None,
+        typer.Option(
+            "--joint-metric",
+            help="A metric joint.yaml, with --unknown-scale: also estimates mu_a and mu_b.",
+        ),
+    ] = None,
+    unknown_scale: Annotated[
+        bool,
+        typer.Option(
+            "--unknown-scale",
+            help="Algorithm IV: each trajectory is known only up to its own scale factor.",
+        ),
+    ] = False,
+    self_calibrate: Annotated[
+        bool,
+        typer.Option(
+            "--self-calibrate",
+            help="Estimate the joint too, from this general-motion recording alone.",
+        ),
+    ] = False,
+    reference: Annotated[
+        int,
+        typer.Option("--reference", help="Index of the paired frame at which T_b_a is reported."),
+    ] = 0,
+    method: MethodOpt = Method.refined,
+    format_a: FormatAOpt = TrajFormat.auto,
+    format_b: FormatBOpt = TrajFormat.auto,
+    pair_by: PairByOpt = PairBy.auto,
+    max_dt: MaxDtOpt = None,
+    length_unit: UnitOpt = "m",
+) -> None:
+    """Relative pose T_b_a of two cameras joined by a joint (no overlap needed).
+
+    Example (Algorithm III):
+
+        acscal relpose --joint joint.yaml --poses-a a.tum --poses-b b.tum -o relpose.yaml
+
+    Example (Algorithm IV, monocular SLAM trajectories of unknown scale):
+
+        acscal relpose --unknown-scale --joint joint.yaml --poses-a a.tum --poses-b b.tum \\
+            -o relpose.yaml
+
+    Example (self-calibration from one recording):
+
+        acscal relpose --self-calibrate --poses-a a.tum --poses-b b.tum -o relpose.yaml
+    """
+    from acs_cli.stages.relpose import RelposeConfig, run_relpose
+
+    if joint_file is not None and joint_metric is not None:
+        raise InputError("give one of --joint and --joint-metric")
+    cfg = RelposeConfig(
+        method=method.value,
+        unknown_scale=unknown_scale,
+        self_calibrate=self_calibrate,
+        joint_metric=joint_metric is not None,
+        reference=reference,
+        format_a=format_a.value,
+        format_b=format_b.value,
+        pair_by=pair_by.value,
+        max_dt=max_dt,
+        length_unit=length_unit,
+    )
+    run = run_relpose(poses_a, poses_b, joint_file or joint_metric, output, cfg)
+    est = run.estimate
+    rel = run.artifact["relative_pose"]
+    table = Table(
+        title=f"relative pose at frame {est.reference} ({cfg.method})", title_justify="left"
+    )
+    table.add_column("quantity")
+    table.add_column("value")
+    table.add_column("std")
+    table.add_row(
+        "roll, pitch, yaw of R_a_b (deg)", _fmt(rel["rpy_deg"], 3), _fmt(rel["rpy_deg_std"], 3)
+    )
+    unit = "B units" if unknown_scale else length_unit
+    table.add_row(
+        f"translation of B in A ({unit})",
+        _fmt(rel["translation_b_in_a"]),
+        _fmt(rel["translation_b_in_a_std"]),
+    )
+    j = run.artifact["joint"]
+    table.add_row("joint.position_in_a", _fmt(j["position_in_a"]), _fmt(j["position_in_a_std"]))
+    table.add_row("joint.position_in_b", _fmt(j["position_in_b"]), _fmt(j["position_in_b_std"]))
+    if unknown_scale:
+        table.add_row("phi_ba = mu_b / mu_a", f"{est.phi_ba:.5f}", f"{est.phi_std:.5f}")
+        if est.mu_a is not None:
+            table.add_row("mu_a", f"{est.mu_a:.5f}", f"{est.mu_a_std:.5f}")
+            table.add_row("mu_b", f"{est.mu_b:.5f}", f"{est.mu_b_std:.5f}")
+    table.add_row("residual RMS", f"{est.residual_rms:.4g}", "")
+    out.print(table)
+    for w in run.warnings:
+        err.print(f"[yellow]warning:[/] {w}")
+    out.print(f"wrote {output}")
+
+
+@app.command()
+def export(
+    relpose_file: Annotated[Path, typer.Argument(help="relpose.yaml from `acscal relpose`.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="File to write.")],
+    fmt: Annotated[
+        ExportFormat,
+        typer.Option("--format", help="kalibr (camchain YAML) or opencv (cv2.FileStorage YAML)."),
+    ] = ExportFormat.kalibr,
+) -> None:
+    """Export a relative pose for other tools.
+
+    Example:
+
+        acscal export relpose.yaml --format opencv -o relpose_cv.yaml
+    """
+    from acs_cli.stages.export import run_export
+
+    info = run_export(relpose_file, output, fmt.value)
+    out.print(f"wrote {info['output']} ({info['format']}: {', '.join(info['keys'])})")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``acscal`` console script."""
+    args = sys.argv[1:] if argv is None else argv
+    try:
+        app(args=args, prog_name="acscal", standalone_mode=False)
+    except AcsError as exc:
+        err.print(f"acscal: error: {exc.one_line()}", markup=False, soft_wrap=True)
+        raise SystemExit(exc.exit_code) from None
+    except typer.Abort:
+        err.print("acscal: aborted")
+        raise SystemExit(130) from None
+    except typer.TyperException as exc:  # usage errors from the option parser
+        show = getattr(exc, "show", None)
+        if callable(show):
+            show()
+        else:
+            err.print(f"acscal: error: {exc.format_message()}", markup=False)
+        raise SystemExit(exc.exit_code) from None
+    except OSError as exc:
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        err.print(f"acscal: error: {where}{exc.strerror or exc}", markup=False, soft_wrap=True)
+        raise SystemExit(2) from None
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,1 @@
+"""Stages: ``run_*(paths, config)`` functions that read inputs, estimate and write artifacts."""

@@ -1,0 +1,162 @@
+"""The joint stage: ``acscal joint`` (Algorithms I and II)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
+from acs_cli.io.atomic import check_distinct_output
+from acs_cli.stages.common import (
+    frames_section,
+    load_pair,
+    load_trajectory,
+    pairing_section,
+    vector_with_std,
+)
+
+SCENARIOS = ("fixed_joint", "overlap")
+
+METHOD_TEXT = {
+    ("fixed_joint", "paper"): "Algorithm II (Chen & Wong eq. (12)): linear least squares of "
+    "(R^i - I) O = -T^i relative to the first frame",
+    ("fixed_joint", "refined"): "fixed joint, world joint position unknown; frames weighted by "
+    "the pose noise they carry (levels estimated), outliers rejected",
+    ("overlap", "paper"): "Algorithm I (Chen & Wong eq. (9)): linear least squares",
+    ("overlap", "refined"): "Algorithm I's constraint weighted by the pose noise (levels "
+    "estimated), outliers rejected",
+}
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    """Options of the joint stage.
+
+    Attributes
+    ----------
+    scenario : {"fixed_joint", "overlap"}
+    method : {"refined", "paper"}
+    format_a, format_b : str
+        Trajectory file formats (``auto`` sniffs).
+    pair_by : {"auto", "timestamp", "index"}
+        Overlap only: how A's and B's samples are paired.
+    max_dt : float, optional
+        Largest timestamp difference of a pair, seconds.
+    length_unit : str
+        The unit of the trajectories' translations, recorded in the artifact.
+    """
+
+    scenario: str = "fixed_joint"
+    method: str = "refined"
+    format_a: str = "auto"
+    format_b: str = "auto"
+    pair_by: str = "auto"
+    max_dt: float | None = None
+    length_unit: str = "m"
+
+
+@dataclass(frozen=True)
+class JointRun:
+    """What :func:`run_joint` did: the estimate, the artifact's body and its warnings."""
+
+    estimate: JointEstimate
+    artifact: dict[str, Any]
+    output: Path
+    warnings: list[str] = field(default_factory=list)
+
+
+def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
+    """The ``joint`` section of an artifact from an estimate."""
+    pa, sa = vector_with_std(est.position_in_a, est.covariance_a)
+    body: dict[str, Any] = {"position_in_a": pa, "position_in_a_std": sa}
+    if est.position_in_b is not None:
+        pb, sb = vector_with_std(est.position_in_b, est.covariance_b)
+        body |= {"position_in_b": pb, "position_in_b_std": sb}
+    body["covariance_a"] = est.covariance_a.tolist()
+    if est.covariance_b is not None:
+        body["covariance_b"] = est.covariance_b.tolist()
+    body["units"] = length_unit
+    return body
+
+
+def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
+    """Read the trajectories, estimate the joint and write ``joint.yaml`` atomically.
+
+    Raises
+    ------
+    InputError
+        Bad files or options.
+    DegenerateMotionError
+        The motion cannot determine the joint (nothing is written).
+    """
+    if config.scenario not in SCENARIOS:
+        raise InputError(f"unknown scenario {config.scenario!r}")
+    inputs = {"poses_a": poses_a} | ({"poses_b": poses_b} if poses_b is not None else {})
+    check_distinct_output(output, inputs.values())
+    warnings: list[str] = []
+    quality: dict[str, Any] = {}
+    if config.scenario == "overlap":
+        if poses_b is None:
+            raise InputError("--overlap needs both --poses-a and --poses-b")
+        pair = load_pair(
+            poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
+        )
+        warnings += pair.warnings
+        est = estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, config.method)
+        quality["pairing"] = pairing_section(pair.pairing, config.pair_by)
+        quality["frames"] = {"ab": frames_section(est.inliers["ab"], pair.a.timestamps)}
+    else:
+        ta = load_trajectory(poses_a, config.format_a)
+        tb = None if poses_b is None else load_trajectory(poses_b, config.format_b)
+        est = estimate_joint_fixed(
+            ta.T_world_cam, None if tb is None else tb.T_world_cam, config.method
+        )
+        quality["frames"] = {"a": frames_section(est.inliers["a"], ta.timestamps)}
+        if tb is not None:
+            quality["frames"]["b"] = frames_section(est.inliers["b"], tb.timestamps)
+        quality["joint_in_world"] = {k: v.tolist() for k, v in est.position_in_world.items()}
+    for key, fr in quality["frames"].items():
+        if fr["rejected"]:
+            warnings.append(
+                f"{len(fr['rejected'])} frame(s) of {key.upper()} rejected as outliers "
+                f"(timestamps {fr['rejected'][:10]})"
+            )
+    quality["residual_rms"] = est.residual_rms
+    if est.noise:
+        quality["estimated_pose_noise"] = est.noise
+    header = make_header(
+        "joint",
+        inputs,
+        method=f"{config.method}: {METHOD_TEXT[(config.scenario, config.method)]}",
+        units={"length": config.length_unit, "angles": "deg"},
+        frames={
+            "position_in_a": "camera A's optical frame",
+            "position_in_b": "camera B's optical frame",
+            "joint_in_world": "each trajectory's own world frame (fixed joint only)",
+        },
+    )
+    body = {
+        "scenario": config.scenario,
+        "joint": joint_body(est, config.length_unit),
+        "quality": quality,
+        "warnings": warnings,
+    }
+    write_yaml_artifact(output, header, body)
+    return JointRun(est, header | body, output, warnings)
+
+
+def read_joint(path: Path) -> dict[str, Any]:
+    """Read a ``joint.yaml`` (or a ``relpose.yaml`` holding a joint): its ``joint`` section."""
+    try:
+        doc = read_yaml_artifact(path, "joint", ["joint.position_in_a"])
+    except InputError as exc:
+        if "acscal/relpose" not in exc.message:
+            raise
+        doc = read_yaml_artifact(path, "relpose", ["joint.position_in_a"])
+    joint = doc["joint"]
+    if not isinstance(joint, dict):
+        raise InputError("'joint' must be a mapping", path=path)
+    return joint

@@ -1,0 +1,230 @@
+"""The relative-pose stage: ``acscal relpose`` (Algorithms III, IV and self-calibration)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import make_header, write_yaml_artifact
+from acs_cli.io.atomic import check_distinct_output
+from acs_cli.stages.common import frames_section, load_pair, pairing_section, vector_with_std
+from acs_cli.stages.joint import read_joint
+
+
+@dataclass(frozen=True)
+class RelposeConfig:
+    """Options of the relative-pose stage.
+
+    Attributes
+    ----------
+    method : {"refined", "paper"}
+    unknown_scale : bool
+        Each trajectory's translations carry an unknown factor (Algorithm IV).
+    self_calibrate : bool
+        Estimate the joint from this recording alone (no joint file).
+    joint_metric : bool
+        The joint file is metric while the trajectories have unknown scales.
+    reference : int
+        Index (among the paired frames) of the reference instant.
+    format_a, format_b, pair_by, max_dt, length_unit
+        As for the joint stage.
+    """
+
+    method: str = "refined"
+    unknown_scale: bool = False
+    self_calibrate: bool = False
+    joint_metric: bool = False
+    reference: int = 0
+    format_a: str = "auto"
+    format_b: str = "auto"
+    pair_by: str = "auto"
+    max_dt: float | None = None
+    length_unit: str = "m"
+
+
+@dataclass(frozen=True)
+class RelposeRun:
+    """What :func:`run_relpose` did."""
+
+    estimate: RelposeEstimate
+    artifact: dict[str, Any]
+    output: Path
+    warnings: list[str] = field(default_factory=list)
+
+
+def _cov3(joint: dict[str, Any], which: str, path: Path) -> np.ndarray | None:
+    cov = joint.get(f"covariance_{which}")
+    if cov is None:
+        std = joint.get(f"position_in_{which}_std")
+        if std is None:
+            return None
+        cov = np.diag(np.square(np.asarray(std, dtype=float)))
+    arr = np.asarray(cov, dtype=float)
+    if arr.shape != (3, 3) or not np.all(np.isfinite(arr)):
+        raise InputError(f"joint.covariance_{which} must be a finite 3x3 matrix", path=path)
+    return arr
+
+
+def _vec3(joint: dict[str, Any], key: str, path: Path) -> np.ndarray | None:
+    value = joint.get(key)
+    if value is None:
+        return None
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise InputError(f"joint.{key} must be three finite numbers", path=path)
+    return arr
+
+
+def load_prior(path: Path, metric: bool) -> JointPrior:
+    """A :class:`JointPrior` from a ``joint.yaml``."""
+    joint = read_joint(path)
+    return JointPrior(
+        position_in_a=_vec3(joint, "position_in_a", path),
+        position_in_b=_vec3(joint, "position_in_b", path),
+        covariance_a=_cov3(joint, "a", path),
+        covariance_b=_cov3(joint, "b", path),
+        metric=metric,
+    )
+
+
+def _units(config: RelposeConfig) -> dict[str, str]:
+    if not config.unknown_scale:
+        return {"length": config.length_unit, "angles": "deg"}
+    return {
+        "length": "B units (camera B's trajectory units) for T_b_a and position_in_b; "
+        "A units for position_in_a",
+        "angles": "deg",
+        "scale": "phi_ba = mu_b / mu_a; mu = trajectory units per metre",
+    }
+
+
+def run_relpose(
+    poses_a: Path,
+    poses_b: Path,
+    joint: Path | None,
+    output: Path,
+    config: RelposeConfig,
+) -> RelposeRun:
+    """Read the trajectories (and joint), estimate the relative pose, write ``relpose.yaml``.
+
+    Raises
+    ------
+    InputError
+        Bad files or options.
+    DegenerateMotionError
+        The motion cannot determine the answer (nothing is written).
+    """
+    if config.self_calibrate and joint is not None:
+        raise InputError("--self-calibrate estimates the joint; do not also give a joint file")
+    if not config.self_calibrate and joint is None:
+        raise InputError(
+            "give the joint (--joint joint.yaml or --joint-metric joint.yaml), or "
+            "--self-calibrate to estimate it from this recording"
+        )
+    if config.joint_metric and not config.unknown_scale:
+        raise InputError("--joint-metric only makes sense with --unknown-scale")
+    inputs: dict[str, Path] = {"poses_a": poses_a, "poses_b": poses_b}
+    if joint is not None:
+        inputs["joint"] = joint
+    check_distinct_output(output, inputs.values())
+    prior = None if joint is None else load_prior(joint, config.joint_metric)
+    pair = load_pair(
+        poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
+    )
+    warnings = list(pair.warnings)
+    est = estimate_relpose(
+        pair.a.T_world_cam,
+        pair.b.T_world_cam,
+        prior,
+        unknown_scale=config.unknown_scale,
+        reference=config.reference,
+        method=config.method,
+    )
+    rpy_std, t_std = paper_pose_std(est.T_b_a, est.covariance)
+    rel: dict[str, Any] = {
+        "T_b_a": est.T_b_a.tolist(),
+        "T_b_a_covariance": est.covariance.tolist(),
+        "rpy_deg": est.rpy_deg.tolist(),
+        "rpy_deg_std": rpy_std.tolist(),
+        "translation_b_in_a": est.translation_b_in_a.tolist(),
+        "translation_b_in_a_std": t_std.tolist(),
+        "reference": int(est.reference),
+        "reference_timestamp_a": float(pair.a.timestamps[est.reference]),
+        "reference_timestamp_b": float(pair.b.timestamps[est.reference]),
+        "T_wb_wa": est.T_wb_wa.tolist(),
+    }
+    pa, sa = vector_with_std(est.position_in_a, est.covariance_a)
+    pb, sb = vector_with_std(est.position_in_b, est.covariance_b)
+    body: dict[str, Any] = {
+        "scenario": "general",
+        "relative_pose": rel,
+        "joint": {
+            "position_in_a": pa,
+            "position_in_a_std": sa,
+            "position_in_b": pb,
+            "position_in_b_std": sb,
+            "covariance_a": est.covariance_a.tolist(),
+            "covariance_b": est.covariance_b.tolist(),
+            "source": "self-calibrated from this recording"
+            if est.self_calibrated
+            else "refined from the given joint and this recording"
+            if est.method == "refined"
+            else "the given joint, position_in_a refined by the paper's LM",
+        },
+    }
+    if config.unknown_scale:
+        body["scale"] = {
+            "phi_ba": est.phi_ba,
+            "phi_ba_std": est.phi_std,
+            "mu_a": est.mu_a,
+            "mu_a_std": est.mu_a_std,
+            "mu_b": est.mu_b,
+            "mu_b_std": est.mu_b_std,
+        }
+    frames = frames_section(est.inliers, pair.a.timestamps)
+    if frames["rejected"]:
+        warnings.append(f"{len(frames['rejected'])} frame(s) rejected as outliers")
+    body["quality"] = {
+        "residual_rms": est.residual_rms,
+        "frames": frames,
+        "pairing": pairing_section(pair.pairing, config.pair_by),
+        "estimated_pose_noise": est.noise or None,
+    }
+    body["warnings"] = warnings
+    mode = (
+        "self-calibration"
+        if est.self_calibrated
+        else ("Algorithm IV" if config.unknown_scale else "Algorithm III")
+    )
+    method_text = (
+        f"paper: {mode} as published (linear eq. (24), SVD projection, LM over roll, pitch, "
+        "yaw, T_BA, O_A" + (", phi" if config.unknown_scale else "") + ")"
+        if config.method == "paper"
+        else f"refined: {mode}; joint in both cameras, world-to-world "
+        + ("similarity" if config.unknown_scale else "rigid transform")
+        + " by weighted ML over all frames, reference poses corrected by the joint constraint"
+    )
+    header = make_header(
+        "relpose",
+        inputs,
+        method=method_text,
+        units=_units(config),
+        frames={
+            "T_b_a": "maps points of camera A's frame into camera B's at the reference instant "
+            "(the paper's H_BA)",
+            "rpy_deg": "roll, pitch, yaw of R_a_b (R = Rz(yaw) Ry(pitch) Rx(roll))",
+            "translation_b_in_a": "camera B's origin in camera A's frame (t_a_b)",
+            "T_b_a_covariance": "of (rotation vector perturbation on the right, rad; t_b_a)",
+            "T_wb_wa": "maps world A into world B (rotation and translation of the similarity)",
+        },
+    )
+    write_yaml_artifact(output, header, body)
+    return RelposeRun(est, header | body, output, warnings)
