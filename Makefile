@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: install
-	bash docs/demo.sh
+	$(BIN)/python -m sample_data_gen.demo demo_out
 
 lint: install
 	$(BIN)/ruff check acs_cli sample_data_gen tests benchmarks
