@@ -111,8 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     table.add_row("phi_ba = mu_b / mu_a (Alg IV)", f"{truth_s['scale']['phi_ba']:.4f}",
                   *both("relpose_scaled", "scale.phi_ba"))  # fmt: skip
     sc = _load(res / "relpose_selfcal_scaled.yaml")
-    table.add_row("self-calibration: joint in A (A units / mu_a)", _v(tj["position_in_a"]), "n/a",
-                  _v(np.asarray(sc["joint"]["position_in_a"]) / truth_s["scale"]["mu_a"]))  # fmt: skip
+    sc_joint = np.asarray(sc["joint"]["position_in_a"]) / truth_s["scale"]["mu_a"]
+    table.add_row("self-calibration: joint in A (A units / mu_a)", _v(tj["position_in_a"]),
+                  "n/a", _v(sc_joint))  # fmt: skip
     table.add_row("self-calibration: phi_ba", f"{truth_s['scale']['phi_ba']:.4f}", "n/a",
                   f"{sc['scale']['phi_ba']:.4f}")  # fmt: skip
     console.print(table)

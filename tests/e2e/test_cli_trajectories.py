@@ -50,7 +50,11 @@ def rig_files(tmp_path_factory: pytest.TempPathFactory) -> dict:
             write_tum(path, seq.timestamps, noisy)
             files[f"{name}_{cam}"] = path
             scaled = d / f"{name}_{cam}_scaled.tum"
-            write_tum(scaled, seq.timestamps, acs_sim.scale_translations(noisy, 0.8 if cam == "a" else 3.2))
+            write_tum(
+                scaled,
+                seq.timestamps,
+                acs_sim.scale_translations(noisy, 0.8 if cam == "a" else 3.2),
+            )
             files[f"{name}_{cam}_scaled"] = scaled
     return files
 
@@ -203,15 +207,24 @@ def test_errors_are_one_line_with_exit_codes(rig_files: dict, tmp_path: Path) ->
     assert not out.exists()
     # output equal to an input
     _one_line_error(
-        acscal("joint", "--fixed-joint", "--poses-a", rig_files["fixed_a"], "-o", rig_files["fixed_a"]),
+        acscal(
+            "joint", "--fixed-joint", "--poses-a", rig_files["fixed_a"], "-o", rig_files["fixed_a"]
+        ),
         2,
     )
     # a trajectory where a joint file is expected: wrong kind of file
     msg = _one_line_error(
         acscal(
-            "relpose", "--joint", rig_files["fixed_a"], "--poses-a", rig_files["general_a"],
-            "--poses-b", rig_files["general_b"], "-o", out,
-        ),  # fmt: skip
+            "relpose",
+            "--joint",
+            rig_files["fixed_a"],
+            "--poses-a",
+            rig_files["general_a"],
+            "--poses-b",
+            rig_files["general_b"],
+            "-o",
+            out,
+        ),
         2,
     )
     assert "fixed_a.tum" in msg

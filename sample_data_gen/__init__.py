@@ -1,0 +1,1 @@
+"""Synthetic articulated camera systems: trajectories, sample recordings and the demo."""
