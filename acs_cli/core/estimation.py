@@ -34,7 +34,7 @@ NDArrayBool = np.ndarray
 OUTLIER_ALPHA = 0.01
 #: Largest share of frames that may be rejected as outliers.
 MAX_OUTLIER_FRACTION = 0.3
-#: Variance components are kept above this fraction of the largest one (numerical floor).
+#: Variance components are kept above this fraction of their natural scale (numerical floor).
 _VARIANCE_FLOOR = 1e-8
 
 
@@ -113,9 +113,12 @@ def fit_variance_components(
     dof = 3 * n
     bias = dof / (dof - n_params) if dof > n_params else 1.0
     ms = float(np.mean(np.sum(r * r, axis=1))) + 1e-300
+    trL = max(float(np.trace(L, axis1=1, axis2=2).mean()), 1e-300)
+    # each component's natural scale (it alone explaining all residual power): the floor
+    # is relative to it, so that it does not depend on the length unit
+    floor = _VARIANCE_FLOOR * np.array([ms / 3.0, ms / trL])
     if theta0 is None:
-        trL = float(np.trace(L, axis1=1, axis2=2).mean())
-        theta = np.array([ms / 6.0, ms / (2.0 * max(trL, 1e-300))])
+        theta = np.array([ms / 6.0, ms / (2.0 * trL)])
     else:
         theta = np.maximum(np.asarray(theta0, dtype=float) / bias, 1e-300)
         iterations = min(iterations, 3)  # warm start: the caller iterates anyway
@@ -136,7 +139,6 @@ def fit_variance_components(
             new = np.linalg.solve(F, q)
         except np.linalg.LinAlgError:
             new = np.linalg.lstsq(F, q, rcond=None)[0]
-        floor = _VARIANCE_FLOOR * max(float(new.max()), ms * 1e-12)
         new = np.maximum(new, floor)
         done = np.max(np.abs(new - theta) / np.maximum(theta, 1e-300)) < 1e-4
         theta = new
@@ -219,40 +221,29 @@ def outlier_threshold(n: int) -> float:
     return float(chi2.isf(OUTLIER_ALPHA / max(n, 1), 3))
 
 
-def solve(
+@dataclass
+class _Fit:
+    """State of one fit on a fixed set of frames."""
+
+    x: FloatArray
+    theta: FloatArray
+    W: FloatArray
+    converged: bool
+    iterations: int
+
+
+def _fit(
     problem: LeastSquaresProblem,
     x0: FloatArray,
-    *,
-    theta: FloatArray | None = None,
-    reject_outliers: bool = True,
-    max_outer: int = 30,
-    max_rounds: int = 5,
-) -> LeastSquaresResult:
-    """Iteratively reweighted Levenberg-Marquardt with variance-component estimation.
-
-    Parameters
-    ----------
-    problem : LeastSquaresProblem
-    x0 : ndarray, shape (p,)
-        Initial parameters.
-    theta : ndarray, shape (k,), optional
-        Fixed variance components (known noise levels); estimated when ``None``.
-    reject_outliers : bool
-        Drop frames beyond :func:`outlier_threshold` and refit, at most ``max_rounds`` times.
-    """
+    theta0: FloatArray | None,
+    mask: NDArrayBool,
+    fixed_theta: bool,
+    max_outer: int,
+) -> _Fit:
+    """Alternate LM on the parameters (weights held) and ML on the noise levels."""
     retract = problem.retract or (lambda x, dx: x + dx)
     x = np.asarray(x0, dtype=float).copy()
     p = x.size
-    r, _ = problem.residuals(x, False)
-    n = r.shape[0]
-    mask = np.ones(n, dtype=bool)
-    fixed_theta = theta is not None
-    th = np.asarray(theta, dtype=float) if theta is not None else None
-    lam = 1e-6
-    it = 0
-    converged = False
-    max_reject = int(np.floor(MAX_OUTLIER_FRACTION * n))
-    threshold = outlier_threshold(n)
 
     def weights(x: FloatArray, th: FloatArray | None) -> tuple[FloatArray, FloatArray]:
         L = problem.noise_shapes(x)
@@ -262,56 +253,131 @@ def solve(
         assert th is not None  # for mypy: fixed or just fitted
         return th, batched_inv3(covariances(th, L))
 
-    for _round in range(max_rounds + 1):
-        th, W = weights(x, th)
-        converged = False
-        for _outer in range(max_outer):
-            it += 1
-            cost = _cost(problem, x, mask, W)
-            x_start = x.copy()
-            for _inner in range(10):
-                r, J = problem.residuals(x, True)
-                assert J is not None  # for mypy: asked for
-                H, g = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
-                if problem.priors is not None:
-                    rp, Jp, Wp = problem.priors(x)
-                    H = H + Jp.T @ Wp @ Jp
-                    g = g + Jp.T @ Wp @ rp
-                accepted = False
-                dx = np.zeros_like(x)
-                for _try in range(20):
-                    A = H + lam * np.diag(np.diag(H) + 1e-12)
-                    try:
-                        dx = -np.linalg.solve(A, g)
-                    except np.linalg.LinAlgError:
-                        dx = -np.linalg.lstsq(A, g, rcond=None)[0]
-                    if np.all(np.isfinite(dx)):
-                        x_new = retract(x, dx)
-                        cost_new = _cost(problem, x_new, mask, W)
-                        if np.isfinite(cost_new) and cost_new <= cost:
-                            x, cost, accepted = x_new, cost_new, True
-                            lam = max(lam / 10.0, 1e-12)
-                            break
-                    lam = min(lam * 10.0, 1e12)
-                if not accepted or np.linalg.norm(dx) < 1e-10 * (1.0 + np.linalg.norm(x)):
-                    break
-            th_old = th
-            th, W = weights(x, th)
-            moved = float(np.linalg.norm(x - x_start)) / (1.0 + float(np.linalg.norm(x)))
-            change = float(np.max(np.abs(th - th_old) / np.maximum(th_old, 1e-300)))
-            if moved < 1e-8 and change < 1e-3:
-                converged = True
+    th, W = weights(x, theta0)
+    converged = False
+    it = 0
+    for _outer in range(max_outer):
+        it += 1
+        lam = 1e-6  # new weights, new problem: no damping carried over
+        cost = _cost(problem, x, mask, W)
+        x_start = x.copy()
+        for _inner in range(10):
+            r, J = problem.residuals(x, True)
+            assert J is not None  # for mypy: asked for
+            H, g = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
+            if problem.priors is not None:
+                rp, Jp, Wp = problem.priors(x)
+                H = H + Jp.T @ Wp @ Jp
+                g = g + Jp.T @ Wp @ rp
+            accepted = False
+            dx = np.zeros_like(x)
+            for _try in range(20):
+                A = H + lam * np.diag(np.diag(H) + 1e-12)
+                try:
+                    dx = -np.linalg.solve(A, g)
+                except np.linalg.LinAlgError:
+                    dx = -np.linalg.lstsq(A, g, rcond=None)[0]
+                if np.all(np.isfinite(dx)):
+                    x_new = retract(x, dx)
+                    cost_new = _cost(problem, x_new, mask, W)
+                    if np.isfinite(cost_new) and cost_new <= cost:
+                        x, cost, accepted = x_new, cost_new, True
+                        lam = max(lam / 10.0, 1e-12)
+                        break
+                lam = min(lam * 10.0, 1e12)
+            if not accepted or np.linalg.norm(dx) < 1e-10 * (1.0 + np.linalg.norm(x)):
                 break
-        if not reject_outliers:
+        th_old = th
+        th, W = weights(x, th)
+        moved = float(np.linalg.norm(x - x_start)) / (1.0 + float(np.linalg.norm(x)))
+        change = float(np.max(np.abs(th - th_old) / np.maximum(th_old, 1e-300)))
+        if moved < 1e-8 and change < 1e-3:
+            converged = True
             break
-        r, _ = problem.residuals(x, False)
-        d2 = mahalanobis_sq(r, W)
+    return _Fit(x, th, W, converged, it)
+
+
+#: Up to this many kept frames, the worst frames are also tested against a fit without them
+#: (leave-out), so that outliers cannot hide by inflating the fitted noise levels.
+LEAVE_ONE_OUT_MAX_FRAMES = 2000
+#: Share of the kept frames (at least one) tested together in the leave-out test.
+LEAVE_OUT_SHARE = 0.1
+#: The leave-one-out test removes the largest residual from the noise fit, which biases the
+#: fitted noise down; the worst frame is rejected only beyond this many times the threshold.
+#: Outliers that hide behind inflated noise levels exceed it by far.
+LEAVE_ONE_OUT_FACTOR = 2.5  # calibrated: <= 1% of clean 30-frame recordings lose a frame
+
+
+def solve(
+    problem: LeastSquaresProblem,
+    x0: FloatArray,
+    *,
+    theta: FloatArray | None = None,
+    reject_outliers: bool = True,
+    max_outer: int = 30,
+    max_batch_rounds: int = 8,
+) -> LeastSquaresResult:
+    """Iteratively reweighted Levenberg-Marquardt with variance-component estimation.
+
+    Outlier rejection (when ``reject_outliers``): after each fit, every frame beyond
+    :func:`outlier_threshold` is dropped at once and the fit repeated. When none is beyond
+    it, the worst ``LEAVE_OUT_SHARE`` of the frames are tested against a fit of the others
+    (for at most ``LEAVE_ONE_OUT_MAX_FRAMES`` frames): outliers inflate the fitted noise
+    levels and can hide each other. At most ``MAX_OUTLIER_FRACTION`` of the frames are dropped.
+
+    Parameters
+    ----------
+    problem : LeastSquaresProblem
+    x0 : ndarray, shape (p,)
+        Initial parameters.
+    theta : ndarray, shape (2,), optional
+        Fixed noise levels ``(theta_t, theta_r)``; estimated when ``None``.
+    reject_outliers : bool
+    """
+    r0, _ = problem.residuals(np.asarray(x0, dtype=float), False)
+    n = r0.shape[0]
+    mask = np.ones(n, dtype=bool)
+    fixed_theta = theta is not None
+    th0 = None if theta is None else np.asarray(theta, dtype=float)
+    fit = _fit(problem, x0, th0, mask, fixed_theta, max_outer)
+    iterations = fit.iterations
+    max_reject = int(np.floor(MAX_OUTLIER_FRACTION * n))
+    threshold = outlier_threshold(n)
+    batch_rounds = 0
+    while reject_outliers:
         room = max_reject - int((~mask).sum())
-        candidates = np.flatnonzero(mask & (d2 > threshold))
-        if candidates.size == 0 or room <= 0:
+        if room <= 0:
             break
-        worst = candidates[np.argsort(d2[candidates])[::-1][:room]]
-        mask[worst] = False
+        r, _ = problem.residuals(fit.x, False)
+        d2 = mahalanobis_sq(r, fit.W)
+        candidates = np.flatnonzero(mask & (d2 > threshold))
+        if candidates.size and batch_rounds < max_batch_rounds:
+            batch_rounds += 1
+            mask[candidates[np.argsort(d2[candidates])[::-1][:room]]] = False
+            fit = _fit(problem, fit.x, fit.theta, mask, fixed_theta, max_outer)
+            iterations += fit.iterations
+            continue
+        if mask.sum() > LEAVE_ONE_OUT_MAX_FRAMES or fixed_theta:
+            break
+        # group deletion: the worst ~10% of the kept frames, each tested against a fit of
+        # the others (outliers inflate the fitted noise and so hide each other)
+        kept = np.flatnonzero(mask)
+        k = min(room, max(1, int(np.ceil(LEAVE_OUT_SHARE * kept.size))))
+        suspects = kept[np.argsort(d2[kept])[::-1][:k]]
+        trial_mask = mask.copy()
+        trial_mask[suspects] = False
+        loo = _fit(problem, fit.x, fit.theta, trial_mask, fixed_theta, max_outer)
+        iterations += loo.iterations
+        r_loo, _ = problem.residuals(loo.x, False)
+        d2_loo = mahalanobis_sq(r_loo[suspects], loo.W[suspects])
+        out = suspects[d2_loo > LEAVE_ONE_OUT_FACTOR * threshold]
+        if out.size == 0:
+            break
+        mask[out] = False
+        fit = (
+            loo if out.size == k else _fit(problem, loo.x, loo.theta, mask, fixed_theta, max_outer)
+        )
+    x, th, W = fit.x, fit.theta, fit.W
     r, J = problem.residuals(x, True)
     assert J is not None  # for mypy: asked for
     H, _ = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
@@ -326,7 +392,7 @@ def solve(
         residuals=r,
         mahalanobis_sq=mahalanobis_sq(r, W),
         inliers=mask,
-        iterations=it,
-        converged=converged,
+        iterations=iterations,
+        converged=fit.converged,
         information=H,
     )

@@ -101,11 +101,23 @@ def _check_method(method: str) -> None:
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
 
 
-def _rotation_design_check(R: FloatArray, what: str) -> None:
-    """Raise :class:`DegenerateMotionError` when rotations ``(n, 3, 3)`` cannot fix a point.
+def _rotation_design_check(R: FloatArray, what: str) -> FloatArray | None:
+    """Check that rotations ``(n, 3, 3)`` can fix a point; return the hinge axis if not.
 
     The joint is fixed by how the rotations differ from their mean: stacked, centred
     rotations ``R_i - mean(R)`` must have three clearly non-zero singular values.
+
+    Returns
+    -------
+    ndarray of shape (3,) or None
+        The unit axis ``v`` with ``R_i v`` (nearly) constant when the motion is a hinge
+        (weakest/strongest singular value below ``HINGE_RATIO``), in the frame the
+        rotations act on; ``None`` otherwise.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Too little rotation overall.
     """
     n = R.shape[0]
     D = (R - R.mean(axis=0)).reshape(-1, 3)
@@ -118,16 +130,30 @@ def _rotation_design_check(R: FloatArray, what: str) -> None:
             "of degrees about at least two different axes.",
             details={"rotation_spread_deg": float(np.degrees(spread))},
         )
-    ratio = float(s[2] / s[0])
-    if ratio < HINGE_RATIO:
-        axis = Vt[2]
-        raise DegenerateMotionError(
-            f"{what}: the rotations are all about one axis (a hinge; weakest/strongest "
-            f"direction {ratio:.3f} < {HINGE_RATIO}), so the joint can be anywhere on that "
-            f"axis [{axis[0]:+.3f} {axis[1]:+.3f} {axis[2]:+.3f}] (camera frame). Record "
-            "motion about a second axis, or use the hinge axis instead of a point.",
-            details={"hinge_axis": axis.tolist(), "singular_value_ratio": ratio},
+    return Vt[2] if s[2] / s[0] < HINGE_RATIO else None
+
+
+def _hinge_error(
+    what: str, axes: dict[str, FloatArray], points: dict[str, FloatArray]
+) -> DegenerateMotionError:
+    """The error for a hinge: the axis and its point nearest each camera, in each frame."""
+    details: dict[str, object] = {}
+    text = []
+    for cam in axes:
+        v = axes[cam] / np.linalg.norm(axes[cam])
+        p = points[cam] - (points[cam] @ v) * v  # the axis point nearest camera's origin
+        details[f"hinge_axis_in_{cam}"] = v.tolist()
+        details[f"hinge_point_in_{cam}"] = p.tolist()
+        text.append(
+            f"in camera {cam.upper()}: direction [{v[0]:+.3f} {v[1]:+.3f} {v[2]:+.3f}] "
+            f"through [{p[0]:+.3f} {p[1]:+.3f} {p[2]:+.3f}]"
         )
+    return DegenerateMotionError(
+        f"{what}: the motion turns about one axis only (a hinge), so the joint can be anywhere "
+        f"on that axis ({'; '.join(text)}). Record motion about a second axis, or use the "
+        "hinge axis instead of a point.",
+        details=details,
+    )
 
 
 def _noise_dict(theta: FloatArray) -> dict[str, float]:
@@ -183,7 +209,13 @@ def estimate_pivot(
             f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
         )
     R, t = T[:, :3, :3], T[:, :3, 3]
-    _rotation_design_check(R, what)
+    axis = _rotation_design_check(R, what)
+    if axis is not None:
+        # any point on the axis fits: the truncated least-squares point (p_w eliminated)
+        D = (R - R.mean(axis=0)).reshape(-1, 3)
+        point, *_ = np.linalg.lstsq(D, -(t - t.mean(axis=0)).reshape(-1), rcond=HINGE_RATIO)
+        cam = what.split()[-1].lower() if what.startswith("camera ") else "a"
+        raise _hinge_error(what, {cam: axis}, {cam: point})
     if method == "paper":
         # eq. (11)-(12): H^i = inv(T_0) T_i, (R^i - I) O = -T^i, i = 1..n-1
         H = se3.invert_transforms(T[0]) @ T[1:]
@@ -292,7 +324,7 @@ def estimate_joint_overlap(
     # observability: the articulation R_a_b(i) = R_wa^T R_wb must vary (about 2+ axes)
     R_ab = np.einsum("nji,njk->nik", Ra, Rb)
     try:
-        _rotation_design_check(R_ab, "relative rotation between A and B")
+        axis_b = _rotation_design_check(R_ab, "relative rotation between A and B")
     except DegenerateMotionError as exc:
         raise DegenerateMotionError(
             "the joint cannot be observed: "
@@ -301,6 +333,16 @@ def estimate_joint_overlap(
             "between frames.",
             details=exc.details,
         ) from None
+    if axis_b is not None:
+        # R_ab_i axis_b is the same axis in A's frame for every i
+        axis_a = R_ab.mean(axis=0) @ axis_b
+        A6 = np.concatenate([Ra, -Rb], axis=2).reshape(-1, 6)
+        sol, *_ = np.linalg.lstsq(A6, (tb - ta).reshape(-1), rcond=HINGE_RATIO)
+        raise _hinge_error(
+            "the joint cannot be observed",
+            {"a": axis_a, "b": axis_b},
+            {"a": sol[:3], "b": sol[3:]},
+        )
     J = np.concatenate([Ra, -Rb], axis=2)  # eq. (9): [R_wa, -R_wb] [o_a; o_b] = t_wb - t_wa
     rhs = tb - ta
     x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), rhs.reshape(-1), rcond=None)

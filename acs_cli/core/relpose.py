@@ -388,7 +388,10 @@ def _estimate_paper(
     if unknown_scale:
         JOb = np.concatenate([JOb, (R @ O)[:, None]], axis=1)
     cov_b = JOb @ cov[: JOb.shape[1], : JOb.shape[1]] @ JOb.T
-    T_wb_wa = Tb[reference] @ T_b_a @ se3.invert_transforms(Ta[reference])
+    # the similarity world A -> world B: j_b = phi R_X j_a + t_X (eq. (24) at the reference)
+    R_X = Tb[reference, :3, :3] @ R @ Ta[reference, :3, :3].T
+    t_X = Tb[reference, :3, 3] + Tb[reference, :3, :3] @ T - phi * R_X @ Ta[reference, :3, 3]
+    T_wb_wa = se3.transforms_from_rt(R_X, t_X)
     return RelposeEstimate(
         T_b_a=T_b_a,
         covariance=cov6,

@@ -12,6 +12,7 @@ Conventions (see ``docs/conventions.md``):
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -188,7 +189,10 @@ def matrix_from_quat_xyzw(q: ArrayLike, tol: float = 1e-3) -> FloatArray:
 def rpy_deg_from_matrix(R: ArrayLike) -> FloatArray:
     """Roll, pitch, yaw (deg) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``."""
     arr = np.asarray(R, dtype=float)
-    ypr = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True))
+    with warnings.catch_warnings():
+        # at pitch +-90 deg roll and yaw are not unique; scipy picks one and warns
+        warnings.filterwarnings("ignore", message="Gimbal lock", category=UserWarning)
+        ypr = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True))
     return ypr[:, ::-1].reshape(*arr.shape[:-2], 3)
 
 

@@ -263,3 +263,16 @@ def test_existing_artifact_survives_a_failed_run(rig_files: dict, tmp_path: Path
     bad.write_text("0 0 0 0 nan 0 0 1\n")
     assert acscal("joint", "--fixed-joint", "--poses-a", bad, "-o", out).returncode == 2
     assert out.read_bytes() == before
+
+
+def test_simulate_writes_study(tmp_path: Path) -> None:
+    out = tmp_path / "study"
+    res = acscal("simulate", "-o", out, "--trials", "2", "--levels", "2", "--frames", "20")
+    assert res.returncode == 0, res.stderr
+    rows = (out / "trials.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 * 2 * 8  # header + levels x trials x (4 scenarios x 2 methods)
+    pngs = sorted(out.glob("fig*.png"))
+    assert len(pngs) == 8
+    assert all(p.stat().st_size > 10_000 for p in pngs)
+    summary = (out / "summary.csv").read_text()
+    assert "paper" in summary and "refined" in summary
