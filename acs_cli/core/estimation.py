@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -68,7 +69,7 @@ def normal_equations(r: FloatArray, J: FloatArray, W: FloatArray) -> tuple[Float
 
 def mahalanobis_sq(r: FloatArray, W: FloatArray) -> FloatArray:
     """``r_i^T W_i r_i`` for ``r`` ``(n, 3)`` and ``W`` ``(n, 3, 3)``."""
-    return np.einsum("na,na->n", np.einsum("nab,nb->na", W, r), r)
+    return np.einsum("na,na->n", np.matmul(W, r[:, :, None])[:, :, 0], r)
 
 
 def covariances(theta: FloatArray, L: FloatArray) -> FloatArray:
@@ -133,8 +134,8 @@ def fit_variance_components(
             ]
         )
         F[1, 0] = F[0, 1]
-        u = np.einsum("nab,nb->na", Si, r)
-        q = np.array([np.sum(u * u), np.einsum("na,nab,nb->", u, L, u)])
+        u = np.matmul(Si, r[:, :, None])[:, :, 0]
+        q = np.array([np.sum(u * u), np.sum(np.matmul(L, u[:, :, None])[:, :, 0] * u)])
         try:
             new = np.linalg.solve(F, q)
         except np.linalg.LinAlgError:
@@ -221,6 +222,22 @@ def outlier_threshold(n: int) -> float:
     return float(chi2.isf(OUTLIER_ALPHA / max(n, 1), 3))
 
 
+def _memoised(problem: LeastSquaresProblem) -> LeastSquaresProblem:
+    """The problem with its residuals at the last ``x`` remembered (they are asked for
+    several times at one point: cost, weights, Jacobian)."""
+    raw = problem.residuals
+    memo: dict[str, Any] = {}
+
+    def cached(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+        key = x.tobytes()
+        if memo.get("key") != key or (jac and memo.get("J") is None):
+            r, J = raw(x, jac)
+            memo.update(key=key, r=r, J=J)
+        return memo["r"], (memo["J"] if jac else None)
+
+    return LeastSquaresProblem(cached, problem.noise_shapes, problem.priors, problem.retract)
+
+
 @dataclass
 class _Fit:
     """State of one fit on a fixed set of frames."""
@@ -242,6 +259,7 @@ def _fit(
 ) -> _Fit:
     """Alternate LM on the parameters (weights held) and ML on the noise levels."""
     retract = problem.retract or (lambda x, dx: x + dx)
+    problem = _memoised(problem)
     x = np.asarray(x0, dtype=float).copy()
     p = x.size
 
@@ -277,6 +295,8 @@ def _fit(
                     dx = -np.linalg.solve(A, g)
                 except np.linalg.LinAlgError:
                     dx = -np.linalg.lstsq(A, g, rcond=None)[0]
+                if -float(g @ dx) < 1e-13 * cost:
+                    break  # converged: the model predicts no measurable decrease
                 if np.all(np.isfinite(dx)):
                     x_new = retract(x, dx)
                     cost_new = _cost(problem, x_new, mask, W)

@@ -208,7 +208,7 @@ def estimate_pivot(
         raise DegenerateMotionError(
             f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
         )
-    R, t = T[:, :3, :3], T[:, :3, 3]
+    R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
     axis = _rotation_design_check(R, what)
     if axis is not None:
         # any point on the axis fits: the truncated least-squares point (p_w eliminated)

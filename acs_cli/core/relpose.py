@@ -145,9 +145,18 @@ def _kron_rows(v: FloatArray) -> FloatArray:
 
 def _lstsq_scaled(A: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Least squares with column equilibration; returns the solution and singular values."""
-    scale = np.linalg.norm(A, axis=0)
+    if A.shape[0] < 20 * A.shape[1]:
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        x, _, _, s = np.linalg.lstsq(A / scale, b, rcond=None)
+        return x / scale, s
+    # tall: the same least-squares problem through its (equilibrated) Gram matrix
+    G = A.T @ A
+    scale = np.sqrt(np.diag(G))
     scale[scale == 0] = 1.0
-    x, _, _, s = np.linalg.lstsq(A / scale, b, rcond=None)
+    Gs = G / np.outer(scale, scale)
+    x = np.linalg.lstsq(Gs, (A.T @ b) / scale, rcond=None)[0]
+    s = np.sqrt(np.maximum(np.linalg.eigvalsh(Gs)[::-1], 0.0))
     return x / scale, s
 
 
@@ -202,7 +211,9 @@ def _paper(
     """Algorithms III / IV as published. Returns ``R_BA, T_BA, O_A, phi, residuals, cov``."""
     Ha = se3.invert_transforms(Ta[reference]) @ Ta  # H_A^i
     Hb = se3.invert_transforms(Tb[reference]) @ Tb  # H_B^i
-    RA, TA, RB, TB = Ha[:, :3, :3], Ha[:, :3, 3], Hb[:, :3, :3], Hb[:, :3, 3]
+    c = np.ascontiguousarray
+    RA, TA, RB, TB = c(Ha[:, :3, :3]), c(Ha[:, :3, 3]), c(Hb[:, :3, :3]), c(Hb[:, :3, 3])
+    RAf, RBf = RA.reshape(-1, 3), RB.reshape(-1, 3)
     n = Ta.shape[0]
     # eq. (24), linear in vec(R_BA) and T_BA:
     # [R_B^i K(O_A) - K(R_A^i O_A + T_A^i)] vec(R_BA) + (R_B^i - I) T_BA = -T_B^i
@@ -222,14 +233,14 @@ def _paper(
     def res(p: FloatArray) -> FloatArray:
         # eq. (25) / (44)
         R, T, O, phi = unpack(p)
-        ja = np.einsum("nij,j->ni", RA, O) + TA
-        r = phi * np.einsum("nij,j->ni", RB, R @ O) + np.einsum("nij,j->ni", RB - np.eye(3), T)
+        ja = (RAf @ O).reshape(-1, 3) + TA
+        r = phi * (RBf @ (R @ O)).reshape(-1, 3) + (RBf @ T).reshape(-1, 3) - T
         return np.asarray((r - phi * ja @ R.T + TB).reshape(-1))
 
     def jac(p: FloatArray) -> FloatArray:
         R, _T, O, phi = unpack(p)
         eps = 1e-7
-        ja = np.einsum("nij,j->ni", RA, O) + TA
+        ja = (RAf @ O).reshape(-1, 3) + TA
         cols = []
         for k in range(3):  # three Euler angles, not frames
             dp = np.zeros(3)
@@ -238,13 +249,13 @@ def _paper(
                 se3.matrix_from_rpy_deg(np.degrees(p[:3] + dp))
                 - se3.matrix_from_rpy_deg(np.degrees(p[:3] - dp))
             ) / (2 * eps)
-            cols.append(phi * (np.einsum("nij,j->ni", RB, dR @ O) - ja @ dR.T))
+            cols.append(phi * ((RBf @ (dR @ O)).reshape(-1, 3) - ja @ dR.T))
         Jr = np.stack(cols, axis=2)
         JT = RB - np.eye(3)
-        JO = phi * (np.einsum("nij,jk->nik", RB, R) - np.einsum("ij,njk->nik", R, RA))
+        JO = phi * ((RBf @ R).reshape(-1, 3, 3) - np.matmul(R, RA))
         blocks = [Jr, JT, JO]
         if unknown_scale:
-            blocks.append((np.einsum("nij,j->ni", RB, R @ O) - ja @ R.T)[:, :, None])
+            blocks.append(((RBf @ (R @ O)).reshape(-1, 3) - ja @ R.T)[:, :, None])
         return np.concatenate(blocks, axis=2).reshape(3 * n, -1)
 
     p0 = np.concatenate([rpy0, x[9:], o_a] + ([[phi0]] if unknown_scale else []))
@@ -423,7 +434,8 @@ def _estimate_refined(
     reject_outliers: bool,
 ) -> RelposeEstimate:
     n = Ta.shape[0]
-    Ra, ta, Rb, tb = Ta[:, :3, :3], Ta[:, :3, 3], Tb[:, :3, :3], Tb[:, :3, 3]
+    c = np.ascontiguousarray
+    Ra, ta, Rb, tb = c(Ta[:, :3, :3]), c(Ta[:, :3, 3]), c(Tb[:, :3, :3]), c(Tb[:, :3, 3])
     metric = bool(prior.metric and unknown_scale)
     L = _Layout(unknown_scale, metric)
 
@@ -623,6 +635,7 @@ def _reference_pose(
     o_b: FloatArray,
     theta_t: float,
     theta_r: float,
+    jacobian: bool = True,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``T_b_a`` at the reference instant from reference poses corrected by the constraint.
 
@@ -653,6 +666,8 @@ def _reference_pose(
         return se3.transforms_from_rt(R_ba, t_ba)
 
     T0 = compose(delta)
+    if not jacobian:
+        return T0, np.zeros((6, 12)), P_post
     Jd = np.zeros((6, 12))
     eps = 1e-7
     for k in range(12):  # 12 pose-correction coordinates
@@ -671,7 +686,7 @@ def _relpose_covariance(Ta_ref, Tb_ref, sol, L, J_ref, P_post, unpack):
 
     def tba(x: FloatArray) -> FloatArray:
         Rx, tx, oa, ob, ph, _ = unpack(x)
-        T, _, _ = _reference_pose(Ta_ref, Tb_ref, Rx, tx, ph, oa, ob, theta_t, theta_r)
+        T, _, _ = _reference_pose(Ta_ref, Tb_ref, Rx, tx, ph, oa, ob, theta_t, theta_r, False)
         return T
 
     T0 = tba(sol.x)

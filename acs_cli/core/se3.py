@@ -56,8 +56,9 @@ def check_rotations(
         raise InputError(f"{name} must have shape (n, 3, 3), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name} contains NaN or inf")
-    err = np.abs(np.einsum("nji,njk->nik", arr, arr) - np.eye(3)).max(axis=(1, 2))
-    bad = np.flatnonzero((err > tol) | (np.linalg.det(arr) <= 0))
+    err = np.abs(np.matmul(arr.transpose(0, 2, 1), arr) - np.eye(3)).max(axis=(1, 2))
+    det = np.einsum("ni,ni->n", arr[:, 0], np.cross(arr[:, 1], arr[:, 2]))
+    bad = np.flatnonzero((err > tol) | (det <= 0))
     if bad.size:
         raise InputError(
             f"{name}[{bad[0]}] is not a rotation matrix (|R^T R - I| = {err[bad[0]]:.2e}, "
@@ -144,9 +145,23 @@ def transform_points(T: ArrayLike, p: ArrayLike) -> FloatArray:
     return np.einsum("...ij,...j->...i", arr[..., :3, :3], pts) + arr[..., :3, 3]
 
 
+def _exp1(w: FloatArray) -> FloatArray:
+    """Rodrigues for one rotation vector (no scipy call overhead)."""
+    th2 = float(w @ w)
+    if th2 < 1e-8:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = np.sqrt(th2)
+        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    return np.eye(3) + a * K + b * (K @ K)
+
+
 def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
     """``Exp``: rotation vectors (axis x angle, radians) ``(n, 3)`` to matrices ``(n, 3, 3)``."""
     arr = np.asarray(rotvec, dtype=float)
+    if arr.shape == (3,):
+        return _exp1(arr)
     return np.asarray(Rotation.from_rotvec(arr.reshape(-1, 3)).as_matrix()).reshape(
         *arr.shape[:-1], 3, 3
     )
@@ -155,6 +170,14 @@ def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
 def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
     """``Log``: rotation matrices ``(n, 3, 3)`` to rotation vectors (radians) ``(n, 3)``."""
     arr = np.asarray(R, dtype=float)
+    if arr.shape == (3, 3):
+        c = (arr[0, 0] + arr[1, 1] + arr[2, 2] - 1.0) / 2.0
+        if c > -0.99:  # away from a half turn: the skew part is well conditioned
+            v = np.array([arr[2, 1] - arr[1, 2], arr[0, 2] - arr[2, 0], arr[1, 0] - arr[0, 1]])
+            s = np.linalg.norm(v) / 2.0
+            th = np.arctan2(s, c)
+            f = 0.5 + th * th / 12.0 if th < 1e-4 else th / (2.0 * s)
+            return f * v
     return np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_rotvec()).reshape(
         *arr.shape[:-2], 3
     )
