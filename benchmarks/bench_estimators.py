@@ -14,11 +14,17 @@ the truth: a joint farther than ``--tolerance`` metres is reported on stderr (a 
 broken set-up; the paper's methods are expected to be off by centimetres at this noise).
 """
 
+# ruff: noqa: E402  (BLAS threads must be set before numpy is imported)
 from __future__ import annotations
+
+import os
+
+# as the acscal command does (acs_cli/cli/__init__.py): one BLAS thread unless told otherwise
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import argparse
 import datetime as dt
-import os
 import platform
 import sys
 import time
