@@ -176,6 +176,45 @@ def lever_shapes(R: FloatArray, o: FloatArray) -> FloatArray:
     return out  # [v]x [v]x^T = |v|^2 I - v v^T
 
 
+def pivot_bias_step(
+    x: FloatArray, theta: FloatArray, R: FloatArray, information: FloatArray
+) -> FloatArray:
+    """The step ``(6,)`` that removes the errors-in-variables bias of the fixed-joint fit.
+
+    The measured rotations are regressors with noise: ``R~_i = R_i Exp(n_i)``. With weights
+    ``W_i = R~_i W0 R~_i^T``, ``W0 = (theta_t I + theta_r [o]x [o]x^T)^-1``, the weighted score
+    ``g = sum J_i^T W_i r_i`` of ``r_i = R~_i o + t~_i - p_w`` has, at the truth, the
+    expectation (to second order in ``n``, using ``E[Exp(n)] = (1 - s^2) I`` and
+    ``E[[n]x M [n]x] = s^2 (M^T - tr(M) I)``)
+
+        b = theta_r [ n W0 o ;  -sum_i R_i (2 W0 - tr(W0) I) o ]
+
+    which pulls the joint towards the camera by about ``theta_r / spread(R)^2`` of ``|o|``.
+    Solving the corrected score ``g - b = 0`` from the fit (where ``g = 0``) is one step
+    ``H^-1 b``, with ``H`` the information matrix.
+
+    Parameters
+    ----------
+    x : ndarray, shape (6,)
+        Fitted ``(o, p_w)``.
+    theta : ndarray, shape (2,)
+        Noise levels ``(theta_t, theta_r)``.
+    R : ndarray, shape (m, 3, 3)
+        Measured rotations of the frames used.
+    information : ndarray, shape (6, 6)
+    """
+    o = x[:3]
+    S = se3.skew(o)
+    W0 = np.linalg.inv(theta[0] * np.eye(3) + theta[1] * S @ S.T)
+    b = np.concatenate(
+        [
+            theta[1] * R.shape[0] * W0 @ o,
+            -theta[1] * R.sum(axis=0) @ ((2.0 * W0 - np.trace(W0) * np.eye(3)) @ o),
+        ]
+    )
+    return np.asarray(np.linalg.solve(information, b))
+
+
 def estimate_pivot(
     T_w_c: FloatArray, method: str = "refined", what: str = "camera"
 ) -> PivotEstimate:
@@ -188,7 +227,8 @@ def estimate_pivot(
     method : {"refined", "paper"}
         ``"paper"``: eq. (12) relative to the first frame, by linear least squares.
         ``"refined"``: the world joint ``p_w`` as an unknown, frames weighted by their
-        estimated noise, gross outliers rejected.
+        estimated noise, gross outliers rejected, the errors-in-variables bias of noisy
+        rotations removed (:func:`pivot_bias_step`).
     what : str
         Name used in messages.
 
@@ -242,11 +282,12 @@ def estimate_pivot(
     x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), -t.reshape(-1), rcond=None)
     sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
     inl = sol.inliers
+    x = sol.x + pivot_bias_step(sol.x, sol.theta, R[inl], sol.information)
     rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
     return PivotEstimate(
-        position_in_cam=sol.x[:3],
+        position_in_cam=x[:3],
         covariance=sol.covariance[:3, :3],
-        position_in_world=sol.x[3:],
+        position_in_world=x[3:],
         residual_rms=rms,
         inliers=inl,
         noise=_noise_dict(sol.theta),
