@@ -352,6 +352,11 @@ def simulate(
     out.print(f"{info['n_rows']} rows in {info['elapsed_s']:.1f} s")
 
 
+from acs_cli.cli.images import register as _register_images  # noqa: E402
+
+_register_images(app)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
     args = sys.argv[1:] if argv is None else argv

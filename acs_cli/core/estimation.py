@@ -222,6 +222,14 @@ def outlier_threshold(n: int) -> float:
     return float(chi2.isf(OUTLIER_ALPHA / max(n, 1), 3))
 
 
+def _with_jacobian(problem: LeastSquaresProblem, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Residuals and their Jacobian (which a problem must give when asked)."""
+    r, J = problem.residuals(x, True)
+    if J is None:
+        raise RuntimeError("the problem gave no Jacobian when asked for one")
+    return r, J
+
+
 def _memoised(problem: LeastSquaresProblem) -> LeastSquaresProblem:
     """The problem with its residuals at the last ``x`` remembered (they are asked for
     several times at one point: cost, weights, Jacobian)."""
@@ -268,7 +276,8 @@ def _fit(
         if not fixed_theta:
             r, _ = problem.residuals(x, False)
             th = fit_variance_components(_rows(r, mask), _rows(L, mask), p, th)
-        assert th is not None  # for mypy: fixed or just fitted
+        if th is None:  # pragma: no cover - fixed_theta is False whenever th is None
+            raise RuntimeError("noise levels neither given nor fitted")
         return th, batched_inv3(covariances(th, L))
 
     th, W = weights(x, theta0)
@@ -280,8 +289,7 @@ def _fit(
         cost = _cost(problem, x, mask, W)
         x_start = x.copy()
         for _inner in range(10):
-            r, J = problem.residuals(x, True)
-            assert J is not None  # for mypy: asked for
+            r, J = _with_jacobian(problem, x)
             H, g = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
             if problem.priors is not None:
                 rp, Jp, Wp = problem.priors(x)
@@ -398,8 +406,7 @@ def solve(
             loo if out.size == k else _fit(problem, loo.x, loo.theta, mask, fixed_theta, max_outer)
         )
     x, th, W = fit.x, fit.theta, fit.W
-    r, J = problem.residuals(x, True)
-    assert J is not None  # for mypy: asked for
+    r, J = _with_jacobian(problem, x)
     H, _ = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
     if problem.priors is not None:
         _, Jp, Wp = problem.priors(x)

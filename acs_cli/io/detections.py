@@ -1,0 +1,165 @@
+"""The checkerboard detections cache: an NPZ beside a stage's output.
+
+Each entry is keyed by :func:`detection_key`: the image content's SHA-256, the board's
+inner-corner counts and the detector version, so a changed image, another board or a new
+detector never reuse a stale detection. The cache is a convenience: a missing, corrupt or
+foreign cache file reads as empty (never an error), and it is written atomically, so an
+interrupted run leaves the last complete snapshot.
+
+Arrays of the NPZ (``n`` entries, ``m`` the largest corner count):
+
+- ``schema`` = ``"acscal/detections"``, ``schema_version`` (int);
+- ``keys`` (n,) str, ``names`` (n,) str (file name, informative);
+- ``found`` (n,) bool, ``image_size`` (n, 2) int ``[w, h]`` pixels;
+- ``n_corners`` (n,) int and ``corners`` (n, m, 2) float64 pixels (NaN-padded; all NaN
+  when not found).
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acs_cli.io.atomic import atomic_path
+
+__all__ = [
+    "CACHE_SCHEMA",
+    "CACHE_SUFFIX",
+    "Detection",
+    "cache_path_for",
+    "detection_key",
+    "read_detections",
+    "write_detections",
+]
+
+CACHE_SCHEMA = "acscal/detections"
+CACHE_SCHEMA_VERSION = 1
+#: ``<output stem>`` + this suffix names the cache beside an output file.
+CACHE_SUFFIX = ".detections.npz"
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One image's checkerboard detection.
+
+    Attributes
+    ----------
+    name : str
+        The image's file name.
+    found : bool
+        Whether a complete board was found.
+    image_size : tuple of int
+        ``(width, height)`` in pixels.
+    corners : ndarray, shape (cols * rows, 2) or None
+        Corners row by row in pixels, None when not found.
+    """
+
+    name: str
+    found: bool
+    image_size: tuple[int, int]
+    corners: NDArray[np.float64] | None
+
+
+def detection_key(sha256: str, cols: int, rows: int, detector_version: str) -> str:
+    """The cache key of one image's detection of a ``cols x rows`` board."""
+    return f"{sha256}:{cols}x{rows}:{detector_version}"
+
+
+def cache_path_for(output: str | Path) -> Path:
+    """The detections cache beside an output file: ``<stem>.detections.npz``."""
+    out = Path(output)
+    return out.with_name(out.stem + CACHE_SUFFIX)
+
+
+def read_detections(path: str | Path) -> dict[str, Detection]:
+    """Read a detections cache; a missing, unreadable or foreign file gives ``{}``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The cache file.
+
+    Returns
+    -------
+    dict of str to Detection
+        By :func:`detection_key`.
+    """
+    p = Path(path)
+    if not p.is_file():
+        return {}
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            if str(z["schema"]) != CACHE_SCHEMA or int(z["schema_version"]) > CACHE_SCHEMA_VERSION:
+                return {}
+            keys = [str(k) for k in z["keys"]]
+            names = [str(k) for k in z["names"]]
+            found = np.asarray(z["found"], bool)
+            sizes = np.asarray(z["image_size"], np.int64).reshape(-1, 2)
+            ncorn = np.asarray(z["n_corners"], np.int64)
+            corners = np.asarray(z["corners"], np.float64)
+    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile):
+        return {}
+    n = len(keys)
+    if not (len(names) == found.shape[0] == sizes.shape[0] == ncorn.shape[0] == n):
+        return {}
+    if n and (corners.ndim != 3 or corners.shape[0] != n or corners.shape[2] != 2):
+        return {}
+    out: dict[str, Detection] = {}
+    for i, key in enumerate(keys):
+        c = None
+        if found[i]:
+            k = int(ncorn[i])
+            if k <= 0 or k > corners.shape[1] or not np.all(np.isfinite(corners[i, :k])):
+                continue
+            c = np.array(corners[i, :k], dtype=np.float64)
+        out[key] = Detection(names[i], bool(found[i]), (int(sizes[i, 0]), int(sizes[i, 1])), c)
+    return out
+
+
+def write_detections(path: str | Path, detections: Mapping[str, Detection]) -> None:
+    """Write a detections cache atomically (compressed NPZ).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    detections : mapping of str to Detection
+        By :func:`detection_key`.
+
+    Raises
+    ------
+    InputError
+        The destination cannot be written.
+    """
+    keys = list(detections)
+    n = len(keys)
+    m = max((d.corners.shape[0] for d in detections.values() if d.corners is not None), default=0)
+    corners = np.full((n, m, 2), np.nan)
+    ncorn = np.zeros(n, dtype=np.int64)
+    for i, key in enumerate(keys):
+        c = detections[key].corners
+        if c is not None:
+            corners[i, : c.shape[0]] = c
+            ncorn[i] = c.shape[0]
+    arrays = {
+        "schema": np.array(CACHE_SCHEMA),
+        "schema_version": np.array(CACHE_SCHEMA_VERSION, dtype=np.int64),
+        "keys": np.array(keys, dtype=str) if n else np.zeros(0, dtype="<U1"),
+        "names": np.array([detections[k].name for k in keys], dtype=str)
+        if n
+        else np.zeros(0, dtype="<U1"),
+        "found": np.array([detections[k].found for k in keys], dtype=bool),
+        "image_size": np.array([detections[k].image_size for k in keys], dtype=np.int64).reshape(
+            n, 2
+        ),
+        "n_corners": ncorn,
+        "corners": corners,
+    }
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]

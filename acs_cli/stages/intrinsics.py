@@ -1,0 +1,431 @@
+"""The intrinsics stage: ``acscal intrinsics`` (checkerboard detection + OpenCV calibration).
+
+:func:`detect_folder` (shared with the poses stage) detects the board in every image of a
+folder, in parallel, reusing and incrementally updating a detections cache;
+:func:`run_intrinsics` calibrates from the detections and writes the artifact.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core.checkerboard import DETECTOR_VERSION, detect_checkerboard
+from acs_cli.core.intrinsics import (
+    DISTORTION_NAMES,
+    MODELS,
+    CalibrationResult,
+    board_points,
+    calibrate_robust,
+)
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import make_header, write_yaml_artifact
+from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.detections import (
+    Detection,
+    cache_path_for,
+    detection_key,
+    read_detections,
+    write_detections,
+)
+from acs_cli.io.export import write_opencv_yaml
+from acs_cli.io.images import list_images, read_gray
+
+__all__ = [
+    "EXPORTS",
+    "FolderDetections",
+    "IntrinsicsConfig",
+    "IntrinsicsRun",
+    "detect_folder",
+    "no_board_error",
+    "run_intrinsics",
+    "write_ros_camera_info",
+]
+
+EXPORTS = ("ros", "opencv")
+#: Detections between two cache snapshots during a run.
+CACHE_EVERY = 8
+#: Images below which detection runs in this process (a pool costs more than it saves).
+MIN_IMAGES_PER_WORKER = 12
+
+Progress = Callable[[int, int], None]
+
+_ROS_MODELS = {
+    "pinhole": "plumb_bob",
+    "rational": "rational_polynomial",
+    "fisheye": "equidistant",
+}
+
+
+@dataclass(frozen=True)
+class IntrinsicsConfig:
+    """Options of the intrinsics stage.
+
+    Attributes
+    ----------
+    cols, rows : int
+        Inner corners of the board along its x axis and its y axis.
+    square : float
+        Square side, metres.
+    model : {"pinhole", "rational", "fisheye"}
+    export : tuple of str
+        Extra files: ``"ros"`` (camera_info YAML), ``"opencv"`` (cv2.FileStorage YAML).
+    workers : int, optional
+        Detection processes (default ``os.cpu_count()``).
+    """
+
+    cols: int = 9
+    rows: int = 6
+    square: float = 0.025
+    model: str = "pinhole"
+    export: tuple[str, ...] = ()
+    workers: int | None = None
+
+
+@dataclass(frozen=True)
+class FolderDetections:
+    """Detections of the board in a folder's images.
+
+    Attributes
+    ----------
+    images : list of Path
+        All images, in natural order.
+    detections : list of Detection
+        One per image, same order.
+    image_size : tuple of int
+        ``(width, height)`` shared by all images, pixels.
+    cached : int
+        How many detections came from a cache.
+    cache : Path
+        The cache file written.
+    """
+
+    images: list[Path]
+    detections: list[Detection]
+    image_size: tuple[int, int]
+    cached: int
+    cache: Path
+
+
+@dataclass(frozen=True)
+class IntrinsicsRun:
+    """What :func:`run_intrinsics` did."""
+
+    calibration: CalibrationResult
+    artifact: dict[str, Any]
+    output: Path
+    exports: dict[str, Path]
+    detections: FolderDetections
+    warnings: list[str] = field(default_factory=list)
+
+
+def _detect_file(path: str, cols: int, rows: int) -> tuple[str, Detection | None, str | None]:
+    """Worker: read one image and detect the board; errors come back as text."""
+    try:
+        img, sha = read_gray(path)
+    except InputError as exc:
+        return "", None, exc.one_line()
+    corners = detect_checkerboard(img, cols, rows)
+    h, w = img.shape[:2]
+    det = Detection(Path(path).name, corners is not None, (int(w), int(h)), corners)
+    return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
+
+
+def _file_key(path: Path, cols: int, rows: int) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    except OSError as exc:
+        raise InputError(f"cannot read image ({exc.strerror or exc})", path=path) from exc
+    return detection_key(h.hexdigest(), cols, rows, DETECTOR_VERSION)
+
+
+def no_board_error(folder: Path, cols: int, rows: int, n: int) -> InputError:
+    """The error for a folder where no image shows the board."""
+    return InputError(
+        f"no {cols}x{rows} board found in any of {n} images; check --board "
+        "(inner corners, COLSxROWS)",
+        path=folder,
+    )
+
+
+def detect_folder(
+    folder: Path,
+    cols: int,
+    rows: int,
+    cache: Path,
+    *,
+    extra_caches: Sequence[Path] = (),
+    workers: int | None = None,
+    progress: Progress | None = None,
+) -> FolderDetections:
+    """Detect the board in every image of a folder, reusing and updating a cache.
+
+    Parameters
+    ----------
+    folder : Path
+        The images (see :func:`acs_cli.io.images.list_images`).
+    cols, rows : int
+        Inner corners of the board.
+    cache : Path
+        The cache read and written (snapshots every :data:`CACHE_EVERY` detections, so an
+        interrupted run resumes).
+    extra_caches : sequence of Path
+        More caches to read (e.g. the intrinsics stage's, from the poses stage).
+    workers : int, optional
+        Processes; default ``os.cpu_count()``. Few images run in this process.
+    progress : callable, optional
+        ``progress(done, total)`` after each image.
+
+    Returns
+    -------
+    FolderDetections
+
+    Raises
+    ------
+    InputError
+        No images, a corrupt image, or images of different sizes.
+    """
+    images = list_images(folder)
+    known: dict[str, Detection] = {}
+    for extra in extra_caches:
+        known.update(read_detections(extra))
+    own = read_detections(cache)
+    known.update(own)
+    keys = [_file_key(p, cols, rows) for p in images]
+    found: dict[int, Detection] = {i: known[k] for i, k in enumerate(keys) if k in known}
+    cached = len(found)
+    todo = [i for i in range(len(images)) if i not in found]
+    total = len(images)
+    done = cached
+    if progress is not None:
+        progress(done, total)
+
+    store: dict[str, Detection] = dict(own)
+    store.update({keys[i]: d for i, d in found.items()})
+    dirty = bool(found) and set(store) != set(own)
+    last_save = time.monotonic()
+
+    def record(i: int, key: str, det: Detection) -> None:
+        nonlocal done, dirty, last_save
+        found[i] = det
+        store[key] = det
+        done += 1
+        dirty = True
+        if progress is not None:
+            progress(done, total)
+        if done % CACHE_EVERY == 0 or time.monotonic() - last_save > 2.0:
+            write_detections(cache, store)
+            dirty = False
+            last_save = time.monotonic()
+
+    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+    n_workers = min(n_workers, max(1, len(todo) // MIN_IMAGES_PER_WORKER))
+    try:
+        if n_workers <= 1:
+            for i in todo:
+                key, det, error = _detect_file(str(images[i]), cols, rows)
+                if error is not None:
+                    raise InputError(error)
+                if det is None:  # pragma: no cover - _detect_file's contract
+                    raise RuntimeError("detection worker returned nothing")
+                record(i, key, det)
+        else:
+            with ProcessPoolExecutor(max_workers=n_workers) as pool:
+                pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
+                    pool.submit(_detect_file, str(images[i]), cols, rows): i for i in todo
+                }
+                try:
+                    while pending:
+                        ready, _ = wait(pending, return_when=FIRST_COMPLETED)
+                        for fut in ready:
+                            i = pending.pop(fut)
+                            key, det, error = fut.result()
+                            if error is not None:
+                                raise InputError(error)
+                            if det is None:  # pragma: no cover - _detect_file's contract
+                                raise RuntimeError("detection worker returned nothing")
+                            record(i, key, det)
+                finally:
+                    for fut in pending:
+                        fut.cancel()
+    finally:
+        if dirty:
+            write_detections(cache, store)
+
+    dets = [found[i] for i in range(len(images))]
+    size = dets[0].image_size
+    for p, d in zip(images, dets, strict=True):
+        if d.image_size != size:
+            raise InputError(
+                f"image size {d.image_size[0]}x{d.image_size[1]} differs from "
+                f"{size[0]}x{size[1]} of {images[0].name}: all images must come from one "
+                "camera at one resolution",
+                path=p,
+            )
+    return FolderDetections(images, dets, size, cached, cache)
+
+
+def write_ros_camera_info(
+    path: Path, calib: CalibrationResult, camera_name: str, model: str
+) -> None:
+    """Write a ROS ``camera_info`` YAML (the camera_calibration_parsers format)."""
+    from acs_cli.io.atomic import atomic_write_text
+
+    K = calib.camera_matrix
+    P = np.zeros((3, 4))
+    P[:3, :3] = K
+    text_doc = {
+        "image_width": int(calib.image_size[0]),
+        "image_height": int(calib.image_size[1]),
+        "camera_name": camera_name,
+        "camera_matrix": {"rows": 3, "cols": 3, "data": K.ravel().tolist()},
+        "distortion_model": _ROS_MODELS[model],
+        "distortion_coefficients": {
+            "rows": 1,
+            "cols": int(calib.distortion.size),
+            "data": calib.distortion.tolist(),
+        },
+        "rectification_matrix": {"rows": 3, "cols": 3, "data": np.eye(3).ravel().tolist()},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": P.ravel().tolist()},
+    }
+    import yaml
+
+    atomic_write_text(path, yaml.safe_dump(text_doc, sort_keys=False, default_flow_style=None))
+
+
+def _check_config(config: IntrinsicsConfig) -> None:
+    if config.cols < 2 or config.rows < 2:
+        raise InputError(
+            f"--board needs at least 2x2 inner corners, got {config.cols}x{config.rows}"
+        )
+    if config.cols == config.rows:
+        pass  # square boards work; their ordering is fixed only up to 90-degree turns
+    if not (np.isfinite(config.square) and config.square > 0):
+        raise InputError(f"--square must be a positive length in metres, got {config.square}")
+    if config.model not in MODELS:
+        raise InputError(f"unknown --model {config.model!r}; use one of {', '.join(MODELS)}")
+    for e in config.export:
+        if e not in EXPORTS:
+            raise InputError(f"unknown --export {e!r}; use one of {', '.join(EXPORTS)}")
+
+
+def run_intrinsics(
+    images_dir: Path,
+    output: Path,
+    config: IntrinsicsConfig,
+    progress: Progress | None = None,
+) -> IntrinsicsRun:
+    """Detect the board, calibrate the camera and write ``intrinsics.yaml`` atomically.
+
+    Also writes ``<stem>.detections.npz`` (the detections cache) and the requested exports
+    (``<stem>_camera_info.yaml`` for ROS, ``<stem>_opencv.yaml`` for OpenCV) beside it.
+
+    Raises
+    ------
+    InputError
+        Bad options, no or corrupt images, images of different sizes, no board anywhere.
+    DegenerateMotionError
+        Too few views of the board to calibrate (nothing but the cache is written).
+    """
+    _check_config(config)
+    check_distinct_output(output, [images_dir])
+    cols, rows = config.cols, config.rows
+    fd = detect_folder(
+        images_dir, cols, rows, cache_path_for(output), workers=config.workers, progress=progress
+    )
+    with_board = [i for i, d in enumerate(fd.detections) if d.found]
+    skipped = [fd.images[i].name for i, d in enumerate(fd.detections) if not d.found]
+    if not with_board:
+        raise no_board_error(images_dir, cols, rows, len(fd.images))
+    obj = board_points(cols, rows, config.square)
+    img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]
+    calib = calibrate_robust([obj] * len(img_pts), img_pts, fd.image_size, config.model)
+    names = [fd.images[i].name for i in with_board]
+    used = [names[j] for j in calib.used]
+    dropped = [
+        {"image": names[j], "rms_px": float(calib.first_pass_per_view_rms[j])}
+        for j in calib.dropped
+    ]
+    warnings: list[str] = []
+    if skipped:
+        warnings.append(f"no board in {len(skipped)} image(s): {', '.join(skipped[:10])}")
+    if dropped:
+        warnings.append(
+            f"{len(dropped)} view(s) dropped as outliers: "
+            + ", ".join(f"{d['image']} ({d['rms_px']:.2f} px)" for d in dropped)
+        )
+
+    exports: dict[str, Path] = {}
+    if "ros" in config.export:
+        exports["ros"] = output.with_name(output.stem + "_camera_info.yaml")
+    if "opencv" in config.export:
+        exports["opencv"] = output.with_name(output.stem + "_opencv.yaml")
+    for p in exports.values():
+        check_distinct_output(p, [images_dir, output])
+
+    dist_names = DISTORTION_NAMES[config.model]
+    std = dict(calib.std_intrinsics)
+    calibrator = "cv2.fisheye.calibrate" if config.model == "fisheye" else "calibrateCameraExtended"
+    header = make_header(
+        "intrinsics",
+        {"images": images_dir},
+        method=f"OpenCV {calibrator} "
+        f"({config.model} model) on {DETECTOR_VERSION} corners (coarse findChessboardCorners, "
+        "cornerSubPix sized to the squares, saddle-point refinement); views with RMS above "
+        "max(median + 3 * 1.4826 * MAD, 2 * median) dropped and the calibration redone",
+        units={"square": "m", "camera_matrix": "px", "rms": "px", "distortion": "unitless"},
+        frames={
+            "camera_matrix": "pixels, OpenCV convention (centre of the top-left pixel at 0, 0)",
+            "board": "origin at the first inner corner, x along a row, z into the board",
+        },
+    )
+    body: dict[str, Any] = {
+        "model": config.model,
+        "image_size": [int(fd.image_size[0]), int(fd.image_size[1])],
+        "camera_matrix": calib.camera_matrix,
+        "distortion": calib.distortion,
+        "distortion_names": list(dist_names),
+        "rms_px": calib.rms_px,
+        "per_view_rms_px": {n: float(e) for n, e in zip(used, calib.per_view_rms, strict=True)},
+        "std": std if std else None,
+        "board": {"cols": cols, "rows": rows, "square": config.square, "units": "m"},
+        "images": {
+            "total": len(fd.images),
+            "used": used,
+            "skipped_no_board": skipped,
+            "dropped_outliers": dropped,
+        },
+        "detector": DETECTOR_VERSION,
+        "detections_cache": fd.cache.name,
+        "exports": {k: v.name for k, v in exports.items()},
+        "warnings": warnings,
+    }
+    write_yaml_artifact(output, header, body)
+    camera_name = output.parent.name or output.stem
+    if "ros" in exports:
+        write_ros_camera_info(exports["ros"], calib, camera_name, config.model)
+    if "opencv" in exports:
+        write_opencv_yaml(
+            exports["opencv"],
+            {
+                "image_width": int(fd.image_size[0]),
+                "image_height": int(fd.image_size[1]),
+                "model": config.model,
+                "camera_matrix": calib.camera_matrix,
+                "distortion_coefficients": calib.distortion.reshape(1, -1),
+                "rms_px": calib.rms_px,
+            },
+        )
+    return IntrinsicsRun(calib, header | body, output, exports, fd, warnings)

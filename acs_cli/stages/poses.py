@@ -1,0 +1,229 @@
+"""The poses stage: ``acscal poses`` (one board pose per image, as a trajectory).
+
+Each image with a detected board gives ``T_cam_board`` (PnP); the trajectory stores its
+inverse ``T_world_cam`` with world = the board. Timestamps are the last number in each
+file name when those increase strictly, else the image indices.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS, board_points
+from acs_cli.core.pnp import board_pose, camera_in_board
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import get_path, make_header, read_yaml_artifact
+from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.detections import cache_path_for
+from acs_cli.io.images import timestamp_from_name
+from acs_cli.io.trajectory import Trajectory, write_npz_poses, write_tum
+from acs_cli.stages.intrinsics import detect_folder, no_board_error
+
+__all__ = ["CameraIntrinsics", "PosesConfig", "PosesRun", "read_intrinsics", "run_poses"]
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class PosesConfig:
+    """Options of the poses stage.
+
+    Attributes
+    ----------
+    cols, rows : int, optional
+        Inner corners of the board; default: the intrinsics artifact's board.
+    square : float, optional
+        Square side, metres; default: the intrinsics artifact's.
+    tum : Path, optional
+        Also write the trajectory as a TUM file.
+    workers : int, optional
+        Detection processes (default ``os.cpu_count()``).
+    """
+
+    cols: int | None = None
+    rows: int | None = None
+    square: float | None = None
+    tum: Path | None = None
+    workers: int | None = None
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """A camera's intrinsics as read from an ``acscal/intrinsics`` artifact."""
+
+    model: str
+    camera_matrix: np.ndarray
+    distortion: np.ndarray
+    image_size: tuple[int, int]
+    board: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class PosesRun:
+    """What :func:`run_poses` did."""
+
+    trajectory: Trajectory
+    reprojection_rms: np.ndarray
+    skipped: list[str]
+    output: Path
+    cached: int
+    warnings: list[str] = field(default_factory=list)
+
+
+def read_intrinsics(path: Path) -> CameraIntrinsics:
+    """Read and check an ``acscal/intrinsics`` artifact.
+
+    Raises
+    ------
+    InputError
+        Not an intrinsics artifact, or a key of the wrong shape or value.
+    """
+    doc = read_yaml_artifact(path, "intrinsics", ["camera_matrix", "distortion", "image_size"])
+    model = str(get_path(doc, "model", "pinhole"))
+    if model not in MODELS:
+        raise InputError(f"unknown camera model {model!r}", path=path)
+    try:
+        K = np.asarray(doc["camera_matrix"], dtype=float)
+        D = np.asarray(doc["distortion"], dtype=float).ravel()
+        size = np.asarray(doc["image_size"], dtype=float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            "camera_matrix, distortion and image_size must be numbers", path=path
+        ) from exc
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError("'camera_matrix' must be a 3x3 matrix with positive fx, fy", path=path)
+    if D.size != len(DISTORTION_NAMES[model]) or not np.all(np.isfinite(D)):
+        raise InputError(
+            f"'distortion' must hold {len(DISTORTION_NAMES[model])} finite numbers for the "
+            f"{model} model, got {D.size}",
+            path=path,
+        )
+    if size.shape != (2,) or np.any(size <= 0) or np.any(size != np.round(size)):
+        raise InputError("'image_size' must be [width, height] in pixels", path=path)
+    board = doc.get("board") if isinstance(doc.get("board"), dict) else {}
+    return CameraIntrinsics(model, K, D, (int(size[0]), int(size[1])), dict(board or {}))
+
+
+def _timestamps(names: list[str], all_names: list[str]) -> tuple[np.ndarray, bool]:
+    """Timestamps from file names if they increase strictly, else the folder indices."""
+    stamps = [timestamp_from_name(n) for n in names]
+    if all(s is not None for s in stamps):
+        t = np.array(stamps, dtype=float)
+        if t.size < 2 or np.all(np.diff(t) > 0):
+            return t, True
+    index = {n: i for i, n in enumerate(all_names)}
+    return np.array([index[n] for n in names], dtype=float), False
+
+
+def _board_option(value: Any, stored: Any, name: str, path: Path) -> Any:
+    if value is not None:
+        return value
+    if stored is None:
+        raise InputError(
+            f"the intrinsics artifact records no board {name}: give --board/--square", path=path
+        )
+    return stored
+
+
+def run_poses(
+    images_dir: Path,
+    intrinsics: Path,
+    output: Path,
+    config: PosesConfig,
+    progress: Progress | None = None,
+) -> PosesRun:
+    """Detect the board, solve each image's pose and write the ``acscal/poses`` NPZ.
+
+    Raises
+    ------
+    InputError
+        Bad options or files, no board in any image, images of another size than the
+        intrinsics'.
+    """
+    cam = read_intrinsics(intrinsics)
+    cols = int(_board_option(config.cols, cam.board.get("cols"), "size", intrinsics))
+    rows = int(_board_option(config.rows, cam.board.get("rows"), "size", intrinsics))
+    square = float(_board_option(config.square, cam.board.get("square"), "square", intrinsics))
+    if cols < 2 or rows < 2:
+        raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
+    if not (np.isfinite(square) and square > 0):
+        raise InputError(f"--square must be a positive length in metres, got {square}")
+    outputs = [output] + ([config.tum] if config.tum is not None else [])
+    for o in outputs:
+        check_distinct_output(o, [images_dir, intrinsics])
+    if config.tum is not None and Path(config.tum).resolve() == output.resolve():
+        raise InputError("--tum and -o name the same file", path=output)
+
+    fd = detect_folder(
+        images_dir,
+        cols,
+        rows,
+        cache_path_for(output),
+        extra_caches=[cache_path_for(intrinsics)],
+        workers=config.workers,
+        progress=progress,
+    )
+    if fd.image_size != cam.image_size:
+        raise InputError(
+            f"images are {fd.image_size[0]}x{fd.image_size[1]} but {intrinsics.name} was "
+            f"calibrated at {cam.image_size[0]}x{cam.image_size[1]}",
+            path=images_dir,
+        )
+    obj = board_points(cols, rows, square)
+    all_names = [p.name for p in fd.images]
+    names: list[str] = []
+    T_cb: list[np.ndarray] = []
+    rms: list[float] = []
+    skipped: list[str] = []
+    for p, d in zip(fd.images, fd.detections, strict=True):
+        pose = None
+        if d.found and d.corners is not None:
+            pose = board_pose(obj, d.corners, cam.camera_matrix, cam.distortion, cam.model)
+        if pose is None:
+            skipped.append(p.name)
+            continue
+        names.append(p.name)
+        T_cb.append(pose.T_cam_board)
+        rms.append(pose.rms_px)
+    if not names:
+        raise no_board_error(images_dir, cols, rows, len(fd.images))
+    t, has_t = _timestamps(names, all_names)
+    T_wc = camera_in_board(np.stack(T_cb))
+    traj = Trajectory(
+        t, T_wc, source=str(output), format="npz", has_timestamps=has_t, names=tuple(names)
+    )
+    warnings: list[str] = []
+    if skipped:
+        warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
+    header = make_header(
+        "poses",
+        {"images": images_dir, "intrinsics": intrinsics},
+        method="cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on "
+        f"{cols}x{rows} board corners; T_world_cam = inverse of T_cam_board",
+        units={"length": "m", "reprojection_rms": "px", "timestamps": "s or frame number"},
+        frames={
+            "world": "the board (origin at its first inner corner, z into the board)",
+            "cam": "the camera's optical frame",
+        },
+    )
+    header["board"] = {"cols": cols, "rows": rows, "square": square, "units": "m"}
+    header["intrinsics_file"] = str(intrinsics)
+    header["timestamps_from"] = "file names" if has_t else "image indices"
+    rms_arr = np.array(rms, dtype=float)
+    write_npz_poses(
+        output,
+        traj,
+        {
+            "reprojection_rms": rms_arr,
+            "skipped_images": np.array(skipped, dtype=str) if skipped else np.zeros(0, "<U1"),
+        },
+        header=header,
+    )
+    if config.tum is not None:
+        write_tum(config.tum, t, T_wc)
+    return PosesRun(traj, rms_arr, skipped, output, fd.cached, warnings)

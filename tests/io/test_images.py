@@ -1,0 +1,177 @@
+"""Image folders, image reading and the detections cache (round trip, key invalidation)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from acs_cli.core.checkerboard import DETECTOR_VERSION
+from acs_cli.errors import InputError
+from acs_cli.io.detections import (
+    Detection,
+    cache_path_for,
+    detection_key,
+    read_detections,
+    write_detections,
+)
+from acs_cli.io.images import list_images, natural_key, read_gray, timestamp_from_name
+from acs_cli.stages.intrinsics import detect_folder
+
+
+def board_image(cols: int = 9, rows: int = 6, square: int = 30, shift: int = 0) -> np.ndarray:
+    """A fronto-parallel board of ``cols x rows`` inner corners on a 640x480 image."""
+    img = np.full((480, 640), 255, np.uint8)
+    x0, y0 = 120 + shift, 100
+    for j in range(rows + 1):
+        for i in range(cols + 1):
+            if (i + j) % 2 == 0:
+                y, x = y0 + j * square, x0 + i * square
+                img[y : y + square, x : x + square] = 0
+    return cv2.GaussianBlur(img, (0, 0), 0.8)
+
+
+def test_natural_order_and_suffixes(tmp_path: Path) -> None:
+    for name in ("img10.png", "img2.PNG", "img1.jpg", "notes.txt", "b.tif"):
+        (tmp_path / name).write_bytes(b"x")
+    assert [p.name for p in list_images(tmp_path)] == ["b.tif", "img1.jpg", "img2.PNG", "img10.png"]
+    assert natural_key("a2") < natural_key("a10")
+
+
+@pytest.mark.parametrize(
+    ("setup", "message"),
+    [("missing", "no such folder"), ("empty", "empty"), ("noimages", "no images")],
+)
+def test_list_images_errors(tmp_path: Path, setup: str, message: str) -> None:
+    folder = tmp_path / "imgs"
+    if setup != "missing":
+        folder.mkdir()
+    if setup == "noimages":
+        (folder / "readme.txt").write_text("hi")
+    with pytest.raises(InputError, match=message) as exc:
+        list_images(folder)
+    assert str(folder) in exc.value.one_line()
+
+
+def test_read_gray_and_corrupt_files(tmp_path: Path) -> None:
+    good = tmp_path / "good.png"
+    cv2.imwrite(str(good), board_image())
+    img, sha = read_gray(good)
+    assert img.shape == (480, 640) and img.dtype == np.uint8 and len(sha) == 64
+    junk = tmp_path / "x.png"
+    junk.write_bytes(np.random.default_rng(0).integers(0, 256, 500, dtype=np.uint8).tobytes())
+    with pytest.raises(InputError, match="corrupt"):
+        read_gray(junk)
+    ok, buf = cv2.imencode(".jpg", board_image())
+    assert ok
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(buf.tobytes()[: len(buf) // 2])
+    with pytest.raises(InputError, match="truncated JPEG"):
+        read_gray(cut)
+    empty = tmp_path / "e.png"
+    empty.write_bytes(b"")
+    with pytest.raises(InputError, match="empty"):
+        read_gray(empty)
+
+
+def test_timestamps_from_names() -> None:
+    assert timestamp_from_name("img_00012.png") == 12.0
+    assert timestamp_from_name("frame_1623456789.123.png") == pytest.approx(1623456789.123)
+    assert timestamp_from_name("left01.jpg") == 1.0
+    assert timestamp_from_name("board.png") is None
+
+
+def test_cache_round_trip(tmp_path: Path) -> None:
+    corners = np.arange(108, dtype=float).reshape(54, 2) + 0.25
+    dets = {
+        "a:9x6:v": Detection("a.png", True, (640, 480), corners),
+        "b:9x6:v": Detection("b.png", False, (640, 480), None),
+        "c:4x3:v": Detection("c.png", True, (320, 240), corners[:12]),
+    }
+    path = tmp_path / "out.detections.npz"
+    write_detections(path, dets)
+    back = read_detections(path)
+    assert set(back) == set(dets)
+    for k, d in dets.items():
+        assert back[k].name == d.name and back[k].found == d.found
+        assert back[k].image_size == d.image_size
+        if d.corners is None:
+            assert back[k].corners is None
+        else:
+            np.testing.assert_array_equal(back[k].corners, d.corners)
+    assert cache_path_for(tmp_path / "cam" / "intrinsics.yaml").name == "intrinsics.detections.npz"
+
+
+def test_bad_cache_reads_as_empty(tmp_path: Path) -> None:
+    p = tmp_path / "c.npz"
+    assert read_detections(p) == {}
+    p.write_bytes(b"not an npz")
+    assert read_detections(p) == {}
+
+
+def test_detect_folder_reuses_cache_and_invalidates_on_change(tmp_path: Path) -> None:
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(folder / f"img{i}.png"), board_image(shift=10 * i))
+    cv2.imwrite(str(folder / "img3.png"), np.full((480, 640), 90, np.uint8))
+    cache = tmp_path / "out.detections.npz"
+    first = detect_folder(folder, 9, 6, cache, workers=1)
+    assert first.cached == 0 and cache.is_file()
+    assert [d.found for d in first.detections] == [True, True, True, False]
+    assert len(read_detections(cache)) == 4
+
+    second = detect_folder(folder, 9, 6, cache, workers=1)
+    assert second.cached == 4
+    for a, b in zip(first.detections, second.detections, strict=True):
+        assert a.found == b.found
+        if a.corners is not None:
+            np.testing.assert_array_equal(a.corners, b.corners)
+
+    # change one image's content: its detection is redone, the others reused
+    cv2.imwrite(str(folder / "img1.png"), board_image(shift=40))
+    third = detect_folder(folder, 9, 6, cache, workers=1)
+    assert third.cached == 3
+    c1, c3 = third.detections[1].corners, first.detections[1].corners
+    assert c1 is not None and c3 is not None
+    assert np.abs(c1 - c3).max() > 20.0
+
+    # another board size is another key
+    fourth = detect_folder(folder, 8, 5, cache, workers=1)
+    assert fourth.cached == 0 and not any(d.found for d in fourth.detections)
+    sha = read_gray(folder / "img0.png")[1]
+    keys = read_detections(cache)
+    assert detection_key(sha, 9, 6, DETECTOR_VERSION) in keys
+    assert detection_key(sha, 8, 5, DETECTOR_VERSION) in keys
+
+
+def test_detect_folder_in_worker_processes(tmp_path: Path) -> None:
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(26):
+        cv2.imwrite(str(folder / f"f{i:03d}.png"), board_image(shift=i))
+    seen: list[tuple[int, int]] = []
+    res = detect_folder(
+        folder, 9, 6, tmp_path / "c.npz", workers=2, progress=lambda d, t: seen.append((d, t))
+    )
+    assert all(d.found for d in res.detections)
+    assert seen[-1] == (26, 26)
+    serial = detect_folder(folder, 9, 6, tmp_path / "c2.npz", workers=1)
+    for a, b in zip(res.detections, serial.detections, strict=True):
+        np.testing.assert_allclose(a.corners, b.corners)
+
+
+def test_detect_folder_errors(tmp_path: Path) -> None:
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), board_image())
+    cv2.imwrite(str(folder / "b.png"), cv2.resize(board_image(), (320, 240)))
+    with pytest.raises(InputError, match="differs") as exc:
+        detect_folder(folder, 9, 6, tmp_path / "c.npz", workers=1)
+    assert "b.png" in exc.value.one_line()
+    (folder / "b.png").unlink()
+    (folder / "c.png").write_bytes(b"\x89PNG\r\n\x1a\nbroken")
+    with pytest.raises(InputError, match=r"c\.png"):
+        detect_folder(folder, 9, 6, tmp_path / "c.npz", workers=1)
