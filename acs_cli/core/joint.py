@@ -352,12 +352,7 @@ def estimate_joint_overlap(
         enough (a rigid pair: no articulation), or that changes about one axis only.
     """
     _check_method(method)
-    Ta = se3.check_transforms(T_w_a, name="camera A poses")
-    Tb = se3.check_transforms(T_w_b, name="camera B poses")
-    if Ta.shape[0] != Tb.shape[0]:
-        raise InputError(
-            f"overlap needs paired poses; got {Ta.shape[0]} for A and {Tb.shape[0]} for B"
-        )
+    Ta, Tb = se3.check_paired_transforms(T_w_a, T_w_b, "overlap")
     n = Ta.shape[0]
     if n < 3:
         raise DegenerateMotionError(f"{n} paired poses; an overlap calibration needs at least 3")

@@ -177,12 +177,7 @@ def similarity_from_points(
 def _check_inputs(
     T_wa_a: FloatArray, T_wb_b: FloatArray, reference: int
 ) -> tuple[FloatArray, FloatArray]:
-    Ta = se3.check_transforms(T_wa_a, name="camera A poses")
-    Tb = se3.check_transforms(T_wb_b, name="camera B poses")
-    if Ta.shape[0] != Tb.shape[0]:
-        raise InputError(
-            f"relpose needs paired poses; got {Ta.shape[0]} for A and {Tb.shape[0]} for B"
-        )
+    Ta, Tb = se3.check_paired_transforms(T_wa_a, T_wb_b, "relpose")
     n = Ta.shape[0]
     if not -n <= reference < n:
         raise InputError(f"reference frame {reference} is outside the {n} paired frames")

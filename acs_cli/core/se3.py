@@ -84,6 +84,19 @@ def check_transforms(
     return arr
 
 
+def check_paired_transforms(
+    T_a: ArrayLike, T_b: ArrayLike, what: str
+) -> tuple[FloatArray, FloatArray]:
+    """Validate two stacks of poses that must pair one to one (``(n, 4, 4)`` each)."""
+    Ta = check_transforms(T_a, name="camera A poses")
+    Tb = check_transforms(T_b, name="camera B poses")
+    if Ta.shape[0] != Tb.shape[0]:
+        raise InputError(
+            f"{what} needs paired poses; got {Ta.shape[0]} for A and {Tb.shape[0]} for B"
+        )
+    return Ta, Tb
+
+
 def skew(v: ArrayLike) -> FloatArray:
     """Cross-product matrices ``[v]x`` of shape ``(n, 3, 3)`` (or ``(3, 3)`` for one vector)."""
     arr = np.asarray(v, dtype=float)

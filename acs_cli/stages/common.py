@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -12,6 +12,21 @@ from acs_cli.core.pairing import PairingResult, pair_trajectories
 from acs_cli.io.trajectory import Trajectory, read_trajectory
 
 TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
+
+E = TypeVar("E")
+
+
+@dataclass(frozen=True)
+class StageRun(Generic[E]):
+    """What a stage's ``run_*`` did: the estimate, the artifact (header and body) it wrote,
+    where, and the run's warnings."""
+
+    estimate: E
+    artifact: dict[str, Any]
+    output: Path
+    warnings: list[str] = field(default_factory=list)
+
+
 PAIR_BY = ("auto", "timestamp", "index")
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +11,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output
 from acs_cli.stages.common import (
+    StageRun,
     frames_section,
     load_pair,
     load_trajectory,
@@ -58,14 +59,7 @@ class JointConfig:
     length_unit: str = "m"
 
 
-@dataclass(frozen=True)
-class JointRun:
-    """What :func:`run_joint` did: the estimate, the artifact's body and its warnings."""
-
-    estimate: JointEstimate
-    artifact: dict[str, Any]
-    output: Path
-    warnings: list[str] = field(default_factory=list)
+JointRun = StageRun[JointEstimate]
 
 
 def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
@@ -145,7 +139,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         "warnings": warnings,
     }
     write_yaml_artifact(output, header, body)
-    return JointRun(est, header | body, output, warnings)
+    return StageRun(est, header | body, output, warnings)
 
 
 def read_joint(path: Path) -> dict[str, Any]:

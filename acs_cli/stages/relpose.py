@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +12,13 @@ from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, 
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output
-from acs_cli.stages.common import frames_section, load_pair, pairing_section, vector_with_std
+from acs_cli.stages.common import (
+    StageRun,
+    frames_section,
+    load_pair,
+    pairing_section,
+    vector_with_std,
+)
 from acs_cli.stages.joint import read_joint
 
 
@@ -47,14 +53,7 @@ class RelposeConfig:
     length_unit: str = "m"
 
 
-@dataclass(frozen=True)
-class RelposeRun:
-    """What :func:`run_relpose` did."""
-
-    estimate: RelposeEstimate
-    artifact: dict[str, Any]
-    output: Path
-    warnings: list[str] = field(default_factory=list)
+RelposeRun = StageRun[RelposeEstimate]
 
 
 def _cov3(joint: dict[str, Any], which: str, path: Path) -> np.ndarray | None:
@@ -227,4 +226,4 @@ def run_relpose(
         },
     )
     write_yaml_artifact(output, header, body)
-    return RelposeRun(est, header | body, output, warnings)
+    return StageRun(est, header | body, output, warnings)
