@@ -356,6 +356,10 @@ from acs_cli.cli.images import register as _register_images  # noqa: E402
 
 _register_images(app)
 
+from acs_cli.cli.run import register as _register_run  # noqa: E402
+
+_register_run(app)
+
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""

@@ -1,0 +1,753 @@
+"""The pipeline stage: ``acscal run CONFIG`` (intrinsics, poses, joint and relpose in one go).
+
+:func:`load_run_config` reads and checks a run configuration (``schema: acscal/run-config``,
+see ``configs/*.yaml``); :func:`run_pipeline` runs the stages it names, each only when its
+inputs changed since its last successful run.
+
+A stage's *stamp* is the SHA-256 of its name, the tool's version, its options and the
+SHA-256 of each input file (or folder of images). After a stage succeeds, its stamp and the
+SHA-256 of each output are stored in ``<output>/.acscal-run.yaml`` (written atomically after
+every stage). A later run skips the stage when its stamp is unchanged and its outputs are
+still there, unmodified. Downstream stages read upstream outputs, so a rerun upstream
+propagates downstream through the outputs' content hashes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+import acs_cli
+from acs_cli.core.intrinsics import MODELS
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import sha256_of
+from acs_cli.io.atomic import atomic_write_text
+from acs_cli.io.images import list_images
+
+__all__ = [
+    "CONFIG_SCHEMA",
+    "STAGE_KINDS",
+    "STATE_FILE",
+    "CameraSpec",
+    "JointSpec",
+    "PipelineRun",
+    "RelposeSpec",
+    "RunConfig",
+    "StageResult",
+    "load_run_config",
+    "parse_run_config",
+    "run_pipeline",
+]
+
+CONFIG_SCHEMA = "acscal/run-config"
+CONFIG_VERSION = 1
+STATE_SCHEMA = "acscal/run-state"
+STATE_FILE = ".acscal-run.yaml"
+#: Stage kinds, in the order they run (``--only`` takes one of them).
+STAGE_KINDS = ("intrinsics", "poses", "joint", "relpose")
+CAMERAS = ("a", "b")
+METHODS = ("refined", "paper")
+JOINT_SCENARIOS = ("fixed_joint", "overlap")
+INTRINSICS_FROM = ("all", "joint")
+
+StageCallback = Callable[["StageResult"], None]
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """One camera of a run: its joint-motion images (optional) and its lens model."""
+
+    name: str
+    images: Path | None
+    model: str = "pinhole"
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """The joint stage's options (Algorithm I or II)."""
+
+    scenario: str
+    method: str = "refined"
+
+
+@dataclass(frozen=True)
+class RelposeSpec:
+    """The relpose stage's options and its general-motion image folders."""
+
+    images: dict[str, Path]
+    method: str = "refined"
+    unknown_scale: bool = False
+    self_calibrate: bool = False
+    reference: int = 0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A checked run configuration; every path is resolved against the config's folder."""
+
+    path: Path
+    output: Path
+    cols: int
+    rows: int
+    square: float
+    cameras: dict[str, CameraSpec]
+    intrinsics_from: dict[str, Path] | None = None
+    intrinsics_images: str = "all"
+    joint: JointSpec | None = None
+    relpose: RelposeSpec | None = None
+    workers: int | None = None
+
+
+class _Checker:
+    """Type checks of config values; errors name the config file and the dotted key."""
+
+    def __init__(self, path: Path):
+        self.file = path
+        self.base = path.parent
+
+    def fail(self, key: str, problem: str) -> InputError:
+        return InputError(f"key '{key}': {problem}", path=self.file)
+
+    def mapping(
+        self,
+        value: Any,
+        key: str,
+        required: tuple[str, ...] = (),
+        optional: tuple[str, ...] = (),
+    ) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.fail(key, f"must be a mapping, got {_describe(value)}")
+        prefix = f"{key}." if key else ""
+        allowed = set(required) | set(optional)
+        for k in value:
+            if not isinstance(k, str) or k not in allowed:
+                known = ", ".join(sorted(allowed))
+                raise self.fail(f"{prefix}{k}", f"unknown key (known keys: {known})")
+        for k in required:
+            if k not in value:
+                raise self.fail(f"{prefix}{k}", "missing (required)")
+        return value
+
+    def integer(self, value: Any, key: str, minimum: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"must be an integer, got {_describe(value)}")
+        if minimum is not None and value < minimum:
+            raise self.fail(key, f"must be at least {minimum}, got {value}")
+        return value
+
+    def positive(self, value: Any, key: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, f"must be a number, got {_describe(value)}")
+        if not (np.isfinite(value) and value > 0):
+            raise self.fail(key, f"must be a positive number, got {value}")
+        return float(value)
+
+    def boolean(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.fail(key, f"must be true or false, got {_describe(value)}")
+        return value
+
+    def choice(self, value: Any, key: str, choices: tuple[str, ...]) -> str:
+        if not isinstance(value, str) or value not in choices:
+            raise self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}")
+        return value
+
+    def path(self, value: Any, key: str) -> Path:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(key, f"must be a path (a string), got {_describe(value)}")
+        p = Path(os.path.expanduser(value))
+        return Path(os.path.normpath(p if p.is_absolute() else self.base / p))
+
+
+def _describe(value: Any) -> str:
+    if value is None:
+        return "nothing (null)"
+    text = repr(value)
+    return f"{type(value).__name__} {text[:40]}"
+
+
+def parse_run_config(doc: Any, path: Path) -> RunConfig:
+    """Check a loaded run configuration and resolve its paths against ``path``'s folder.
+
+    Raises
+    ------
+    InputError
+        An unknown key, a missing required key, or a value of the wrong type or range; the
+        message names the file and the dotted key.
+    """
+    c = _Checker(path)
+    top = c.mapping(
+        doc,
+        "",
+        required=("schema", "schema_version", "output", "board", "cameras"),
+        optional=("intrinsics_from", "intrinsics", "joint", "relpose", "workers"),
+    )
+    if top["schema"] != CONFIG_SCHEMA:
+        raise c.fail("schema", f"must be {CONFIG_SCHEMA}, got {top['schema']!r}")
+    version = c.integer(top["schema_version"], "schema_version", 1)
+    if version > CONFIG_VERSION:
+        raise c.fail(
+            "schema_version",
+            f"{version} is newer than this acscal reads ({CONFIG_VERSION}); upgrade acscal",
+        )
+    output = c.path(top["output"], "output")
+    board = c.mapping(top["board"], "board", required=("cols", "rows", "square"))
+    cols = c.integer(board["cols"], "board.cols", 2)
+    rows = c.integer(board["rows"], "board.rows", 2)
+    square = c.positive(board["square"], "board.square")
+
+    cams_doc = c.mapping(top["cameras"], "cameras", required=("a",), optional=("b",))
+    cameras: dict[str, CameraSpec] = {}
+    for name in CAMERAS:
+        if name not in cams_doc:
+            continue
+        key = f"cameras.{name}"
+        cam = cams_doc[name] if cams_doc[name] is not None else {}
+        cam = c.mapping(cam, key, optional=("images", "model"))
+        images = c.path(cam["images"], f"{key}.images") if cam.get("images") is not None else None
+        model = c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS)
+        cameras[name] = CameraSpec(name, images, model)
+
+    intrinsics_from: dict[str, Path] | None = None
+    src = top.get("intrinsics_from")
+    if isinstance(src, dict):
+        m = c.mapping(src, "intrinsics_from", optional=tuple(cameras))
+        intrinsics_from = {n: c.path(m[n], f"intrinsics_from.{n}") for n in cameras if n in m}
+        missing = [n for n in cameras if n not in intrinsics_from]
+        if missing:
+            raise c.fail(f"intrinsics_from.{missing[0]}", "missing (one file per camera)")
+    elif src is not None:
+        run_dir = c.path(src, "intrinsics_from")
+        intrinsics_from = {n: run_dir / f"cam_{n}" / "intrinsics.yaml" for n in cameras}
+
+    intr = top.get("intrinsics")
+    intrinsics_images = "all"
+    if intr is not None:
+        intr = c.mapping(intr, "intrinsics", optional=("from",))
+        intrinsics_images = c.choice(intr.get("from", "all"), "intrinsics.from", INTRINSICS_FROM)
+
+    joint: JointSpec | None = None
+    if top.get("joint") is not None:
+        j = c.mapping(top["joint"], "joint", required=("scenario",), optional=("method",))
+        joint = JointSpec(
+            c.choice(j["scenario"], "joint.scenario", JOINT_SCENARIOS),
+            c.choice(j.get("method", "refined"), "joint.method", METHODS),
+        )
+        for name, cam in cameras.items():
+            if cam.images is None:
+                raise c.fail(f"cameras.{name}.images", "missing (the joint stage needs it)")
+        if joint.scenario == "overlap" and "b" not in cameras:
+            raise c.fail("cameras.b", "missing (joint.scenario overlap needs both cameras)")
+
+    relpose: RelposeSpec | None = None
+    if top.get("relpose") is not None:
+        r = c.mapping(
+            top["relpose"],
+            "relpose",
+            required=("images",),
+            optional=("method", "unknown_scale", "self_calibrate", "reference"),
+        )
+        imgs = c.mapping(r["images"], "relpose.images", required=CAMERAS)
+        if "b" not in cameras:
+            raise c.fail("cameras.b", "missing (relpose needs both cameras)")
+        relpose = RelposeSpec(
+            images={n: c.path(imgs[n], f"relpose.images.{n}") for n in CAMERAS},
+            method=c.choice(r.get("method", "refined"), "relpose.method", METHODS),
+            unknown_scale=c.boolean(r.get("unknown_scale", False), "relpose.unknown_scale"),
+            self_calibrate=c.boolean(r.get("self_calibrate", False), "relpose.self_calibrate"),
+            reference=c.integer(r.get("reference", 0), "relpose.reference", 0),
+        )
+        if relpose.self_calibrate and joint is not None:
+            raise c.fail(
+                "relpose.self_calibrate",
+                "true estimates the joint from the general motion: remove the 'joint' section",
+            )
+        if not relpose.self_calibrate and joint is None:
+            raise c.fail("joint", "missing (relpose needs it, or relpose.self_calibrate: true)")
+    if joint is None and relpose is None:
+        raise c.fail("joint", "missing: name a 'joint' section, a 'relpose' section or both")
+
+    if intrinsics_from is None:
+        for name, cam in cameras.items():
+            if intrinsics_images == "joint" and cam.images is None:
+                raise c.fail(
+                    "intrinsics.from",
+                    f"'joint' but camera {name} has no joint images (cameras.{name}.images)",
+                )
+    workers = None
+    if top.get("workers") is not None:
+        workers = c.integer(top["workers"], "workers", 1)
+    return RunConfig(
+        path=path,
+        output=output,
+        cols=cols,
+        rows=rows,
+        square=square,
+        cameras=cameras,
+        intrinsics_from=intrinsics_from,
+        intrinsics_images=intrinsics_images,
+        joint=joint,
+        relpose=relpose,
+        workers=workers,
+    )
+
+
+def load_run_config(path: Path) -> RunConfig:
+    """Read a run configuration file and check it (see :func:`parse_run_config`).
+
+    Raises
+    ------
+    InputError
+        A missing or unreadable file, bad YAML, or a bad key.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise InputError("no such config file", path=p) from exc
+    except IsADirectoryError as exc:
+        raise InputError("is a folder, expected a run config (YAML)", path=p) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the config ({exc})", path=p) from exc
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = None if mark is None else mark.line + 1
+        problem = exc.problem or "syntax error"
+        raise InputError(f"not valid YAML: {problem}", path=p, line=line) from exc
+    except yaml.YAMLError as exc:
+        raise InputError(f"not valid YAML ({type(exc).__name__})", path=p) from exc
+    return parse_run_config(doc, p)
+
+
+# --------------------------------------------------------------------------- pipeline
+
+
+@dataclass
+class StageResult:
+    """One stage of a run: what it did and its headline numbers."""
+
+    stage: str
+    status: str  # "ran", "skipped", "reused", "not selected"
+    outputs: list[Path]
+    numbers: str = ""
+    seconds: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class PipelineRun:
+    """What :func:`run_pipeline` did."""
+
+    config: RunConfig
+    stages: list[StageResult]
+    state_file: Path
+    seconds: float
+
+    @property
+    def ran(self) -> list[str]:
+        return [s.stage for s in self.stages if s.status == "ran"]
+
+    @property
+    def skipped(self) -> list[str]:
+        return [s.stage for s in self.stages if s.status == "skipped"]
+
+
+@dataclass
+class _Stage:
+    stage: str
+    kind: str
+    inputs: dict[str, Path]
+    options: dict[str, Any]
+    outputs: list[Path]
+    action: Callable[[], list[str]]
+
+
+def _stamp(stage: _Stage, input_hashes: Mapping[str, str]) -> str:
+    doc = {
+        "stage": stage.stage,
+        "tool": acs_cli.__version__,
+        "options": stage.options,
+        "inputs": dict(input_hashes),
+    }
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _options_hash(options: Mapping[str, Any]) -> str:
+    text = json.dumps(dict(options), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _read_state(path: Path) -> dict[str, Any]:
+    """The stages recorded by earlier runs, or ``{}`` (a damaged state means: rerun all)."""
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return {}
+    if not isinstance(doc, dict) or doc.get("schema") != STATE_SCHEMA:
+        return {}
+    stages = doc.get("stages")
+    return dict(stages) if isinstance(stages, dict) else {}
+
+
+def _write_state(path: Path, config: RunConfig, stages: Mapping[str, Any]) -> None:
+    doc = {
+        "schema": STATE_SCHEMA,
+        "schema_version": 1,
+        "tool": {"name": "acscal", "version": acs_cli.__version__},
+        "config": str(config.path),
+        "stages": dict(stages),
+    }
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False, default_flow_style=False))
+
+
+def _rel(path: Path, base: Path) -> str:
+    try:
+        return path.relative_to(base).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _up_to_date(record: Any, stamp: str, stage: _Stage, base: Path) -> bool:
+    if not isinstance(record, dict) or record.get("stamp") != stamp:
+        return False
+    outputs = record.get("outputs")
+    if not isinstance(outputs, dict):
+        return False
+    for out in stage.outputs:
+        want = outputs.get(_rel(out, base))
+        if not out.is_file() or want != sha256_of(out):
+            return False
+    return True
+
+
+def _link_images(folders: Mapping[str, Path], dest: Path) -> Path:
+    """A folder of links to the images of several folders (``<label>_<name>``)."""
+    wanted: dict[str, Path] = {}
+    for label, folder in folders.items():
+        for img in list_images(folder):
+            wanted[f"{label}_{img.name}"] = img.resolve()
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+        for entry in dest.iterdir():
+            if entry.name not in wanted or not (
+                entry.is_symlink() and Path(os.readlink(entry)) == wanted[entry.name]
+            ):
+                entry.unlink()
+        for name, target in wanted.items():
+            link = dest / name
+            if link.is_symlink() or link.exists():
+                continue
+            try:
+                link.symlink_to(target)
+            except OSError:  # no symlinks here (some file systems): copy
+                shutil.copy2(target, link)
+    except OSError as exc:
+        raise InputError(
+            f"cannot prepare the image links ({exc.strerror or exc})", path=dest
+        ) from exc
+    return dest
+
+
+def _fmt(values: Any, digits: int = 4) -> str:
+    arr = np.atleast_1d(np.asarray(values, dtype=float))
+    return "[" + ", ".join(f"{v:+.{digits}f}" for v in arr) + "]"
+
+
+def _numbers(kind: str, output: Path) -> str:
+    """Headline numbers of a stage's artifact (for the summary; '' if unreadable)."""
+    try:
+        if kind == "poses":
+            with np.load(output) as z:
+                n = int(np.asarray(z["T_world_cam"]).shape[0])
+                rms = np.asarray(z["reprojection_rms"], dtype=float)
+            return f"{n} poses, median RMS {float(np.median(rms)):.3f} px"
+        doc = yaml.safe_load(output.read_text(encoding="utf-8"))
+        if kind == "intrinsics":
+            K = doc["camera_matrix"]
+            used = len(doc["images"]["used"])
+            return (
+                f"RMS {doc['rms_px']:.3f} px, {used}/{doc['images']['total']} images, "
+                f"fx {K[0][0]:.1f} fy {K[1][1]:.1f}"
+            )
+        if kind == "joint":
+            j = doc["joint"]
+            text = f"O_a {_fmt(j['position_in_a'])}"
+            if j.get("position_in_b") is not None:
+                text += f", O_b {_fmt(j['position_in_b'])}"
+            return text + f" {j.get('units', 'm')}"
+        if kind == "relpose":
+            rel = doc["relative_pose"]
+            text = (
+                f"T_b_a rpy {_fmt(rel['rpy_deg'], 2)} deg, t_a_b {_fmt(rel['translation_b_in_a'])}"
+            )
+            scale = doc.get("scale")
+            if isinstance(scale, dict) and scale.get("phi_ba") is not None:
+                text += f", phi {float(scale['phi_ba']):.4f}"
+            joint = doc.get("joint")
+            if isinstance(joint, dict) and "self-calibrated" in str(joint.get("source")):
+                text += f", O_a {_fmt(joint['position_in_a'])}"
+            return text
+    except (OSError, KeyError, TypeError, ValueError, IndexError, yaml.YAMLError):
+        return ""
+    return ""
+
+
+def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
+    """The stages of a run in order, and the intrinsics file of each camera."""
+    from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
+    from acs_cli.stages.joint import JointConfig, run_joint
+    from acs_cli.stages.poses import PosesConfig, run_poses
+    from acs_cli.stages.relpose import RelposeConfig, run_relpose
+
+    out = config.output
+    board = {"cols": config.cols, "rows": config.rows, "square": config.square}
+    stages: list[_Stage] = []
+    intrinsics: dict[str, Path] = {}
+    poses: dict[str, Path] = {}
+    general: dict[str, Path] = {}
+    rel = config.relpose
+
+    for name, cam in config.cameras.items():
+        cam_dir = out / f"cam_{name}"
+        if config.intrinsics_from is not None:
+            intrinsics[name] = config.intrinsics_from[name]
+            continue
+        folders: dict[str, Path] = {}
+        if cam.images is not None:
+            folders["joint"] = cam.images
+        if rel is not None and (config.intrinsics_images == "all" or cam.images is None):
+            folders["general"] = rel.images[name]
+        intr_out = cam_dir / "intrinsics.yaml"
+        intrinsics[name] = intr_out
+        icfg = IntrinsicsConfig(
+            cols=config.cols,
+            rows=config.rows,
+            square=config.square,
+            model=cam.model,
+            workers=config.workers,
+        )
+
+        def do_intrinsics(
+            folders: dict[str, Path] = folders,
+            cam_dir: Path = cam_dir,
+            intr_out: Path = intr_out,
+            icfg: IntrinsicsConfig = icfg,
+        ) -> list[str]:
+            if len(folders) == 1:
+                images = next(iter(folders.values()))
+            else:
+                images = _link_images(folders, cam_dir / "intrinsics_images")
+            return run_intrinsics(images, intr_out, icfg).warnings
+
+        stages.append(
+            _Stage(
+                f"intrinsics {name}",
+                "intrinsics",
+                {f"images_{k}": v for k, v in folders.items()},
+                {**board, "model": cam.model, "images_from": sorted(folders)},
+                [intr_out],
+                do_intrinsics,
+            )
+        )
+
+    def poses_stage(name: str, images: Path, stem: str, label: str) -> Path:
+        npz = out / f"cam_{name}" / f"{stem}.npz"
+        tum = out / f"cam_{name}" / f"{stem}.tum"
+        pcfg = PosesConfig(
+            cols=config.cols,
+            rows=config.rows,
+            square=config.square,
+            tum=tum,
+            workers=config.workers,
+        )
+        intr = intrinsics[name]
+
+        def do_poses() -> list[str]:
+            return run_poses(images, intr, npz, pcfg).warnings
+
+        stages.append(
+            _Stage(
+                f"{label} {name}",
+                "poses",
+                {"images": images, "intrinsics": intr},
+                dict(board),
+                [npz, tum],
+                do_poses,
+            )
+        )
+        return npz
+
+    for name, cam in config.cameras.items():
+        if config.joint is not None and cam.images is not None:
+            poses[name] = poses_stage(name, cam.images, "poses", "poses")
+        if rel is not None:
+            general[name] = poses_stage(name, rel.images[name], "poses_general", "poses general")
+
+    joint_file: Path | None = None
+    if config.joint is not None:
+        jspec = config.joint
+        joint_file = out / "joint.yaml"
+        jcfg = JointConfig(scenario=jspec.scenario, method=jspec.method)
+        pa, pb = poses["a"], poses.get("b")
+        jout = joint_file
+
+        def do_joint() -> list[str]:
+            return run_joint(pa, pb, jout, jcfg).warnings
+
+        stages.append(
+            _Stage(
+                "joint",
+                "joint",
+                {"poses_a": pa} | ({"poses_b": pb} if pb is not None else {}),
+                {"scenario": jspec.scenario, "method": jspec.method},
+                [joint_file],
+                do_joint,
+            )
+        )
+
+    if rel is not None:
+        rcfg = RelposeConfig(
+            method=rel.method,
+            unknown_scale=rel.unknown_scale,
+            self_calibrate=rel.self_calibrate,
+            reference=rel.reference,
+        )
+        rout = out / "relpose.yaml"
+        ga, gb = general["a"], general["b"]
+        jf = joint_file
+
+        def do_relpose() -> list[str]:
+            return run_relpose(ga, gb, jf, rout, rcfg).warnings
+
+        stages.append(
+            _Stage(
+                "relpose",
+                "relpose",
+                {"poses_a": ga, "poses_b": gb} | ({"joint": jf} if jf is not None else {}),
+                {
+                    "method": rel.method,
+                    "unknown_scale": rel.unknown_scale,
+                    "self_calibrate": rel.self_calibrate,
+                    "reference": rel.reference,
+                },
+                [rout],
+                do_relpose,
+            )
+        )
+    return stages, intrinsics
+
+
+def run_pipeline(
+    config: RunConfig,
+    *,
+    force: bool = False,
+    only: str | None = None,
+    on_stage: StageCallback | None = None,
+) -> PipelineRun:
+    """Run the configured stages, skipping those whose inputs and options are unchanged.
+
+    Parameters
+    ----------
+    config : RunConfig
+        From :func:`load_run_config`.
+    force : bool
+        Run every (selected) stage even if it is up to date.
+    only : str, optional
+        Run only the stages of this kind (one of :data:`STAGE_KINDS`); the others' outputs
+        must exist already.
+    on_stage : callable, optional
+        Called with each :class:`StageResult` as soon as the stage is done.
+
+    Raises
+    ------
+    InputError
+        Bad inputs (from the stages), or ``--only`` with an upstream output missing.
+    DegenerateMotionError
+        A stage's motion cannot determine its answer; the stages before it are recorded.
+    """
+    if only is not None and only not in STAGE_KINDS:
+        raise InputError(f"--only must be one of {', '.join(STAGE_KINDS)}, got {only!r}")
+    t0 = time.perf_counter()
+    out = config.output
+    state_file = out / STATE_FILE
+    state = _read_state(state_file)
+    stages, intrinsics = _plan(config)
+    results: list[StageResult] = []
+
+    def report(res: StageResult) -> None:
+        results.append(res)
+        if on_stage is not None:
+            on_stage(res)
+
+    if config.intrinsics_from is not None:
+        for name, path in intrinsics.items():
+            if not path.is_file():
+                raise InputError(
+                    f"no such intrinsics file (key 'intrinsics_from' of {config.path})",
+                    path=path,
+                )
+            report(
+                StageResult(f"intrinsics {name}", "reused", [path], _numbers("intrinsics", path))
+            )
+
+    if only is not None and not any(s.kind == only for s in stages):
+        raise InputError(f"--only {only}: the config runs no {only} stage", path=config.path)
+    for stage in stages:
+        if only is not None and stage.kind != only:
+            upstream = STAGE_KINDS.index(stage.kind) < STAGE_KINDS.index(only)
+            missing = [p for p in stage.outputs if upstream and not p.is_file()]
+            if missing:
+                raise InputError(
+                    f"--only {only}: the {stage.stage} stage has not run yet; run without "
+                    "--only first",
+                    path=missing[0],
+                )
+            report(StageResult(stage.stage, "not selected", stage.outputs))
+            continue
+        hashes = {role: sha256_of(p) for role, p in stage.inputs.items()}
+        stamp = _stamp(stage, hashes)
+        if not force and _up_to_date(state.get(stage.stage), stamp, stage, out):
+            report(
+                StageResult(
+                    stage.stage, "skipped", stage.outputs, _numbers(stage.kind, stage.outputs[0])
+                )
+            )
+            continue
+        ts = time.perf_counter()
+        warnings = stage.action()
+        state[stage.stage] = {
+            "stamp": stamp,
+            "options_sha256": _options_hash(stage.options),
+            "options": stage.options,
+            "inputs": {
+                role: {"path": str(p), "sha256": hashes[role]} for role, p in stage.inputs.items()
+            },
+            "outputs": {_rel(p, out): sha256_of(p) for p in stage.outputs},
+        }
+        _write_state(state_file, config, state)
+        report(
+            StageResult(
+                stage.stage,
+                "ran",
+                stage.outputs,
+                _numbers(stage.kind, stage.outputs[0]),
+                time.perf_counter() - ts,
+                list(warnings),
+            )
+        )
+    return PipelineRun(config, results, state_file, time.perf_counter() - t0)
