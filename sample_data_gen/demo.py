@@ -3,11 +3,18 @@
 ``python -m sample_data_gen.demo OUT_DIR`` writes the sample set (when missing), runs
 ``acscal joint`` and ``acscal relpose`` as a user would (paper's method and ours, known and
 unknown scale, self-calibration) and prints each result beside the truth.
+
+Then it calibrates from images: it renders the checkerboard image sample set into
+``OUT_DIR/images`` (when missing), runs ``acscal run configs/fixed_joint.yaml`` and
+``acscal run configs/overlap.yaml`` (for an ``OUT_DIR`` other than the repository's
+``demo_out``, copies of the configs pointing at ``OUT_DIR`` are written to
+``OUT_DIR/configs``) and prints the joint and the relative pose beside the rendered truth.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -19,19 +26,27 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
+from acs_cli.core import se3
+from sample_data_gen.render import render_sample_set
 from sample_data_gen.writer import write_sample_set
 
 ACSCAL = Path(sys.executable).with_name("acscal")
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = REPO / "configs"
+RUN_CONFIGS = ("fixed_joint", "overlap")
 console = Console(highlight=False, width=None if sys.stdout.isatty() else 120)
 
 
-def _run(*args: str | Path) -> None:
+def _run(*args: str | Path, show: bool = False) -> None:
     cmd = [str(ACSCAL), *map(str, args)]
     console.print(f"[bold]$ acscal {' '.join(map(str, args))}[/]")
-    res = subprocess.run(cmd, capture_output=True, text=True)
+    env = dict(os.environ, COLUMNS=str(console.width))
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if res.returncode != 0:
-        console.print(res.stdout + res.stderr)
+        console.print(res.stdout + res.stderr, markup=False)
         raise SystemExit(f"demo: acscal failed with exit code {res.returncode}")
+    if show:
+        console.print(res.stdout.rstrip(), markup=False)
 
 
 def _load(path: Path) -> dict[str, Any]:
@@ -42,16 +57,34 @@ def _v(x: Any, digits: int = 3) -> str:
     return "[" + ", ".join(f"{float(v):+.{digits}f}" for v in np.ravel(x)) + "]"
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size must look like 640x480, got {text!r}") from None
+    return w, h
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sample_data_gen.demo", description=__doc__)
     ap.add_argument("out_dir", type=Path)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--frames", type=int, default=20, help="rendered images per camera")
+    ap.add_argument("--size", type=_size, default=(640, 480), metavar="WxH", help="image size")
+    ap.add_argument("--no-images", action="store_true", help="skip the image-chain part")
     args = ap.parse_args(argv)
     out: Path = args.out_dir
+    _trajectory_demo(out, args.seed)
+    if not args.no_images:
+        _image_demo(out, args.seed, args.frames, args.size)
+    return 0
+
+
+def _trajectory_demo(out: Path, seed: int) -> None:
     data = out / "data"
     if not (data / "general_scaled" / "truth.yaml").exists():
         console.print(f"writing the sample data set into {data}")
-        write_sample_set(data, seed=args.seed)
+        write_sample_set(data, seed=seed)
     res = out / "results"
     res.mkdir(parents=True, exist_ok=True)
 
@@ -118,7 +151,112 @@ def main(argv: Sequence[str] | None = None) -> int:
                   f"{sc['scale']['phi_ba']:.4f}")  # fmt: skip
     console.print(table)
     console.print(f"artifacts in {res}")
-    return 0
+
+
+# --------------------------------------------------------------------------- from images
+
+
+def _images_ok(images: Path, frames: int, size: tuple[int, int]) -> bool:
+    """Does ``images`` hold a complete rendered set of ``frames`` images of ``size``?"""
+    for scn in ("overlap", "fixed_joint", "general"):
+        truth = images / scn / "truth.yaml"
+        if not truth.is_file():
+            return False
+        doc = _load(truth)
+        if int(doc["n_frames"]) != frames or tuple(doc["image_size"]) != tuple(size):
+            return False
+    return True
+
+
+def _config_for(name: str, out: Path) -> Path:
+    """The run config of ``name``: ``configs/<name>.yaml`` itself when ``out`` is the
+    repository's ``demo_out``, else a copy in ``out/configs`` with its paths moved to ``out``."""
+    src = CONFIGS / f"{name}.yaml"
+    if out.resolve() == (REPO / "demo_out").resolve():
+        return src
+    text = src.read_text()
+    if "../demo_out/" not in text:
+        raise SystemExit(f"demo: {src} no longer points at ../demo_out/")
+    dst = out / "configs" / src.name
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_text(text.replace("../demo_out/", "../"))
+    return dst
+
+
+def _check_config(config: Path, images: Path) -> Path:
+    """The run folder of ``config``, after checking its image folders are under ``images``."""
+    doc = _load(config)
+    base = config.parent
+    folders = [c["images"] for c in doc["cameras"].values() if c.get("images")]
+    if doc.get("relpose"):
+        folders += list(doc["relpose"]["images"].values())
+    for f in folders:
+        p = (base / f).resolve()
+        if not p.is_relative_to(images.resolve()):
+            raise SystemExit(f"demo: {config}: image folder {f} is not under {images}")
+    return Path(os.path.normpath(base / doc["output"]))
+
+
+def _show(path: Path) -> str:
+    """``path`` relative to the current folder when it is under it."""
+    p = Path(os.path.abspath(path))
+    return str(p.relative_to(Path.cwd())) if p.is_relative_to(Path.cwd()) else str(p)
+
+
+def _image_demo(out: Path, seed: int, frames: int, size: tuple[int, int]) -> None:
+    images = out / "images"
+    if _images_ok(images, frames, size):
+        console.print(f"\nreusing the rendered images in {images}")
+    else:
+        console.print(
+            f"\nrendering the image sample set ({frames} frames, {size[0]}x{size[1]}) into {images}"
+        )
+        render_sample_set(images, seed=seed, size=size, frames=frames)
+    runs: dict[str, Path] = {}
+    for name in RUN_CONFIGS:
+        config = _config_for(name, out)
+        runs[name] = _check_config(config, images)
+        _run("run", _show(config), show=True)
+
+    t_fj = _load(images / "fixed_joint" / "truth.yaml")
+    t_gen = _load(images / "general" / "truth.yaml")
+    t_ov = _load(images / "overlap" / "truth.yaml")
+    table = Table(title="acscal run from rendered images: estimates beside the truth (metres, deg)")
+    table.add_column("quantity")
+    table.add_column("truth")
+    table.add_column("acscal run (refined)")
+    table.add_column("error")
+
+    def joint_rows(label: str, truth: dict[str, Any], est_file: Path) -> None:
+        est = _load(est_file)["joint"]
+        for cam in ("a", "b"):
+            key = f"position_in_{cam}"
+            t = np.asarray(truth["joint"][key], dtype=float)
+            e = np.asarray(est[key], dtype=float)
+            err = float(np.linalg.norm(e - t))
+            pct = 100.0 * err / float(np.linalg.norm(t))
+            table.add_row(f"joint in {cam.upper()}, {label}", _v(t, 4), _v(e, 4),
+                          f"{1000 * err:.2f} mm = {pct:.2f}% of |O|")  # fmt: skip
+
+    joint_rows("fixed joint (Alg II)", t_fj, runs["fixed_joint"] / "joint.yaml")
+    joint_rows("overlap (Alg I)", t_ov, runs["overlap"] / "joint.yaml")
+    rel = _load(runs["fixed_joint"] / "relpose.yaml")["relative_pose"]
+    # reference = the run's paired frame 0; the image name's number is the frame index
+    ref = round(float(rel["reference_timestamp_a"]))
+    T_a_b_true = np.asarray(t_gen["T_a_b"], dtype=float)[ref]
+    T_a_b_est = se3.invert_transforms(np.asarray(rel["T_b_a"], dtype=float))
+    R_err = T_a_b_true[:3, :3].T @ T_a_b_est[:3, :3]
+    ang = float(se3.rotation_angle_deg(R_err))
+    rpy_t = se3.rpy_deg_from_matrix(T_a_b_true[:3, :3])
+    table.add_row(f"roll/pitch/yaw of R_a_b at frame {ref} (Alg III)", _v(rpy_t, 2),
+                  _v(rel["rpy_deg"], 2), f"{ang:.3f} deg (rotation angle)")  # fmt: skip
+    t_t = T_a_b_true[:3, 3]
+    t_e = np.asarray(rel["translation_b_in_a"], dtype=float)
+    table.add_row(f"B's origin in A at frame {ref} (Alg III)", _v(t_t, 4), _v(t_e, 4),
+                  f"{1000 * float(np.linalg.norm(t_e - t_t)):.2f} mm")  # fmt: skip
+    console.print(table)
+    console.print(f"images and truth in {_show(images)}")
+    console.print(f"artifacts in {', '.join(_show(r) for r in runs.values())}")
 
 
 if __name__ == "__main__":

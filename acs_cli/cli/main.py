@@ -126,6 +126,14 @@ def joint(
         ),
     ] = False,
     method: MethodOpt = Method.refined,
+    bundle: Annotated[
+        bool,
+        typer.Option(
+            "--bundle",
+            help="Fixed joint, refined, poses from `acscal poses`: also refine each camera's "
+            "joint and intrinsics by bundle adjustment on its detected corners.",
+        ),
+    ] = False,
     format_a: FormatAOpt = TrajFormat.auto,
     format_b: FormatBOpt = TrajFormat.auto,
     pair_by: PairByOpt = PairBy.auto,
@@ -154,6 +162,7 @@ def joint(
         pair_by=pair_by.value,
         max_dt=max_dt,
         length_unit=length_unit,
+        bundle=bundle,
     )
     run = run_joint(poses_a, poses_b, output, cfg)
     est = run.estimate

@@ -28,10 +28,18 @@ from acs_cli.core import estimation, se3
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
-#: Smallest ratio of the weakest to the strongest direction of the rotation design
-#: (singular values of the stacked, centred rotations) for the joint to be observable.
-#: Below it the motion is (close to) a rotation about one axis: a hinge.
-HINGE_RATIO = 0.1
+#: Below this ratio of the weakest to the strongest direction of the rotation design
+#: (singular values of the stacked, centred rotations) the motion may be a hinge (a
+#: rotation about one axis): the fit then decides (see ``hinge_explains``).
+HINGE_RATIO = 0.25
+#: Below this ratio the motion is a hinge whatever the noise (numerically singular).
+HINGE_RATIO_EXACT = 1e-6
+#: A candidate hinge is refused when the joint's standard deviation along the weakest
+#: direction exceeds this share of its distance from the camera ...
+HINGE_STD_FRACTION = 0.05
+#: ... or when the motion about the weak axes is within this many times the estimated
+#: rotation noise (it is then noise, not motion).
+HINGE_NOISE_FACTOR = 5.0
 #: Smallest RMS spread of the rotations (radians, about 3 degrees) for a joint to be observable.
 MIN_ROTATION_SPREAD = 0.05
 
@@ -101,18 +109,34 @@ def _check_method(method: str) -> None:
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
 
 
-def _rotation_design_check(R: FloatArray, what: str) -> FloatArray | None:
-    """Check that rotations ``(n, 3, 3)`` can fix a point; return the hinge axis if not.
+@dataclass(frozen=True)
+class RotationSpread:
+    """How much a set of rotations varies (see :func:`rotation_spread`).
+
+    Attributes
+    ----------
+    ratio : float
+        Weakest over strongest singular value of the stacked, centred rotations.
+    axis : ndarray, shape (3,)
+        The weakest direction: the axis ``v`` with ``R_i v`` most nearly constant.
+    weak_rms_rad : float
+        RMS variation about the weak direction (radians, small-angle).
+    """
+
+    ratio: float
+    axis: FloatArray
+    weak_rms_rad: float
+
+    @property
+    def candidate_hinge(self) -> bool:
+        return self.ratio < HINGE_RATIO
+
+
+def rotation_spread(R: FloatArray, what: str) -> RotationSpread:
+    """Check that rotations ``(n, 3, 3)`` vary enough to fix a point; describe how.
 
     The joint is fixed by how the rotations differ from their mean: stacked, centred
     rotations ``R_i - mean(R)`` must have three clearly non-zero singular values.
-
-    Returns
-    -------
-    ndarray of shape (3,) or None
-        The unit axis ``v`` with ``R_i v`` (nearly) constant when the motion is a hinge
-        (weakest/strongest singular value below ``HINGE_RATIO``), in the frame the
-        rotations act on; ``None`` otherwise.
 
     Raises
     ------
@@ -130,7 +154,33 @@ def _rotation_design_check(R: FloatArray, what: str) -> FloatArray | None:
             "of degrees about at least two different axes.",
             details={"rotation_spread_deg": float(np.degrees(spread))},
         )
-    return Vt[2] if s[2] / s[0] < HINGE_RATIO else None
+    return RotationSpread(float(s[2] / s[0]), Vt[2], float(s[2] / np.sqrt(n)))
+
+
+def hinge_explains(
+    spread: RotationSpread, covariance: FloatArray, o: FloatArray, sigma_rot_rad: float | None
+) -> bool:
+    """Whether a candidate hinge really leaves the joint undetermined.
+
+    Parameters
+    ----------
+    spread : RotationSpread
+    covariance : ndarray, shape (3, 3)
+        Of the fitted joint.
+    o : ndarray, shape (3,)
+        The fitted joint.
+    sigma_rot_rad : float, optional
+        Estimated rotation noise per axis; the motion about the weak axes is noise when
+        within ``HINGE_NOISE_FACTOR`` of it.
+    """
+    if spread.ratio < HINGE_RATIO_EXACT:
+        return True
+    if not spread.candidate_hinge:
+        return False
+    weak_std = float(np.sqrt(max(np.linalg.eigvalsh(covariance)[-1], 0.0)))
+    if weak_std > HINGE_STD_FRACTION * max(float(np.linalg.norm(o)), 1e-12):
+        return True
+    return sigma_rot_rad is not None and spread.weak_rms_rad < HINGE_NOISE_FACTOR * sigma_rot_rad
 
 
 def _hinge_error(
@@ -249,13 +299,17 @@ def estimate_pivot(
             f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
         )
     R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
-    axis = _rotation_design_check(R, what)
-    if axis is not None:
+    spread = rotation_spread(R, what)
+
+    def hinge() -> DegenerateMotionError:
         # any point on the axis fits: the truncated least-squares point (p_w eliminated)
         D = (R - R.mean(axis=0)).reshape(-1, 3)
         point, *_ = np.linalg.lstsq(D, -(t - t.mean(axis=0)).reshape(-1), rcond=HINGE_RATIO)
         cam = what.split()[-1].lower() if what.startswith("camera ") else "a"
-        raise _hinge_error(what, {cam: axis}, {cam: point})
+        return _hinge_error(what, {cam: spread.axis}, {cam: point})
+
+    if spread.ratio < HINGE_RATIO_EXACT:
+        raise hinge()
     if method == "paper":
         # eq. (11)-(12): H^i = inv(T_0) T_i, (R^i - I) O = -T^i, i = 1..n-1
         H = se3.invert_transforms(T[0]) @ T[1:]
@@ -268,6 +322,8 @@ def estimate_pivot(
         cov = s2 * np.linalg.inv(M.T @ M)
         p_w = se3.transform_points(T[0], o)
         rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+        if hinge_explains(spread, cov, o, None):
+            raise hinge()
         inl = np.ones(n, dtype=bool)
         return PivotEstimate(o, cov, p_w, rms, inl, {})
     # refined: unknowns x = (o, p_w); residual r_i = R_i o + t_i - p_w, linear in x
@@ -282,6 +338,8 @@ def estimate_pivot(
     x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), -t.reshape(-1), rcond=None)
     sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
     inl = sol.inliers
+    if hinge_explains(spread, sol.covariance[:3, :3], sol.x[:3], float(np.sqrt(sol.theta[1]))):
+        raise hinge()
     x = sol.x + pivot_bias_step(sol.x, sol.theta, R[inl], sol.information)
     rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
     return PivotEstimate(
@@ -360,7 +418,7 @@ def estimate_joint_overlap(
     # observability: the articulation R_a_b(i) = R_wa^T R_wb must vary (about 2+ axes)
     R_ab = np.einsum("nji,njk->nik", Ra, Rb)
     try:
-        axis_b = _rotation_design_check(R_ab, "relative rotation between A and B")
+        spread = rotation_spread(R_ab, "relative rotation between A and B")
     except DegenerateMotionError as exc:
         raise DegenerateMotionError(
             "the joint cannot be observed: "
@@ -369,16 +427,20 @@ def estimate_joint_overlap(
             "between frames.",
             details=exc.details,
         ) from None
-    if axis_b is not None:
+
+    def hinge() -> DegenerateMotionError:
         # R_ab_i axis_b is the same axis in A's frame for every i
-        axis_a = R_ab.mean(axis=0) @ axis_b
+        axis_a = R_ab.mean(axis=0) @ spread.axis
         A6 = np.concatenate([Ra, -Rb], axis=2).reshape(-1, 6)
         sol, *_ = np.linalg.lstsq(A6, (tb - ta).reshape(-1), rcond=HINGE_RATIO)
-        raise _hinge_error(
+        return _hinge_error(
             "the joint cannot be observed",
-            {"a": axis_a, "b": axis_b},
+            {"a": axis_a, "b": spread.axis},
             {"a": sol[:3], "b": sol[3:]},
         )
+
+    if spread.ratio < HINGE_RATIO_EXACT:
+        raise hinge()
     J = np.concatenate([Ra, -Rb], axis=2)  # eq. (9): [R_wa, -R_wb] [o_a; o_b] = t_wb - t_wa
     rhs = tb - ta
     x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), rhs.reshape(-1), rcond=None)
@@ -387,6 +449,8 @@ def estimate_joint_overlap(
         dof = max(res.size - 6, 1)
         cov = float(np.sum(res**2) / dof) * np.linalg.inv(J.reshape(-1, 6).T @ J.reshape(-1, 6))
         rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+        if hinge_explains(spread, cov[3:, 3:], x0[3:], None):
+            raise hinge()
         return JointEstimate(
             x0[:3],
             cov[:3, :3],
@@ -405,6 +469,10 @@ def estimate_joint_overlap(
         return lever_shapes(Ra, x[:3]) + lever_shapes(Rb, x[3:])
 
     sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
+    # the relative rotation carries both cameras' rotation noise
+    sigma_rel = float(np.sqrt(2.0 * sol.theta[1]))
+    if hinge_explains(spread, sol.covariance[3:, 3:], sol.x[3:], sigma_rel):
+        raise hinge()
     inl = sol.inliers
     rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
     # theta_t covers both cameras' translation noise: report one camera's share

@@ -690,6 +690,52 @@ def read_npz_header(path: str | Path) -> dict[str, Any]:
     return header
 
 
+@dataclass(frozen=True)
+class BoardObservations:
+    """The corner observations an ``acscal/poses`` NPZ carries (for bundle adjustment).
+
+    Attributes
+    ----------
+    corners : ndarray, shape (n, m, 2)
+        Detected corners (pixels) of the ``n`` posed images, in board-point order.
+    board_points : ndarray, shape (m, 3)
+        The corners in the board's frame (metres).
+    intrinsics_file : str or None
+        The intrinsics artifact the poses were solved with (as recorded).
+    """
+
+    corners: FloatArray
+    board_points: FloatArray
+    intrinsics_file: str | None
+
+
+def read_npz_observations(path: str | Path) -> BoardObservations | None:
+    """The corners stored by ``acscal poses``, or ``None`` for an NPZ without them.
+
+    Raises
+    ------
+    InputError
+        Corners or board points of the wrong shape or not finite.
+    """
+    p = Path(path)
+    arrays = _load_npz(p)
+    if "corners" not in arrays or "board_points" not in arrays:
+        return None
+    corners = _npz_numeric(arrays, "corners", p)
+    board = _npz_numeric(arrays, "board_points", p)
+    if not (np.all(np.isfinite(corners)) and np.all(np.isfinite(board))):
+        raise InputError("'corners' or 'board_points' contain NaN or inf", path=p)
+    if corners.ndim != 3 or corners.shape[2] != 2 or board.shape != (corners.shape[1], 3):
+        raise InputError(
+            f"'corners' {corners.shape} and 'board_points' {board.shape} do not match "
+            "(expected (n, m, 2) and (m, 3))",
+            path=p,
+        )
+    header = read_npz_header(p)
+    intr = header.get("intrinsics_file")
+    return BoardObservations(corners, board, None if intr is None else str(intr))
+
+
 def write_npz_poses(
     path: str | Path,
     traj: Trajectory,

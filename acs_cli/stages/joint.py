@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from acs_cli.core.bundle import (
+    INTRINSIC_NAMES,
+    bundle_adjust_fixed_joint,
+    camera_matrix,
+    intrinsics_vector,
+)
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.trajectory import read_npz_observations
 from acs_cli.stages.common import (
     StageRun,
     frames_section,
@@ -18,6 +27,7 @@ from acs_cli.stages.common import (
     pairing_section,
     vector_with_std,
 )
+from acs_cli.stages.poses import read_intrinsics
 
 SCENARIOS = ("fixed_joint", "overlap")
 
@@ -48,6 +58,9 @@ class JointConfig:
         Largest timestamp difference of a pair, seconds.
     length_unit : str
         The unit of the trajectories' translations, recorded in the artifact.
+    bundle : bool
+        Fixed joint, refined: when a poses NPZ carries its corners (``acscal poses``),
+        refine that camera's joint and intrinsics by bundle adjustment on them.
     """
 
     scenario: str = "fixed_joint"
@@ -57,6 +70,7 @@ class JointConfig:
     pair_by: str = "auto"
     max_dt: float | None = None
     length_unit: str = "m"
+    bundle: bool = False
 
 
 JointRun = StageRun[JointEstimate]
@@ -74,6 +88,69 @@ def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
         body["covariance_b"] = est.covariance_b.tolist()
     body["units"] = length_unit
     return body
+
+
+def _resolve_intrinsics(recorded: str, poses: Path) -> Path | None:
+    """The intrinsics file a poses NPZ names: as recorded, or beside the NPZ."""
+    for candidate in (Path(recorded), poses.parent / Path(recorded).name):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _bundle(
+    poses: Path, T_w_c: np.ndarray, est: JointEstimate, cam: str
+) -> tuple[JointEstimate, dict[str, Any] | None, str | None]:
+    """Refine camera ``cam``'s joint (and intrinsics) on its corners, when they are there.
+
+    Returns the (possibly) refined estimate, the artifact's ``bundle`` section and a warning.
+    """
+    obs = read_npz_observations(poses) if poses.suffix.lower() == ".npz" else None
+    if obs is None:
+        return est, None, None
+    if obs.corners.shape[0] != T_w_c.shape[0]:
+        return est, None, f"{poses.name}: corners and poses disagree; bundle adjustment skipped"
+    intr_path = (
+        None if obs.intrinsics_file is None else _resolve_intrinsics(obs.intrinsics_file, poses)
+    )
+    if intr_path is None:
+        return est, None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
+    intr = read_intrinsics(intr_path)
+    if intr.model != "pinhole":
+        return est, None, f"bundle adjustment supports the pinhole model, not {intr.model}"
+    inl = est.inliers[cam]
+    o0 = est.position_in_a if cam == "a" else est.position_in_b
+    if o0 is None:
+        return est, None, None
+    ba = bundle_adjust_fixed_joint(
+        obs.corners[inl],
+        np.ones(obs.corners[inl].shape[:2], dtype=bool),
+        obs.board_points,
+        intrinsics_vector(intr.camera_matrix, intr.distortion),
+        T_w_c[inl],
+        o0,
+        est.position_in_world[cam],
+    )
+    cov = ba.covariance[9:12, 9:12]
+    refined = (
+        replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
+        if cam == "a"
+        else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov)
+    )
+    refined.position_in_world[cam] = ba.joint_in_world
+    section = {
+        "intrinsics_file": str(intr_path),
+        "rms_px": ba.rms_px,
+        "sigma_px": ba.sigma_px,
+        "frames": int(inl.sum()),
+        "camera_matrix": camera_matrix(ba.intrinsics).tolist(),
+        "distortion": ba.intrinsics[4:].tolist(),
+        "intrinsics_std": dict(
+            zip(INTRINSIC_NAMES, np.sqrt(np.diag(ba.covariance)[:9]).tolist(), strict=True)
+        ),
+        "converged": ba.success,
+    }
+    return refined, section, None
 
 
 def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
@@ -108,6 +185,18 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         est = estimate_joint_fixed(
             ta.T_world_cam, None if tb is None else tb.T_world_cam, config.method
         )
+        if config.method == "refined" and config.bundle:
+            bundles: dict[str, Any] = {}
+            for cam, path, traj in (("a", poses_a, ta), ("b", poses_b, tb)):
+                if path is None or traj is None:
+                    continue
+                est, section, warning = _bundle(path, traj.T_world_cam, est, cam)
+                if section is not None:
+                    bundles[cam] = section
+                if warning is not None:
+                    warnings.append(warning)
+            if bundles:
+                quality["bundle_adjustment"] = bundles
         quality["frames"] = {"a": frames_section(est.inliers["a"], ta.timestamps)}
         if tb is not None:
             quality["frames"]["b"] = frames_section(est.inliers["b"], tb.timestamps)
@@ -124,7 +213,13 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     header = make_header(
         "joint",
         inputs,
-        method=f"{config.method}: {METHOD_TEXT[(config.scenario, config.method)]}",
+        method=f"{config.method}: {METHOD_TEXT[(config.scenario, config.method)]}"
+        + (
+            "; then a bundle adjustment on the detected corners (intrinsics, joint and "
+            "per-frame rotations) for the cameras listed in quality.bundle_adjustment"
+            if "bundle_adjustment" in quality
+            else ""
+        ),
         units={"length": config.length_unit, "angles": "deg"},
         frames={
             "position_in_a": "camera A's optical frame",

@@ -179,17 +179,19 @@ def run_poses(
     names: list[str] = []
     T_cb: list[np.ndarray] = []
     rms: list[float] = []
+    corners: list[np.ndarray] = []
     skipped: list[str] = []
     for p, d in zip(fd.images, fd.detections, strict=True):
         pose = None
         if d.found and d.corners is not None:
             pose = board_pose(obj, d.corners, cam.camera_matrix, cam.distortion, cam.model)
-        if pose is None:
+        if pose is None or d.corners is None:
             skipped.append(p.name)
             continue
         names.append(p.name)
         T_cb.append(pose.T_cam_board)
         rms.append(pose.rms_px)
+        corners.append(np.asarray(d.corners, dtype=float).reshape(-1, 2))
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
     t, has_t = _timestamps(names, all_names)
@@ -221,6 +223,9 @@ def run_poses(
         {
             "reprojection_rms": rms_arr,
             "skipped_images": np.array(skipped, dtype=str) if skipped else np.zeros(0, "<U1"),
+            # the observations themselves, for a bundle adjustment downstream
+            "corners": np.stack(corners),
+            "board_points": np.asarray(obj, dtype=float).reshape(-1, 3),
         },
         header=header,
     )
