@@ -25,6 +25,7 @@ from acs_cli.io.atomic import atomic_write_text
 __all__ = [
     "SCHEMA_VERSION",
     "get_path",
+    "load_yaml_file",
     "make_header",
     "read_yaml_artifact",
     "sha256_of",
@@ -221,6 +222,35 @@ def get_path(
     return node
 
 
+def load_yaml_file(path: str | Path, what: str = "a YAML file") -> Any:
+    """Parse a YAML file; every failure is an :class:`InputError` naming the file (and line).
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        What the file should be, for the message when it is a folder.
+    """
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError as exc:
+        raise InputError("no such file", path=p) from exc
+    except IsADirectoryError as exc:
+        raise InputError(f"is a folder, expected {what}", path=p) from exc
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
+    try:
+        return yaml.safe_load(data)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = None if mark is None else mark.line + 1
+        problem = exc.problem or exc.context or "syntax error"
+        raise InputError(f"not valid YAML: {problem}", path=p, line=line) from exc
+    except Exception as exc:  # bad encodings, deep nesting, ...: all mean "not YAML"
+        raise InputError(f"not valid YAML ({type(exc).__name__})", path=p) from exc
+
+
 def read_yaml_artifact(path: str | Path, kind: str, required: Sequence[str] = ()) -> dict[str, Any]:
     """Read an acscal YAML artifact and check its kind, version and keys.
 
@@ -246,23 +276,7 @@ def read_yaml_artifact(path: str | Path, kind: str, required: Sequence[str] = ()
     """
     p = Path(path)
     expected = f"acscal/{kind}"
-    try:
-        data = p.read_bytes()
-    except FileNotFoundError as exc:
-        raise InputError("no such file", path=p) from exc
-    except IsADirectoryError as exc:
-        raise InputError("is a folder, expected a YAML artifact", path=p) from exc
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
-    try:
-        doc = yaml.safe_load(data)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = None if mark is None else mark.line + 1
-        problem = exc.problem or exc.context or "syntax error"
-        raise InputError(f"not valid YAML: {problem}", path=p, line=line) from exc
-    except Exception as exc:  # bad encodings, deep nesting, ...: all mean "not YAML"
-        raise InputError(f"not valid YAML ({type(exc).__name__})", path=p) from exc
+    doc = load_yaml_file(p, "a YAML artifact")
     if not isinstance(doc, dict):
         raise InputError(
             f"not an acscal artifact: expected a YAML mapping, got {type(doc).__name__}", path=p

@@ -30,7 +30,7 @@ import yaml
 import acs_cli
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import sha256_of
+from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.images import list_images
 
@@ -314,23 +314,7 @@ def load_run_config(path: Path) -> RunConfig:
         A missing or unreadable file, bad YAML, or a bad key.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise InputError("no such config file", path=p) from exc
-    except IsADirectoryError as exc:
-        raise InputError("is a folder, expected a run config (YAML)", path=p) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the config ({exc})", path=p) from exc
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = None if mark is None else mark.line + 1
-        problem = exc.problem or "syntax error"
-        raise InputError(f"not valid YAML: {problem}", path=p, line=line) from exc
-    except yaml.YAMLError as exc:
-        raise InputError(f"not valid YAML ({type(exc).__name__})", path=p) from exc
+    doc = load_yaml_file(p, "a run config (YAML)")
     return parse_run_config(doc, p)
 
 

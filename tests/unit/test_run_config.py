@@ -132,7 +132,7 @@ def test_not_a_mapping_and_bad_yaml(tmp_path: Path) -> None:
     path.write_text("schema: [unclosed\n", encoding="utf-8")
     with pytest.raises(InputError, match="not valid YAML"):
         load_run_config(path)
-    with pytest.raises(InputError, match="no such config file"):
+    with pytest.raises(InputError, match="no such file"):
         load_run_config(tmp_path / "missing.yaml")
 
 
