@@ -5,10 +5,15 @@ The detector (:func:`detect_checkerboard`) works in three steps:
 1. **Coarse search** on a copy of the image downscaled to at most :data:`COARSE_WIDTH`
    pixels wide, with OpenCV's classic ``findChessboardCorners`` (adaptive threshold;
    no image normalisation, which costs time and gained nothing). Before it,
-   ``cv2.checkChessboard`` (the test behind ``CALIB_CB_FAST_CHECK``) runs on a
-   :data:`CHECK_WIDTH`-pixel copy, so frames without a board fail in a few milliseconds
-   while frames with one skip the slower full-size check.
-   The corners are mapped back to full resolution.
+   ``cv2.checkChessboard`` (the test behind ``CALIB_CB_FAST_CHECK``) runs on small
+   copies, smallest first (:func:`check_widths`): a :data:`CHECK_WIDTH`-pixel copy, the
+   coarse image, and for boards of many squares on large images a copy wide enough that
+   a board spanning :data:`MIN_BOARD_FRACTION` of the image still shows squares of
+   :data:`CHECK_SQUARE_PX` pixels (the check ignores blobs under 10 px). Frames without a
+   board fail in tens of milliseconds instead of the seconds a full search takes (clutter
+   of many equal blobs, such as a tiled wall, can pass the check and cost a search); a
+   board first seen at the widest copy is searched for on that copy. The corners are
+   mapped back to full resolution.
 2. **Gradient refinement** at full resolution with ``cornerSubPix``, its window sized from
    the board's square size in pixels (:data:`WINDOW_FRACTION` of the smallest corner
    spacing) instead of a fixed 11x11: a fixed large window reaches into the neighbouring
@@ -37,6 +42,7 @@ __all__ = [
     "COARSE_WIDTH",
     "DETECTOR_VERSION",
     "WINDOW_FRACTION",
+    "check_widths",
     "corner_spacing_px",
     "detect_checkerboard",
     "normalise_order",
@@ -44,7 +50,7 @@ __all__ = [
 ]
 
 #: Recorded in detection caches: bump when the detector's output can change.
-DETECTOR_VERSION = "acscal-checkerboard-3"
+DETECTOR_VERSION = "acscal-checkerboard-4"
 #: Width (pixels) of the image the coarse search runs on.
 COARSE_WIDTH = 640
 #: ``cornerSubPix`` half-window as a fraction of the smallest corner spacing.
@@ -52,8 +58,13 @@ WINDOW_FRACTION = 0.3
 #: Saddle-point fit radius as a fraction of the smallest corner spacing.
 SADDLE_FRACTION = 0.15
 
-#: Width (pixels) of the image of the quick "is there a board?" check.
+#: Width (pixels) of the image of the first quick "is there a board?" check.
 CHECK_WIDTH = 320
+#: Square size (pixels) the quick check needs to see a board reliably.
+CHECK_SQUARE_PX = 13
+#: Smallest board (squares and margin, as a fraction of the image width) the quick checks
+#: are sized for: smaller boards may be reported as "no board".
+MIN_BOARD_FRACTION = 0.25
 
 _COARSE_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH  # NORMALIZE_IMAGE: slower, no gain here
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
@@ -200,21 +211,66 @@ def _to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
     return np.ascontiguousarray(img)
 
 
-def _quick_check(small: NDArray[np.uint8], cols: int, rows: int) -> bool:
-    """``cv2.checkChessboard`` (what ``CALIB_CB_FAST_CHECK`` runs) at low resolution first.
+def check_widths(width: int, cols: int, rows: int, coarse_width: int = COARSE_WIDTH) -> list[int]:
+    """Widths (pixels) of the copies the quick board check runs on, smallest first.
 
-    The check runs on a copy :data:`CHECK_WIDTH` pixels wide (about 2 ms); only if it fails
-    is it repeated on ``small`` itself, so a frame without a board is rejected in a few
-    milliseconds, and a frame with one pays far less than ``CALIB_CB_FAST_CHECK`` would.
+    :data:`CHECK_WIDTH` if a board filling the image shows squares of at least
+    :data:`CHECK_SQUARE_PX` there; the coarse search's width; and, for boards of many
+    squares, the width at which a board spanning :data:`MIN_BOARD_FRACTION` of the image
+    shows such squares (at most ``width``). The board's long side is taken along the
+    image's width, with one square of margin each side.
+
+    Parameters
+    ----------
+    width : int
+        The image's width, pixels.
+    cols, rows : int
+        Inner corners of the board.
+    coarse_width : int
+        Width of the coarse search's image.
+
+    Returns
+    -------
+    list of int
+        Increasing widths, each at most ``width``.
     """
-    h, w = small.shape[:2]
-    if w > CHECK_WIDTH:
-        tiny = cv2.resize(
-            small, (CHECK_WIDTH, max(round(h * CHECK_WIDTH / w), 1)), interpolation=cv2.INTER_AREA
-        )
-        if cv2.checkChessboard(tiny, (cols, rows)):
-            return True
-    return bool(cv2.checkChessboard(small, (cols, rows)))
+    span = max(cols, rows) + 3  # squares across the printed board, margin included
+    small = min(width, coarse_width)
+    out = []
+    if width > CHECK_WIDTH and CHECK_WIDTH < small and CHECK_WIDTH >= CHECK_SQUARE_PX * span:
+        out.append(CHECK_WIDTH)
+    out.append(small)
+    fine = min(width, int(np.ceil(CHECK_SQUARE_PX * span / MIN_BOARD_FRACTION)))
+    if fine > 1.2 * small:
+        out.append(fine)
+    return out
+
+
+def _downscale(gray: NDArray[np.uint8], width: int) -> NDArray[np.uint8]:
+    h, w = gray.shape[:2]
+    if width >= w:
+        return gray
+    size = (width, max(round(h * width / w), 1))
+    return np.asarray(cv2.resize(gray, size, interpolation=cv2.INTER_AREA), np.uint8)
+
+
+def _quick_check(
+    gray: NDArray[np.uint8], cols: int, rows: int, coarse_width: int
+) -> NDArray[np.uint8] | None:
+    """``cv2.checkChessboard`` (what ``CALIB_CB_FAST_CHECK`` runs) on small copies first.
+
+    The check runs at each of :func:`check_widths` in turn (a few to a few tens of
+    milliseconds each) until one sees a board. Returns the image the coarse search should
+    run on (the coarse copy, or the wider copy where the board was first seen), or None
+    when no copy shows a board.
+    """
+    widths = check_widths(gray.shape[1], cols, rows, coarse_width)
+    small = _downscale(gray, min(gray.shape[1], coarse_width))
+    for cw in widths:
+        img = small if cw == small.shape[1] else _downscale(gray, cw)
+        if cv2.checkChessboard(img, (cols, rows)):
+            return small if cw <= small.shape[1] else img
+    return None
 
 
 def detect_checkerboard(
@@ -254,21 +310,11 @@ def detect_checkerboard(
         raise ValueError(f"a board needs at least 2x2 inner corners, got {cols}x{rows}")
     gray = _to_gray(image)
     h, w = gray.shape[:2]
-    scale = 1.0
-    small = gray
-    if w > coarse_width:
-        scale = w / float(coarse_width)
-        small = np.asarray(
-            cv2.resize(
-                gray, (coarse_width, max(round(h / scale), 1)), interpolation=cv2.INTER_AREA
-            ),
-            np.uint8,
-        )
-        scale_y = h / float(small.shape[0])
-    else:
-        scale_y = 1.0
-    if not _quick_check(small, cols, rows):
+    small = _quick_check(gray, cols, rows, coarse_width)
+    if small is None:
         return None
+    scale = w / float(small.shape[1])
+    scale_y = h / float(small.shape[0])
     found, coarse = cv2.findChessboardCorners(small, (cols, rows), flags=_COARSE_FLAGS)
     if not found or coarse is None or coarse.shape[0] != cols * rows:
         return None

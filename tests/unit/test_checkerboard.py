@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from acs_cli.core.checkerboard import (
+    check_widths,
     corner_spacing_px,
     detect_checkerboard,
     normalise_order,
@@ -124,6 +125,44 @@ def test_large_image_uses_coarse_search_and_stays_accurate() -> None:
     corners = detect_checkerboard(img, 9, 6)
     assert corners is not None
     assert _rms(corners, normalise_order(truth, 9, 6)) < 0.15
+
+
+def test_check_widths_grow_with_the_number_of_squares() -> None:
+    assert check_widths(640, 9, 6) == [320, 640]
+    assert check_widths(1920, 9, 6) == [320, 640]  # a 9x6 board's squares are big enough
+    assert check_widths(300, 9, 6) == [300]
+    # 24x17 squares are too small at 320 px; one more check where a board a quarter of
+    # the image wide shows 13 px squares
+    assert check_widths(1920, 24, 17) == [640, 1404]
+    assert check_widths(1000, 24, 17) == [640, 1000]
+
+
+def test_dense_board_on_a_large_image_is_found() -> None:
+    """A 24x17 board with ~30 px squares at 1920x1200: the 640 px check cannot see it."""
+    K = np.array([[1900.0, 0, 959.5], [0, 1900.0, 599.5], [0, 0, 1]])
+    R = cv2.Rodrigues(np.array([0.6, 0.2, 0.1]))[0]
+    t = np.array([0.0, 0.0, 1.2]) - R @ (np.array([11.5, 8.0, 0.0]) * 0.02)
+    H = view_homography(K, cv2.Rodrigues(R)[0], t, 0.02)
+    img, truth = render_board(24, 17, H, (1920, 1200), square=40, blur=0.8)
+    corners = detect_checkerboard(img, 24, 17)
+    assert corners is not None
+    assert _rms(corners, normalise_order(truth, 24, 17)) < 0.05
+
+
+def test_no_dense_board_in_a_large_cluttered_frame_fails_fast(rng: np.random.Generator) -> None:
+    """Clutter of many sizes: shapes, edges and text on noise (as in a room)."""
+    base = rng.integers(60, 200, (30, 48)).astype(np.uint8)
+    clutter = cv2.resize(base, (1920, 1200), interpolation=cv2.INTER_CUBIC)
+    for _ in range(400):
+        x, y = int(rng.integers(0, 1920)), int(rng.integers(0, 1200))
+        sx, sy = (int(v) for v in rng.integers(4, 160, 2))
+        val = int(rng.integers(0, 256))
+        cv2.rectangle(clutter, (x, y), (x + sx, y + sy), val, int(rng.integers(-1, 4)))
+        cv2.putText(clutter, "ACS-17x24", (x, y), cv2.FONT_HERSHEY_SIMPLEX, sx / 40, 255 - val, 2)
+    detect_checkerboard(clutter, 24, 17)  # warm-up (OpenCV's first calls)
+    t0 = time.perf_counter()
+    assert detect_checkerboard(clutter, 24, 17) is None
+    assert time.perf_counter() - t0 < 1.0
 
 
 def test_no_board_returns_none_quickly(rng: np.random.Generator) -> None:
