@@ -57,10 +57,14 @@ def parse_board(text: str) -> tuple[int, int]:
 
 @contextmanager
 def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
-    """A rich progress bar on stderr; yields the ``progress(done, total)`` callback."""
+    """A rich progress bar on stderr; yields the ``progress(done, total)`` callback.
+
+    Off when stderr is not a terminal: a log or a pipe then holds only the messages (a
+    transient bar would still leave an empty line there).
+    """
     with Progress(
         TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-        console=err, transient=True,
+        console=err, transient=True, disable=not err.is_terminal,
     ) as bar:  # fmt: skip
         task = bar.add_task(label, total=None)
 

@@ -13,7 +13,13 @@ from pathlib import Path
 
 from acs_cli.errors import InputError
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_distinct_output"]
+__all__ = [
+    "atomic_path",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "check_distinct_output",
+    "check_writable",
+]
 
 
 def _prepare_parent(path: Path) -> None:
@@ -29,8 +35,12 @@ def _prepare_parent(path: Path) -> None:
 
 
 def _create_temp(path: Path, suffix: str) -> Path:
-    """Create an empty, exclusive temporary file next to ``path`` (mode 0666 minus umask)."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp{suffix}")
+    """Create an empty, exclusive temporary file next to ``path`` (mode 0666 minus umask).
+
+    Its name, ``.<name>.<pid>-<random>.tmp<suffix>``, carries the writer's process id, so
+    a later write can recognise the leftovers of a killed writer (:func:`_remove_stale`).
+    """
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{suffix}")
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     except OSError as exc:
@@ -44,6 +54,36 @@ def _remove_quietly(tmp: Path) -> None:
         tmp.unlink()
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (OSError, OverflowError, ValueError):  # no permission (alive) or a bogus pid
+        return True
+    return True
+
+
+def _remove_stale(dest: Path) -> None:
+    """Remove temporary files of ``dest`` left by writers that died (killed, power cut).
+
+    Only files named by :func:`_create_temp` whose process id is no longer running on
+    this machine are removed; a live writer's temporary file is left alone.
+    """
+    prefix = f".{dest.name}."
+    try:
+        entries = list(os.scandir(dest.parent))
+    except OSError:
+        return
+    for entry in entries:
+        name = entry.name
+        if not name.startswith(prefix) or ".tmp" not in name[len(prefix) :]:
+            continue
+        pid_text = name[len(prefix) :].split("-", 1)[0]
+        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
+            _remove_quietly(Path(entry.path))
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path to write; rename it over ``path`` if the block succeeds.
@@ -52,6 +92,8 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     same suffix, so writers that choose a format by extension (``np.savez``,
     ``cv2.FileStorage``, matplotlib) can write to it. Parent folders are created. If the
     block raises, the temporary file is removed and an existing ``path`` is left intact.
+    After a successful rename, temporary files of ``path`` left by killed writers are
+    removed.
 
     Parameters
     ----------
@@ -83,6 +125,25 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     except OSError as exc:
         _remove_quietly(tmp)
         raise InputError(f"cannot write ({exc.strerror or exc})", path=dest) from exc
+    _remove_stale(dest)
+
+
+def check_writable(path: str | Path) -> None:
+    """Fail early when ``path`` cannot be written (before a long computation, or before a
+    command's first output when it writes several).
+
+    Creates ``path``'s parent folders and a probe file beside it (removed at once); an
+    existing ``path`` is not touched.
+
+    Raises
+    ------
+    InputError
+        The destination is a folder, its folder cannot be created, or no file can be
+        created in it.
+    """
+    dest = Path(path)
+    _prepare_parent(dest)
+    _remove_quietly(_create_temp(dest, ".probe"))
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

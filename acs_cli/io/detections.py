@@ -17,7 +17,6 @@ Arrays of the NPZ (``n`` entries, ``m`` the largest corner count):
 
 from __future__ import annotations
 
-import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -93,7 +92,8 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
     if not p.is_file():
         return {}
     try:
-        with np.load(p, allow_pickle=False) as z:
+        # Open the file ourselves: np.load leaks its handle when the archive is corrupt.
+        with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             if str(z["schema"]) != CACHE_SCHEMA or int(z["schema_version"]) > CACHE_SCHEMA_VERSION:
                 return {}
             keys = [str(k) for k in z["keys"]]
@@ -102,23 +102,40 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
             sizes = np.asarray(z["image_size"], np.int64).reshape(-1, 2)
             ncorn = np.asarray(z["n_corners"], np.int64)
             corners = np.asarray(z["corners"], np.float64)
-    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile):
+    except Exception:  # corrupt archives raise many types (zipfile, zlib, ValueError, ...)
         return {}
     n = len(keys)
-    if not (len(names) == found.shape[0] == sizes.shape[0] == ncorn.shape[0] == n):
+    if not (
+        found.ndim == ncorn.ndim == 1
+        and len(names) == found.shape[0] == sizes.shape[0] == ncorn.shape[0] == n
+    ):
         return {}
     if n and (corners.ndim != 3 or corners.shape[0] != n or corners.shape[2] != 2):
         return {}
     out: dict[str, Detection] = {}
     for i, key in enumerate(keys):
         c = None
+        w, h = int(sizes[i, 0]), int(sizes[i, 1])
+        if w <= 0 or h <= 0:
+            continue
         if found[i]:
             k = int(ncorn[i])
-            if k <= 0 or k > corners.shape[1] or not np.all(np.isfinite(corners[i, :k])):
+            if k != _corner_count(key) or k > corners.shape[1]:
                 continue
             c = np.array(corners[i, :k], dtype=np.float64)
-        out[key] = Detection(names[i], bool(found[i]), (int(sizes[i, 0]), int(sizes[i, 1])), c)
+            if not np.all(np.isfinite(c)):
+                continue
+        out[key] = Detection(names[i], bool(found[i]), (w, h), c)
     return out
+
+
+def _corner_count(key: str) -> int:
+    """``cols * rows`` of a :func:`detection_key` (``sha:COLSxROWS:version``), or -1."""
+    parts = key.split(":")
+    cols, _, rows = parts[1].partition("x") if len(parts) >= 3 else ("", "", "")
+    if not (cols.isdigit() and rows.isdigit()):
+        return -1
+    return int(cols) * int(rows)
 
 
 def write_detections(path: str | Path, detections: Mapping[str, Detection]) -> None:

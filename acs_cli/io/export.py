@@ -12,7 +12,6 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import to_plain
 from acs_cli.io.atomic import atomic_path, atomic_write_text
@@ -66,6 +65,8 @@ def write_camchain_yaml(path: str | Path, cameras: Sequence[Mapping[str, Any]]) 
             raise InputError(f"camera {i} needs a non-empty 'name'")
         entry: dict[str, Any] = {}
         if cam.get("T_cn_cnm1") is not None:
+            from acs_cli.core import se3  # here: scipy's import costs every command ~0.5 s
+
             if i == 0:
                 raise InputError(f"camera {name}: the first camera has no T_cn_cnm1")
             T = se3.check_transforms(cam["T_cn_cnm1"], name=f"camera {name} T_cn_cnm1")
@@ -189,7 +190,10 @@ def read_opencv_yaml(
             elif node.isInt() or node.isReal():
                 out[key] = float(node.real())
             else:
-                mat = node.mat()
+                try:
+                    mat = node.mat()
+                except Exception:  # cv2.error: a malformed opencv-matrix node
+                    mat = None
                 if mat is None:
                     raise InputError(f"'{key}' is not a matrix, number or string", path=p)
                 out[key] = np.asarray(mat)

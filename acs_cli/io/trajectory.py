@@ -125,7 +125,8 @@ class Trajectory:
         if bad.size:
             i = int(bad[0]) + 1
             raise InputError(
-                f"timestamps must increase: timestamps[{i}] = {t[i]!r} follows {t[i - 1]!r}",
+                f"timestamps must increase: timestamps[{i}] = {float(t[i])!r} follows "
+                f"{float(t[i - 1])!r}",
                 path=src,
             )
         if self.names and len(self.names) != n:
@@ -245,7 +246,7 @@ def _check_increasing(t: FloatArray, numbers: list[int], path: Path) -> None:
         k = int(bad[0]) + 1
         what = "repeats" if t[k] == t[k - 1] else "is before"
         raise InputError(
-            f"timestamp {t[k]!r} {what} the previous one ({t[k - 1]!r} on line "
+            f"timestamp {float(t[k])!r} {what} the previous one ({float(t[k - 1])!r} on line "
             f"{numbers[k - 1]}); timestamps must increase",
             path=path,
             line=numbers[k],
@@ -801,23 +802,48 @@ _READERS: dict[str, Callable[[str | Path], Trajectory]] = {
 }
 
 
+_SCHEMA_LINE = re.compile(r"^schema:\s*['\"]?(acscal/[\w.-]+)")
+
+
 def _sniff(path: Path) -> str:
     if path.suffix.lower() == ".npz":
         return "npz"
     if path.is_dir() or path.name == "images.txt":
         return "colmap"
-    lines, _ = _data_lines(_read_text(path))
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) == b"PK\x03\x04":  # a zip archive: an NPZ under another name
+                return "npz"
+    except OSError:
+        pass  # _read_text names the problem
+    lines, numbers = _data_lines(_read_text(path))
     if not lines:
         raise InputError("contains no poses (empty file)", path=path)
-    ncols = len(lines[0].split())
-    if ncols == 8:
+    schema = _SCHEMA_LINE.match(lines[0])
+    if schema:
+        raise InputError(
+            f"this is an {schema.group(1)} artifact, not a trajectory (TUM, KITTI, COLMAP "
+            "images.txt or an acscal/poses NPZ)",
+            path=path,
+        )
+    tokens = lines[0].split()
+    try:
+        [float(tok) for tok in tokens]
+    except ValueError:
+        raise InputError(
+            "not a trajectory: the first pose line is not numbers (TUM has 8 a line, KITTI 12)",
+            path=path,
+            line=numbers[0],
+        ) from None
+    if len(tokens) == 8:
         return "tum"
-    if ncols == 12:
+    if len(tokens) == 12:
         return "kitti"
     raise InputError(
-        f"cannot tell the trajectory format from a first line of {ncols} numbers (TUM has "
-        "8, KITTI 12); give the format explicitly",
+        f"cannot tell the trajectory format from a first line of {len(tokens)} numbers (TUM "
+        "has 8, KITTI 12); give the format explicitly",
         path=path,
+        line=numbers[0],
     )
 
 

@@ -27,7 +27,7 @@ from acs_cli.core.intrinsics import (
 )
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
-from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import (
     Detection,
     cache_path_for,
@@ -138,6 +138,22 @@ def _detect_file(path: str, cols: int, rows: int) -> tuple[str, Detection | None
     return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
 
 
+def _exit_with_parent(parent: int) -> None:
+    """Pool initializer: end this worker when its parent dies.
+
+    A killed ``acscal`` (SIGKILL, the OOM killer) cannot shut its pool down, and the
+    workers would otherwise wait for work forever.
+    """
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def _file_key(path: Path, cols: int, rows: int) -> str:
     import hashlib
 
@@ -242,7 +258,9 @@ def detect_folder(
                     raise RuntimeError("detection worker returned nothing")
                 record(i, key, det)
         else:
-            with ProcessPoolExecutor(max_workers=n_workers) as pool:
+            with ProcessPoolExecutor(
+                max_workers=n_workers, initializer=_exit_with_parent, initargs=(os.getpid(),)
+            ) as pool:
                 pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
                     pool.submit(_detect_file, str(images[i]), cols, rows): i for i in todo
                 }
@@ -340,7 +358,17 @@ def run_intrinsics(
         Too few views of the board to calibrate (nothing but the cache is written).
     """
     _check_config(config)
-    check_distinct_output(output, [images_dir])
+    inputs = [images_dir, *list_images(images_dir)]
+    check_distinct_output(output, inputs)
+    exports: dict[str, Path] = {}
+    if "ros" in config.export:
+        exports["ros"] = output.with_name(output.stem + "_camera_info.yaml")
+    if "opencv" in config.export:
+        exports["opencv"] = output.with_name(output.stem + "_opencv.yaml")
+    for p in exports.values():
+        check_distinct_output(p, [*inputs, output])
+    for p in [output, cache_path_for(output), *exports.values()]:
+        check_writable(p)  # before the detection, not after it
     cols, rows = config.cols, config.rows
     fd = detect_folder(
         images_dir, cols, rows, cache_path_for(output), workers=config.workers, progress=progress
@@ -366,14 +394,6 @@ def run_intrinsics(
             f"{len(dropped)} view(s) dropped as outliers: "
             + ", ".join(f"{d['image']} ({d['rms_px']:.2f} px)" for d in dropped)
         )
-
-    exports: dict[str, Path] = {}
-    if "ros" in config.export:
-        exports["ros"] = output.with_name(output.stem + "_camera_info.yaml")
-    if "opencv" in config.export:
-        exports["opencv"] = output.with_name(output.stem + "_opencv.yaml")
-    for p in exports.values():
-        check_distinct_output(p, [images_dir, output])
 
     dist_names = DISTORTION_NAMES[config.model]
     std = dict(calib.std_intrinsics)

@@ -18,9 +18,9 @@ from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS, board_points
 from acs_cli.core.pnp import board_pose, camera_in_board
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import get_path, make_header, read_yaml_artifact
-from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import cache_path_for
-from acs_cli.io.images import timestamp_from_name
+from acs_cli.io.images import list_images, timestamp_from_name
 from acs_cli.io.trajectory import Trajectory, write_npz_poses, write_tum
 from acs_cli.stages.intrinsics import detect_folder, no_board_error
 
@@ -154,10 +154,13 @@ def run_poses(
     if not (np.isfinite(square) and square > 0):
         raise InputError(f"--square must be a positive length in metres, got {square}")
     outputs = [output] + ([config.tum] if config.tum is not None else [])
+    inputs = [images_dir, intrinsics, *list_images(images_dir)]
     for o in outputs:
-        check_distinct_output(o, [images_dir, intrinsics])
+        check_distinct_output(o, inputs)
     if config.tum is not None and Path(config.tum).resolve() == output.resolve():
         raise InputError("--tum and -o name the same file", path=output)
+    for o in [*outputs, cache_path_for(output)]:
+        check_writable(o)  # before the detection, and before the first output is replaced
 
     fd = detect_folder(
         images_dir,
