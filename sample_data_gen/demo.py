@@ -8,7 +8,8 @@ Then it calibrates from images: it renders the checkerboard image sample set int
 ``OUT_DIR/images`` (when missing), runs ``acscal run configs/fixed_joint.yaml`` and
 ``acscal run configs/overlap.yaml`` (for an ``OUT_DIR`` other than the repository's
 ``demo_out``, copies of the configs pointing at ``OUT_DIR`` are written to
-``OUT_DIR/configs``) and prints the joint and the relative pose beside the rendered truth.
+``OUT_DIR/configs``) and prints the joint and the relative pose beside the rendered truth,
+and the path of each run's HTML report (``acscal run`` writes ``report.html`` at its end).
 """
 
 from __future__ import annotations
@@ -257,6 +258,8 @@ def _image_demo(out: Path, seed: int, frames: int, size: tuple[int, int]) -> Non
     console.print(table)
     console.print(f"images and truth in {_show(images)}")
     console.print(f"artifacts in {', '.join(_show(r) for r in runs.values())}")
+    for r in runs.values():
+        console.print(f"report: {_show(r / 'report.html')} (figures in {_show(r)}/report_files)")
 
 
 if __name__ == "__main__":

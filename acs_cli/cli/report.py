@@ -1,0 +1,157 @@
+"""Commands that show a calibration: ``acscal trajectory`` and ``acscal report``.
+
+Thin Typer commands over :mod:`acs_cli.stages.trajectory` and :mod:`acs_cli.stages.report`;
+:func:`register` adds them to the ``acscal`` app.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+__all__ = ["register", "report", "trajectory"]
+
+out = Console(highlight=False)
+err = Console(stderr=True, highlight=False)
+
+
+class _Format(str, Enum):
+    auto = "auto"
+    tum = "tum"
+    kitti = "kitti"
+    colmap = "colmap"
+    npz = "npz"
+
+
+class _PairBy(str, Enum):
+    auto = "auto"
+    timestamp = "timestamp"
+    by_index = "index"
+
+
+def trajectory(
+    relpose: Annotated[Path, typer.Option("--relpose", help="relpose.yaml from `acscal relpose`.")],
+    poses_a: Annotated[
+        Path, typer.Option("--poses-a", help="Camera A's trajectory (as given to relpose).")
+    ],
+    poses_b: Annotated[
+        Path, typer.Option("--poses-b", help="Camera B's trajectory (as given to relpose).")
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o", "--output", help="Folder for cam_a.tum, cam_b.tum, joint.tum, trajectory.yaml."
+        ),
+    ],
+    joint: Annotated[
+        Path | None,
+        typer.Option(
+            "--joint",
+            help="joint.yaml whose joint to use (default: the joint relpose.yaml estimated "
+            "with the relative pose).",
+        ),
+    ] = None,
+    format_a: Annotated[_Format, typer.Option("--format-a", help="Format of --poses-a.")] = (
+        _Format.auto
+    ),
+    format_b: Annotated[_Format, typer.Option("--format-b", help="Format of --poses-b.")] = (
+        _Format.auto
+    ),
+    pair_by: Annotated[
+        _PairBy,
+        typer.Option(
+            "--pair-by",
+            help="Pair A's and B's samples by timestamp or index (default: as relpose did).",
+        ),
+    ] = _PairBy.auto,
+    max_dt: Annotated[
+        float | None,
+        typer.Option(
+            "--max-dt",
+            help="Largest timestamp difference of a pair, seconds (default: as relpose did).",
+            min=0.0,
+        ),
+    ] = None,
+) -> None:
+    """Recover the ACS's trajectory in one frame: camera A's at the reference instant.
+
+    Writes camera A's and camera B's poses and the joint's path as TUM files (T_world_X,
+    world = camera A at relpose.yaml's reference instant; the joint's orientation is camera
+    A's), and trajectory.yaml with the joint constraint's consistency per frame (distance
+    between the joint as A and as B see it). Under unknown scale B is brought to A's units.
+
+    Example:
+
+        acscal trajectory --joint joint.yaml --relpose relpose.yaml --poses-a a.tum \\
+            --poses-b b.tum -o trajectory/
+    """
+    from acs_cli.stages.trajectory import TrajectoryConfig, run_trajectory
+
+    cfg = TrajectoryConfig(
+        format_a=format_a.value, format_b=format_b.value, pair_by=pair_by.value, max_dt=max_dt
+    )
+    run = run_trajectory(relpose, poses_a, poses_b, output, cfg, joint=joint)
+    rec = run.estimate
+    cons = run.artifact["consistency"]
+    unit = rec.length_unit
+    table = Table(title="ACS trajectory (world = camera A at the reference)", title_justify="left")
+    table.add_column("quantity")
+    table.add_column("value")
+    table.add_row("frames", str(rec.trajectory.n))
+    ref = run.artifact["reference"]
+    table.add_row("reference", f"frame {ref['index']} (A at {ref['timestamp_a']:.6g})")
+    if rec.trajectory.phi_ba != 1.0:
+        table.add_row("phi_ba (B units per A unit)", f"{rec.trajectory.phi_ba:.5f}")
+    table.add_row(f"joint consistency RMS ({unit})", f"{cons['rms']:.4g}")
+    table.add_row(f"joint consistency max ({unit})", f"{cons['max']:.4g}")
+    table.add_row("rejected frames (by relpose)", str(int(rec.rejected.sum())))
+    out.print(table)
+    for w in run.warnings:
+        err.print(f"[yellow]warning:[/] {w}")
+    out.print(f"wrote {', '.join(str(output / n) for n in run.artifact['outputs'].values())}")
+    out.print(f"wrote {run.output}")
+
+
+def report(
+    run_dir: Annotated[
+        Path, typer.Argument(help="A run folder (what `acscal run CONFIG` writes).")
+    ],
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            help="HTML file to write (default RUN_DIR/report.html); figures go to "
+            "<name>_files/ beside it.",
+        ),
+    ] = None,
+) -> None:
+    """Write a self-contained HTML report of a calibration run, with its figures as PNG.
+
+    The rig and its trajectory in 3D, the joint constraint's residuals per frame (rejected
+    frames marked), the reprojection errors and image coverage of each camera, every
+    estimate with its standard deviation and units, and every warning of the run. Sections
+    whose artifact is missing are skipped with a note.
+
+    Example:
+
+        acscal report demo_out/run_fixed_joint -o report.html
+    """
+    from acs_cli.stages.report import run_report
+
+    target = output if output is not None else run_dir / "report.html"
+    run = run_report(run_dir, target)
+    for note in run.notes:
+        err.print(f"[yellow]note:[/] {note}")
+    out.print(f"wrote {run.output} ({len(run.figures)} figures in {run.figures_dir})")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``trajectory`` and ``report`` to the ``acscal`` app."""
+    app.command()(trajectory)
+    app.command()(report)

@@ -1,0 +1,481 @@
+"""The report's figures, drawn with matplotlib's Agg canvas (no pyplot, no display).
+
+Every function takes arrays and returns the PNG's bytes. 3-D views show camera frames
+(OpenCV: x right, y down, z forward) with ``-y`` up: a point ``(x, y, z)`` is drawn at
+``(x, z, -y)``.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+from acs_cli.core.se3 import FloatArray
+
+__all__ = [
+    "CameraView",
+    "CoverageData",
+    "ReprojectionData",
+    "ResidualSeries",
+    "coverage_figure",
+    "reprojection_figure",
+    "residuals_figure",
+    "rig_reference_figure",
+    "rig_trajectory_figure",
+]
+
+COLOR_A = "#1f77b4"
+COLOR_B = "#ff7f0e"
+COLOR_JOINT = "#2ca02c"
+COLOR_REJECTED = "#d62728"
+#: Camera frame -> display frame: (x, y, z) -> (x, z, -y), so that "up" is up.
+_DISPLAY = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """How to draw a camera's frustum: its image size and camera matrix (pixels).
+
+    Without them a 4:3 image with a focal length equal to its width is drawn.
+    """
+
+    image_size: tuple[int, int] = (640, 480)
+    camera_matrix: FloatArray | None = None
+
+
+@dataclass(frozen=True)
+class ResidualSeries:
+    """One panel of the joint-constraint residual figure.
+
+    Attributes
+    ----------
+    title : str
+    x : ndarray, shape (n,)
+        Timestamps (s) or frame numbers.
+    values : ndarray, shape (n,)
+        Residual per frame, in ``unit``.
+    rejected : ndarray of bool, shape (n,)
+        Frames the estimator rejected as outliers.
+    unit : str
+    """
+
+    title: str
+    x: FloatArray
+    values: FloatArray
+    rejected: np.ndarray
+    unit: str
+
+
+@dataclass(frozen=True)
+class ReprojectionData:
+    """One camera's reprojection errors.
+
+    Attributes
+    ----------
+    camera : str
+    view_names : list of str
+        Views of the intrinsics calibration.
+    view_rms : ndarray, shape (v,)
+        Their RMS reprojection error (px).
+    overall_rms : float or None
+        The calibration's RMS (px).
+    poses : dict of str to ndarray
+        Per-image RMS (px) of each poses file, by file name.
+    """
+
+    camera: str
+    view_names: list[str] = field(default_factory=list)
+    view_rms: FloatArray = field(default_factory=lambda: np.zeros(0))
+    overall_rms: float | None = None
+    poses: dict[str, FloatArray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CoverageData:
+    """One camera's detected corners over its image.
+
+    Attributes
+    ----------
+    camera : str
+    corners : ndarray, shape (k, 2)
+        Every detected corner (pixels).
+    image_size : tuple of int
+        ``(width, height)`` in pixels.
+    """
+
+    camera: str
+    corners: FloatArray
+    image_size: tuple[int, int]
+
+
+def _png(fig: Figure, dpi: int) -> bytes:
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _frustum_points(view: CameraView, size: float) -> FloatArray:
+    """Centre and the four image corners at depth ``size`` in the camera frame, ``(5, 3)``."""
+    w, h = view.image_size
+    K = view.camera_matrix
+    if K is None:
+        K = np.array([[w, 0.0, w / 2.0], [0.0, w, h / 2.0], [0.0, 0.0, 1.0]])
+    u = np.array([0.0, w, w, 0.0])
+    v = np.array([0.0, 0.0, h, h])
+    x = (u - K[0, 2]) / K[0, 0]
+    y = (v - K[1, 2]) / K[1, 1]
+    corners = np.column_stack([x, y, np.ones(4)]) * size / np.hypot(x, y).max(initial=1.0)
+    return np.vstack([np.zeros(3), corners])
+
+
+def _frustum_segments(T: FloatArray, view: CameraView, size: float) -> FloatArray:
+    """Line segments ``(n * 9, 2, 3)`` of frustums at poses ``T`` ``(n, 4, 4)`` (display frame)."""
+    P = _frustum_points(view, size)
+    W = np.einsum("nij,kj->nki", T[:, :3, :3], P) + T[:, None, :3, 3]  # (n, 5, 3)
+    W = W @ _DISPLAY.T
+    edges = [(0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1)]
+    segs = np.stack([np.stack([W[:, i], W[:, j]], axis=1) for i, j in edges], axis=1)
+    # a short tick from the image's top edge marks "up" in the image (-y)
+    top = (W[:, 1] + W[:, 2]) / 2.0
+    tick = top + (W[:, 1] - W[:, 4]) * 0.3
+    segs = np.concatenate([segs, np.stack([top, tick], axis=1)[:, None]], axis=1)
+    return segs.reshape(-1, 2, 3)
+
+
+def _disp(p: FloatArray) -> FloatArray:
+    return np.asarray(p, dtype=float) @ _DISPLAY.T
+
+
+def _equal_axes(ax: Any, pts: FloatArray) -> None:
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    mid = (lo + hi) / 2.0
+    half = max(float((hi - lo).max()) / 2.0, 1e-6) * 1.05
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.set_xlabel("x")
+    ax.set_ylabel("z (A forward)")
+    ax.set_zlabel("-y (up)")
+    ax.tick_params(labelsize=7)
+
+
+def _subsample(n: int, max_count: int, keep: int) -> np.ndarray:
+    idx = np.unique(np.linspace(0, n - 1, min(n, max_count)).round().astype(int))
+    return np.union1d(idx, [keep])
+
+
+def rig_trajectory_figure(
+    T_r_a: FloatArray,
+    T_r_b: FloatArray,
+    joint_from_a: FloatArray,
+    joint_from_b: FloatArray,
+    reference: int,
+    unit: str,
+    views: tuple[CameraView, CameraView] = (CameraView(), CameraView()),
+    max_frustums: int = 25,
+    dpi: int = 100,
+) -> bytes:
+    """The rig's recovered trajectory in 3-D, seen from two directions.
+
+    Parameters
+    ----------
+    T_r_a, T_r_b : ndarray, shape (n, 4, 4)
+        Camera A's and B's poses in camera A's frame at the reference instant.
+    joint_from_a, joint_from_b : ndarray, shape (n, 3)
+        The joint as each camera sees it (same frame and unit).
+    reference : int
+        The reference frame (drawn in bold).
+    unit : str
+        Length unit, for the title.
+    views : pair of CameraView
+    max_frustums : int
+        At most this many frustums per camera (evenly spaced frames, plus the reference).
+    dpi : int
+
+    Returns
+    -------
+    bytes
+        A PNG.
+    """
+    n = T_r_a.shape[0]
+    c_a, c_b = T_r_a[:, :3, 3], T_r_b[:, :3, 3]
+    pts = np.vstack([c_a, c_b, joint_from_a, joint_from_b])
+    extent = float(np.ptp(pts, axis=0).max()) if n > 1 else 1.0
+    rig = float(np.linalg.norm(c_a - joint_from_a, axis=1).mean() + 1e-9)
+    size = max(min(0.12 * extent, 0.5 * rig), 1e-3)
+    idx = _subsample(n, max_frustums, reference)
+    fig = Figure(figsize=(11.0, 5.4))
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.16, top=0.9, wspace=0.12)
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ja, jb = _disp(joint_from_a), _disp(joint_from_b)
+    all_segs = [_disp(pts)]
+    for T, color, label, view in (
+        (T_r_a, COLOR_A, "camera A", views[0]),
+        (T_r_b, COLOR_B, "camera B", views[1]),
+    ):
+        segs = _frustum_segments(T[idx], view, size)
+        all_segs.append(segs.reshape(-1, 3))
+        ax.add_collection3d(Line3DCollection(segs, colors=color, linewidths=0.7, label=label))
+    links = np.concatenate([np.stack([_disp(c[idx]), ja[idx]], axis=1) for c in (c_a, c_b)], axis=0)
+    ax.add_collection3d(Line3DCollection(links, colors="#999999", linewidths=0.5))
+    ax.plot(ja[:, 0], ja[:, 1], ja[:, 2], "o-", color=COLOR_JOINT, ms=3, lw=1.5,
+            label="joint (as A sees it)")  # fmt: skip
+    ax.plot(jb[:, 0], jb[:, 1], jb[:, 2], "x", color="#145214", ms=5,
+            label="joint (as B sees it)")  # fmt: skip
+    ref = np.stack([_disp(c_a[reference]), ja[reference], _disp(c_b[reference])])
+    ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], color="black", lw=2.2, label="rig at the reference")
+    _equal_axes(ax, np.vstack(all_segs))
+    ax.view_init(elev=22.0, azim=-60.0)
+    ax.set_title("3-D view (-y up)", fontsize=9)
+    fig.legend(*ax.get_legend_handles_labels(), loc="lower center", ncol=5, fontsize=8)
+
+    # top view: camera A's x (right) against z (forward), looking down its -y axis
+    top = fig.add_subplot(1, 2, 2)
+    arrow = size * 1.2
+    for T, color in ((T_r_a, COLOR_A), (T_r_b, COLOR_B)):
+        c = T[:, :3, 3]
+        z = T[:, :3, 2]
+        top.plot(c[:, 0], c[:, 2], ".", color=color, ms=5)
+        dirs = np.stack([c[idx][:, [0, 2]], (c[idx] + arrow * z[idx])[:, [0, 2]]], axis=1)
+        top.add_collection(LineCollection(list(dirs), colors=color, linewidths=0.8))
+    top.plot(joint_from_a[:, 0], joint_from_a[:, 2], "o-", color=COLOR_JOINT, ms=3, lw=1.2)
+    top.plot(joint_from_b[:, 0], joint_from_b[:, 2], "x", color="#145214", ms=5)
+    r = np.stack([c_a[reference], joint_from_a[reference], c_b[reference]])
+    top.plot(r[:, 0], r[:, 2], color="black", lw=2.2)
+    top.set_aspect("equal", adjustable="datalim")
+    top.set_xlabel(f"x ({unit})", fontsize=8)
+    top.set_ylabel(f"z, camera A forward ({unit})", fontsize=8)
+    top.tick_params(labelsize=7)
+    top.grid(alpha=0.3)
+    top.set_title("from above (x-z plane; ticks: viewing directions)", fontsize=9)
+    fig.suptitle(
+        f"ACS trajectory in camera A's frame at the reference instant (frame {reference}), "
+        f"{n} frames, lengths in {unit}",
+        fontsize=10,
+    )
+    return _png(fig, dpi)
+
+
+def rig_reference_figure(
+    T_a_b: FloatArray,
+    position_in_a: FloatArray,
+    joint_from_b: FloatArray,
+    unit: str,
+    views: tuple[CameraView, CameraView] = (CameraView(), CameraView()),
+    dpi: int = 100,
+) -> bytes:
+    """The rig at the reference instant: both cameras, their axes and the joint.
+
+    Parameters
+    ----------
+    T_a_b : ndarray, shape (4, 4)
+        Camera B's pose in camera A's frame (A's units).
+    position_in_a : ndarray, shape (3,)
+        The joint in A's frame.
+    joint_from_b : ndarray, shape (3,)
+        The joint as B sees it, in A's frame (``T_a_b @ o_b``).
+    unit : str
+    views : pair of CameraView
+    dpi : int
+    """
+    T = np.stack([np.eye(4), np.asarray(T_a_b, dtype=float)])
+    o_a = np.asarray(position_in_a, dtype=float)
+    o_b = np.asarray(joint_from_b, dtype=float)
+    span = max(float(np.linalg.norm(o_a)), float(np.linalg.norm(T[1, :3, 3])), 1e-6)
+    size = 0.25 * span
+    fig = Figure(figsize=(6.4, 5.2))
+    ax = fig.add_subplot(1, 1, 1, projection="3d")
+    pts = [np.zeros(3), T[1, :3, 3], o_a, o_b]
+    for k, (color, name, view) in enumerate(((COLOR_A, "A", views[0]), (COLOR_B, "B", views[1]))):
+        segs = _frustum_segments(T[k : k + 1], view, size)
+        ax.add_collection3d(Line3DCollection(segs, colors=color, linewidths=1.2))
+        pts.append(segs.reshape(-1, 3) @ _DISPLAY)  # back to camera coordinates
+        c = T[k, :3, 3]
+        for axis, axis_color in zip(range(3), ("#d62728", "#2ca02c", "#1f77b4"), strict=True):
+            tip = _disp(c + T[k, :3, axis] * size * 0.8)
+            cc = _disp(c)
+            ax.plot([cc[0], tip[0]], [cc[1], tip[1]], [cc[2], tip[2]], color=axis_color, lw=1.2)
+        cd = _disp(c)
+        ax.text(cd[0], cd[1], cd[2], f"  camera {name}", color=color, fontsize=9)
+        link = np.stack([cd, _disp(o_a if k == 0 else o_b)])
+        ax.plot(link[:, 0], link[:, 1], link[:, 2], color=color, lw=2.5, alpha=0.7)
+    ja, jb = _disp(o_a), _disp(o_b)
+    ax.scatter([ja[0]], [ja[1]], [ja[2]], color=COLOR_JOINT, s=60, label="joint (o_a)")
+    ax.scatter(
+        [jb[0]], [jb[1]], [jb[2]], color="#145214", marker="x", s=50, label="joint (T_a_b o_b)"
+    )
+    gap = float(np.linalg.norm(o_a - o_b))
+    _equal_axes(ax, _disp(np.vstack([np.atleast_2d(p) for p in pts])))
+    ax.view_init(elev=20.0, azim=-60.0)
+    ax.legend(loc="upper left", fontsize=7)
+    ax.set_title(
+        f"The rig at the reference instant (axes: x red, y green, z blue)\n"
+        f"|B's origin in A| = {np.linalg.norm(T[1, :3, 3]):.4g} {unit}, joint gap "
+        f"{gap:.3g} {unit}",
+        fontsize=9,
+    )
+    return _png(fig, dpi)
+
+
+def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
+    """One panel per residual series: the residual per frame, rejected frames marked.
+
+    Parameters
+    ----------
+    series : sequence of ResidualSeries
+        At least one.
+    dpi : int
+    """
+    n = len(series)
+    fig = Figure(figsize=(9.0, 2.3 * n + 0.6))
+    fig.subplots_adjust(
+        left=0.08,
+        right=0.98,
+        top=1 - 0.35 / (2.3 * n + 0.6),
+        bottom=0.5 / (2.3 * n + 0.6) + 0.02,
+        hspace=0.45,
+    )
+    axes = fig.subplots(n, 1, squeeze=False)[:, 0]
+    for ax, s in zip(axes, series, strict=True):
+        ok = ~s.rejected
+        ax.plot(s.x, s.values, "-", color="#999999", lw=0.8)
+        ax.plot(s.x[ok], s.values[ok], "o", color=COLOR_A, ms=4, label="used")
+        if s.rejected.any():
+            ax.plot(
+                s.x[~ok],
+                s.values[~ok],
+                "X",
+                color=COLOR_REJECTED,
+                ms=8,
+                label="rejected as outlier",
+            )
+        if ok.any():
+            rms = float(np.sqrt(np.mean(s.values[ok] ** 2)))
+            ax.axhline(rms, color="#555555", ls="--", lw=0.8, label=f"RMS {rms:.3g} {s.unit}")
+        ax.set_title(s.title, fontsize=9, loc="left")
+        ax.set_ylabel(s.unit)
+        ax.set_ylim(bottom=0.0)
+        ax.tick_params(labelsize=8)
+        ax.legend(fontsize=7, loc="upper right")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("timestamp (s) or frame number")
+    return _png(fig, dpi)
+
+
+def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> bytes:
+    """Per camera: RMS reprojection error of each calibration view and of each posed image.
+
+    Parameters
+    ----------
+    cameras : sequence of ReprojectionData
+        At least one.
+    dpi : int
+    """
+    n = len(cameras)
+    height = 2.8 * n + 0.4
+    ax_h = (height - 1.3 - (n - 1) * 1.2) / n  # inches: margins 1.0 below, 0.3 above
+    fig = Figure(figsize=(10.0, height))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=1.0 / height, top=1 - 0.3 / height,
+                        hspace=1.2 / ax_h, wspace=0.22)  # fmt: skip
+    axes = fig.subplots(n, 2, squeeze=False)
+    for row, cam in zip(axes, cameras, strict=True):
+        ax = row[0]
+        if cam.view_rms.size:
+            x = np.arange(cam.view_rms.size)
+            ax.bar(x, cam.view_rms, color=COLOR_A if cam.camera == "a" else COLOR_B)
+            if cam.overall_rms is not None:
+                ax.axhline(
+                    cam.overall_rms,
+                    color="black",
+                    ls="--",
+                    lw=0.8,
+                    label=f"overall RMS {cam.overall_rms:.3g} px",
+                )
+                ax.legend(fontsize=7)
+            step = max(1, cam.view_rms.size // 12)
+            ax.set_xticks(
+                x[::step],
+                [cam.view_names[i] for i in x[::step]],
+                rotation=60,
+                ha="right",
+                fontsize=6,
+            )
+        else:
+            ax.text(
+                0.5, 0.5, "no intrinsics.yaml", ha="center", va="center", transform=ax.transAxes
+            )
+        ax.set_title(
+            f"camera {cam.camera.upper()}: intrinsics calibration, per view", fontsize=9, loc="left"
+        )
+        ax.set_ylabel("RMS (px)")
+        ax.tick_params(axis="y", labelsize=8)
+        ax = row[1]
+        if cam.poses:
+            for k, (name, rms) in enumerate(sorted(cam.poses.items())):
+                ax.plot(np.arange(rms.size), rms, "o-", ms=3, lw=0.8, label=name, color=f"C{k}")
+            ax.legend(fontsize=7)
+            ax.set_xlabel("posed image (index in the file)", fontsize=8)
+        else:
+            ax.text(0.5, 0.5, "no poses file", ha="center", va="center", transform=ax.transAxes)
+        ax.set_title(
+            f"camera {cam.camera.upper()}: board poses (PnP), per image", fontsize=9, loc="left"
+        )
+        ax.set_ylabel("RMS (px)")
+        ax.set_ylim(bottom=0.0)
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3)
+    return _png(fig, dpi)
+
+
+def coverage_figure(
+    cameras: Sequence[CoverageData], grid: tuple[int, int] = (16, 12), dpi: int = 100
+) -> bytes:
+    """Per camera: where in the image the board's corners were detected.
+
+    A heat map of corner counts over a ``grid`` of cells with every corner on top; the
+    title gives the share of cells with at least one corner.
+
+    Parameters
+    ----------
+    cameras : sequence of CoverageData
+        At least one.
+    grid : (int, int)
+        Cells across and down.
+    dpi : int
+    """
+    n = len(cameras)
+    fig = Figure(figsize=(5.2 * n, 4.4))
+    fig.subplots_adjust(left=0.08, right=0.96, bottom=0.12, top=0.9, wspace=0.3)
+    axes = fig.subplots(1, n, squeeze=False)[0]
+    for ax, cam in zip(axes, cameras, strict=True):
+        w, h = cam.image_size
+        pts = np.asarray(cam.corners, dtype=float).reshape(-1, 2)
+        counts, _, _ = np.histogram2d(
+            pts[:, 1], pts[:, 0], bins=(grid[1], grid[0]), range=((0, h), (0, w))
+        )
+        covered = float((counts > 0).mean()) * 100.0
+        im = ax.imshow(
+            counts, extent=(0, w, h, 0), cmap="viridis", interpolation="nearest", aspect="equal"
+        )
+        ax.scatter(pts[:, 0], pts[:, 1], s=1.0, color="white", alpha=0.5, linewidths=0)
+        ax.set_xlim(0, w)
+        ax.set_ylim(h, 0)
+        ax.set_title(
+            f"camera {cam.camera.upper()}: {pts.shape[0]} corners, {covered:.0f}% of cells",
+            fontsize=9,
+        )
+        ax.set_xlabel("u (px)", fontsize=8)
+        ax.set_ylabel("v (px)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        fig.colorbar(im, ax=ax, shrink=0.7, label="corners per cell")
+    return _png(fig, dpi)
