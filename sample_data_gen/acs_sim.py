@@ -204,6 +204,27 @@ def add_pose_noise(
     return out
 
 
+def corrupt_poses(
+    rng: np.random.Generator, T_world_cam: FloatArray, o: FloatArray, frames: np.ndarray
+) -> FloatArray:
+    """Gross outliers (a flipped board, a bad PnP) in copies of poses ``(n, 4, 4)``.
+
+    Frames ``frames[0], frames[2], ...`` get a 30 degree rotation error about an axis across
+    the lever arm ``o`` (the joint in the camera, so that it moves the joint); frames
+    ``frames[1], frames[3], ...`` a 1 m translation error in a random direction.
+    """
+    out = T_world_cam.copy()
+    for j, f in enumerate(frames):
+        if j % 2 == 0:
+            axis = np.cross(o, rng.normal(size=3))
+            axis /= np.linalg.norm(axis)
+            out[f, :3, :3] = out[f, :3, :3] @ se3.matrix_from_rotvec(np.radians(30.0) * axis)
+        else:
+            d = rng.normal(size=3)
+            out[f, :3, 3] += d / np.linalg.norm(d)
+    return out
+
+
 def scale_translations(T_world_cam: FloatArray, mu: float) -> FloatArray:
     """Poses with translations multiplied by ``mu`` (a monocular SLAM's unknown scale)."""
     out = T_world_cam.copy()

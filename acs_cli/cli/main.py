@@ -33,6 +33,18 @@ out = Console(highlight=False)
 err = Console(stderr=True, highlight=False)
 
 
+BundleOpt = Annotated[
+    bool,
+    typer.Option(
+        "--bundle/--no-bundle",
+        help="Refined method, poses NPZs from `acscal poses`: refine the result, the joint "
+        "and the intrinsics by bundle adjustment on the detected corners (the "
+        "maximum-likelihood fit on the pixels). Trajectories without corners are used as "
+        "they are.",
+    ),
+]
+
+
 class Method(str, Enum):
     refined = "refined"
     paper = "paper"
@@ -126,14 +138,7 @@ def joint(
         ),
     ] = False,
     method: MethodOpt = Method.refined,
-    bundle: Annotated[
-        bool,
-        typer.Option(
-            "--bundle",
-            help="Fixed joint, refined, poses from `acscal poses`: also refine each camera's "
-            "joint and intrinsics by bundle adjustment on its detected corners.",
-        ),
-    ] = False,
+    bundle: BundleOpt = True,
     format_a: FormatAOpt = TrajFormat.auto,
     format_b: FormatBOpt = TrajFormat.auto,
     pair_by: PairByOpt = PairBy.auto,
@@ -218,6 +223,7 @@ def relpose(
         typer.Option("--reference", help="Index of the paired frame at which T_b_a is reported."),
     ] = 0,
     method: MethodOpt = Method.refined,
+    bundle: BundleOpt = True,
     format_a: FormatAOpt = TrajFormat.auto,
     format_b: FormatBOpt = TrajFormat.auto,
     pair_by: PairByOpt = PairBy.auto,
@@ -254,6 +260,7 @@ def relpose(
         pair_by=pair_by.value,
         max_dt=max_dt,
         length_unit=length_unit,
+        bundle=bundle,
     )
     run = run_relpose(poses_a, poses_b, joint_file or joint_metric, output, cfg)
     est = run.estimate
@@ -347,7 +354,7 @@ def simulate(
     )
     with Progress(
         TextColumn("simulating"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-        TimeRemainingColumn(), console=err, transient=True,
+        TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
     ) as bar:  # fmt: skip
         task = bar.add_task("trials", total=trials * levels)
 
@@ -369,6 +376,10 @@ from acs_cli.cli.run import register as _register_run  # noqa: E402
 
 _register_run(app)
 
+from acs_cli.cli.report import register as _register_report  # noqa: E402
+
+_register_report(app)
+
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
@@ -381,12 +392,14 @@ def main(argv: list[str] | None = None) -> None:
     except typer.Abort:
         err.print("acscal: aborted")
         raise SystemExit(130) from None
-    except typer.TyperException as exc:  # usage errors from the option parser
-        show = getattr(exc, "show", None)
-        if callable(show):
-            show()
-        else:
-            err.print(f"acscal: error: {exc.format_message()}", markup=False)
+    except typer.TyperException as exc:  # usage errors from the option parser: one line
+        ctx = getattr(exc, "ctx", None)
+        where = getattr(ctx, "command_path", None) or "acscal"
+        err.print(
+            f"acscal: error: {exc.format_message()} (see '{where} --help')",
+            markup=False,
+            soft_wrap=True,
+        )
         raise SystemExit(exc.exit_code) from None
     except OSError as exc:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""

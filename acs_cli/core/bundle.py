@@ -15,10 +15,11 @@ cannot use. The camera model is OpenCV's pinhole with radial-tangential distorti
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from acs_cli.core import se3
 from acs_cli.core.se3 import FloatArray
@@ -120,6 +121,60 @@ def camera_matrix(intrinsics: FloatArray) -> FloatArray:
     """``(3, 3)`` camera matrix from the ``(9,)`` vector."""
     fx, fy, cx, cy = intrinsics[:4]
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class _Solution:
+    x: FloatArray
+    fun: FloatArray
+    jac: FloatArray
+    success: bool
+
+
+def _levenberg_marquardt(
+    residuals: Callable[[FloatArray], FloatArray],
+    jacobian: Callable[[FloatArray], FloatArray],
+    x0: FloatArray,
+    max_iter: int = 100,
+    tol: float = 1e-12,
+) -> _Solution:
+    """Levenberg-Marquardt on the normal equations, for bundles of a few hundred unknowns.
+
+    ``J^T J`` is small (unknowns squared) while ``J`` is tall, so each step costs one
+    product instead of the SVD or QR of ``J`` that a general solver does.
+    """
+    x = np.asarray(x0, dtype=float).copy()
+    r = residuals(x)
+    cost = float(r @ r)
+    lam = 1e-3
+    J = jacobian(x)
+    converged = False
+    for _ in range(max_iter):
+        H = J.T @ J
+        g = J.T @ r
+        d = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
+        while True:
+            try:
+                step = -np.linalg.solve(H + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                step = np.full_like(x, np.nan)
+            x_new = x + step
+            r_new = residuals(x_new) if np.all(np.isfinite(step)) else r * np.nan
+            cost_new = float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new <= cost:
+                break
+            lam *= 10.0
+            if lam > 1e12:
+                return _Solution(x, r, J, converged)
+        small_step = np.linalg.norm(step) <= tol * (np.linalg.norm(x) + tol)
+        small_gain = cost - cost_new <= tol * max(cost, 1e-300)
+        x, r, cost = x_new, r_new, cost_new
+        J = jacobian(x)
+        lam = max(lam / 10.0, 1e-12)
+        if small_step or small_gain:
+            converged = True
+            break
+    return _Solution(x, r, J, converged)
 
 
 @dataclass(frozen=True)
@@ -253,14 +308,12 @@ def bundle_adjust_fixed_joint(
         Jac[np.arange(n_obs)[:, None, None], np.arange(2)[None, :, None], cols[:, None, :]] = Jrot
         return Jac.reshape(2 * n_obs, -1)
 
-    sol = least_squares(
-        residuals, p0, jac=jacobian, method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12
-    )
+    sol = _levenberg_marquardt(residuals, jacobian, p0)
     intr, o, pw, R = unpack(sol.x)
     r = sol.fun.reshape(-1, 2)
     dof = max(r.size - sol.x.size, 1)
     sigma2 = float(np.sum(r**2) / dof)
-    J = sol.jac.toarray() if hasattr(sol.jac, "toarray") else np.asarray(sol.jac)
+    J = sol.jac
     cov_full = sigma2 * np.linalg.pinv(J.T @ J, hermitian=True)
     cov = np.zeros((15, 15))
     idx = [*free_intr, *range(9, 15)]
@@ -281,3 +334,364 @@ def bundle_adjust_fixed_joint(
         sigma_px=float(np.sqrt(sigma2)),
         success=bool(sol.success),
     )
+
+
+# ------------------------------------------------------------------ two articulated cameras
+
+
+@dataclass(frozen=True)
+class ArticulatedBundle:
+    """Result of :func:`bundle_adjust_articulated`.
+
+    Attributes
+    ----------
+    intrinsics_a, intrinsics_b : ndarray, shape (9,)
+        ``fx fy cx cy k1 k2 p1 p2 k3`` of each camera.
+    position_in_a, position_in_b : ndarray, shape (3,)
+        The joint in each camera's frame (the boards' unit).
+    covariance_a, covariance_b : ndarray, shape (3, 3)
+        Of the joint in each camera's frame.
+    T_wa_a, T_wb_b : ndarray, shape (n, 4, 4)
+        Refined poses of the frames, each in its camera's world (board) frame.
+    T_b_a : ndarray, shape (n, 4, 4)
+        Relative pose of the frames (maps camera A's frame into B's).
+    T_wb_wa : ndarray, shape (4, 4)
+        World A into world B (the identity for one shared board).
+    pose_covariances : ndarray, shape (n, 6, 6)
+        Of ``T_b_a`` per frame: ``(rotation perturbation on the right (rad), t_b_a)``.
+    intrinsics_std_a, intrinsics_std_b : ndarray, shape (9,)
+        Standard deviations of the intrinsics (0 for held ones).
+    rms_px : dict
+        Reprojection RMS of each camera (``"a"``, ``"b"``).
+    sigma_px : float
+        Estimated standard deviation of a corner coordinate.
+    success : bool
+    """
+
+    intrinsics_a: FloatArray
+    intrinsics_b: FloatArray
+    position_in_a: FloatArray
+    position_in_b: FloatArray
+    covariance_a: FloatArray
+    covariance_b: FloatArray
+    T_wa_a: FloatArray
+    T_wb_b: FloatArray
+    T_b_a: FloatArray
+    T_wb_wa: FloatArray
+    pose_covariances: FloatArray
+    intrinsics_std_a: FloatArray
+    intrinsics_std_b: FloatArray
+    rms_px: dict[str, float]
+    sigma_px: float
+    success: bool
+
+
+@dataclass(frozen=True)
+class _Art:
+    """Layout of the articulated bundle's parameter vector."""
+
+    n: int
+    free: list[int]
+    shared_world: bool
+
+    @property
+    def ni(self) -> int:
+        return len(self.free)
+
+    @property
+    def n_shared(self) -> int:
+        return 2 * self.ni + 6 + (0 if self.shared_world else 6)
+
+    def split(self, p: FloatArray) -> dict[str, FloatArray]:
+        ni, n = self.ni, self.n
+        k = 2 * ni
+        out = {"ia": p[:ni], "ib": p[ni:k], "oa": p[k : k + 3], "ob": p[k + 3 : k + 6]}
+        k += 6
+        if not self.shared_world:
+            out["w"] = p[k : k + 6]
+            k += 6
+        frames = p[k:].reshape(n, 9)
+        out["r"], out["t"], out["q"] = frames[:, :3], frames[:, 3:6], frames[:, 6:]
+        return out
+
+
+def _whitener(cov: FloatArray) -> FloatArray:
+    """``W`` with ``W^T W = cov^-1`` (``(3, 3)``), for prior residuals."""
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    vals = np.maximum(vals, 1e-30 * max(float(vals.max()), 1e-300))
+    return (vecs / np.sqrt(vals)).T
+
+
+def bundle_adjust_articulated(
+    corners_a: FloatArray,
+    valid_a: FloatArray,
+    board_a: FloatArray,
+    corners_b: FloatArray,
+    valid_b: FloatArray,
+    board_b: FloatArray,
+    intrinsics_a0: FloatArray,
+    intrinsics_b0: FloatArray,
+    T_wa_a0: FloatArray,
+    T_wb_b0: FloatArray,
+    position_in_a0: FloatArray,
+    position_in_b0: FloatArray,
+    *,
+    T_wb_wa0: FloatArray | None = None,
+    prior_a: tuple[FloatArray, FloatArray] | None = None,
+    prior_b: tuple[FloatArray, FloatArray] | None = None,
+    fix_k3: bool = True,
+) -> ArticulatedBundle:
+    """Maximum-likelihood calibration of two cameras joined by a ball joint, from corners.
+
+    Frame ``i`` has camera A's pose in world A, ``T_wa_a_i`` (6 unknowns), and the joint's
+    rotation ``R_a_b_i`` (3 unknowns): the joint at ``o_a`` in A and ``o_b`` in B fixes the
+    translation, ``T_a_b_i = [R_a_b_i, o_a - R_a_b_i o_b]`` (the paper's eq. (2) constraint,
+    ``O_A = H_AB O_B``). Camera B's pose in world B is ``T_wb_wa T_wa_a_i T_a_b_i``. With
+    one shared board (the overlap scenario, ``T_wb_wa0`` None) world B is world A; with
+    two boards (the general scenario) ``T_wb_wa`` is one more unknown. The intrinsics of
+    both cameras, ``o_a``, ``o_b`` and every frame's unknowns are fitted to the detected
+    corners of both cameras.
+
+    Parameters
+    ----------
+    corners_a, corners_b : ndarray, shape (n, m_a, 2) and (n, m_b, 2)
+        Detected corners of the ``n`` paired frames (pixels), in board-point order.
+    valid_a, valid_b : ndarray of bool, shape (n, m_a) and (n, m_b)
+    board_a, board_b : ndarray, shape (m_a, 3) and (m_b, 3)
+        The corners in each board's frame (metres).
+    intrinsics_a0, intrinsics_b0 : ndarray, shape (9,)
+        Initial intrinsics.
+    T_wa_a0, T_wb_b0 : ndarray, shape (n, 4, 4)
+        Initial poses (e.g. from PnP), each camera in its board's frame.
+    position_in_a0, position_in_b0 : ndarray, shape (3,)
+        Initial joint.
+    T_wb_wa0 : ndarray, shape (4, 4), optional
+        Initial world A -> world B transform; None for one shared board.
+    prior_a, prior_b : (mean (3,), covariance (3, 3)), optional
+        Independent estimates of the joint (e.g. from a fixed-joint session), fused with
+        the corners.
+    fix_k3 : bool
+        Keep ``k3`` at its initial value.
+
+    Returns
+    -------
+    ArticulatedBundle
+    """
+    ca, cb = np.asarray(corners_a, float), np.asarray(corners_b, float)
+    va, vb = np.asarray(valid_a, bool), np.asarray(valid_b, bool)
+    Xa, Xb = np.asarray(board_a, float), np.asarray(board_b, float)
+    _check_observations(ca, va, Xa)
+    _check_observations(cb, vb, Xb)
+    Ta0 = se3.check_transforms(T_wa_a0, "initial poses of A")
+    Tb0 = se3.check_transforms(T_wb_b0, "initial poses of B")
+    n = ca.shape[0]
+    if not (cb.shape[0] == Ta0.shape[0] == Tb0.shape[0] == n):
+        raise InputError(
+            f"corners and poses must describe the same paired frames: {n}, {cb.shape[0]}, "
+            f"{Ta0.shape[0]}, {Tb0.shape[0]}"
+        )
+    shared = T_wb_wa0 is None
+    W0 = np.eye(4)
+    if T_wb_wa0 is not None:
+        W0 = se3.check_transforms(T_wb_wa0, "initial T_wb_wa")[0]
+    L = _Art(n=n, free=[k for k in range(9) if not (fix_k3 and k == 8)], shared_world=shared)
+    ia0, ib0 = np.asarray(intrinsics_a0, float), np.asarray(intrinsics_b0, float)
+    # initial relative rotations from the initial poses: T_a_b = T_a_wa T_wa_wb T_wb_b
+    T_a_b0 = np.matmul(se3.invert_transforms(Ta0), np.linalg.inv(W0) @ Tb0)
+    Ra0, Rab0, Rw0 = Ta0[:, :3, :3], T_a_b0[:, :3, :3], W0[:3, :3]
+    p0 = np.concatenate(
+        [
+            ia0[L.free],
+            ib0[L.free],
+            np.asarray(position_in_a0, float),
+            np.asarray(position_in_b0, float),
+            [] if shared else np.concatenate([np.zeros(3), W0[:3, 3]]),
+            np.concatenate([np.zeros((n, 3)), Ta0[:, :3, 3], np.zeros((n, 3))], 1).ravel(),
+        ]
+    )
+    fa, ka = np.nonzero(va)
+    fb, kb = np.nonzero(vb)
+    obs = np.concatenate([ca[fa, ka], cb[fb, kb]])
+    priors = [
+        (s, m, _whitener(c))
+        for s, pr in (("oa", prior_a), ("ob", prior_b))
+        if pr
+        for m, c in [(np.asarray(pr[0], float), np.asarray(pr[1], float))]
+    ]
+
+    def model(p: FloatArray) -> dict[str, Any]:
+        s = L.split(p)
+        ia, ib = ia0.copy(), ib0.copy()
+        ia[L.free], ib[L.free] = s["ia"], s["ib"]
+        R = np.matmul(Ra0, se3.matrix_from_rotvec(s["r"]))
+        Rab = np.matmul(Rab0, se3.matrix_from_rotvec(s["q"]))
+        Rw: FloatArray = np.eye(3)
+        tw: FloatArray = np.zeros(3)
+        if not shared:
+            Rw, tw = Rw0 @ se3.matrix_from_rotvec(s["w"][:3]), s["w"][3:]
+        # camera B in world A, then in world B (eq. (2): the joint ties the translation)
+        R_wa_b = np.matmul(R, Rab)
+        t_a_b = s["oa"] - se3.rotate(Rab, s["ob"])
+        t_wa_b = s["t"] + np.einsum("nij,nj->ni", R, t_a_b)
+        R_wb_b = np.matmul(Rw, R_wa_b)
+        t_wb_b = t_wa_b @ Rw.T + tw
+        return {
+            "ia": ia,
+            "ib": ib,
+            "R": R,
+            "t": s["t"],
+            "Rab": Rab,
+            "Rw": Rw,
+            "tw": tw,
+            "R_wb_b": R_wb_b,
+            "t_wb_b": t_wb_b,
+            "oa": s["oa"],
+            "ob": s["ob"],
+        }
+
+    def project_all(m: dict[str, Any]) -> FloatArray:
+        xa = np.einsum("kji,kj->ki", m["R"][fa], Xa[ka] - m["t"][fa])
+        xb = np.einsum("kji,kj->ki", m["R_wb_b"][fb], Xb[kb] - m["t_wb_b"][fb])
+        return np.concatenate([project_points(xa, m["ia"]), project_points(xb, m["ib"])])
+
+    prior_scale = [1.0]
+
+    def residuals(p: FloatArray) -> FloatArray:
+        m = model(p)
+        r = (project_all(m) - obs).ravel()
+        if not priors:
+            return r
+        extra = [prior_scale[0] * (W @ (m[key] - mean)) for key, mean, W in priors]
+        return np.concatenate([r, *extra])
+
+    n_obs_a, n_obs_b = fa.size, fb.size
+    n_px = 2 * (n_obs_a + n_obs_b)
+    n_par = L.n_shared + 9 * n
+    ni, k_oa = L.ni, 2 * L.ni
+
+    def jacobian(p: FloatArray) -> FloatArray:
+        s = L.split(p)
+        m = model(p)
+        J = np.zeros((n_px + 3 * len(priors), n_par))
+        JA = J[: 2 * n_obs_a].reshape(n_obs_a, 2, n_par)
+        JB = J[2 * n_obs_a : n_px].reshape(n_obs_b, 2, n_par)
+        R, Rab = m["R"], m["Rab"]
+        # camera A: x_a = R_i^T (X - t_i), R_i = R0_i Exp(r_i)
+        xa = np.einsum("kji,kj->ki", R[fa], Xa[ka] - m["t"][fa])
+        Di, Dp = projection_jacobians(xa, m["ia"])
+        JA[:, :, :ni] = Di[:, :, L.free]
+        col = L.n_shared + 9 * fa[:, None] + np.arange(3)
+        Jr_r = right_jacobians(s["r"])
+        rows, comp = np.arange(n_obs_a)[:, None, None], np.arange(2)[None, :, None]
+        JA[rows, comp, col[:, None, :]] = np.matmul(np.matmul(Dp, se3.skew(xa)), Jr_r[fa])
+        JA[rows, comp, col[:, None, :] + 3] = -np.matmul(Dp, np.swapaxes(R[fa], 1, 2))
+        # camera B: y = Rw^T (Y - tw) in world A, u = R_i^T (y - t_i) in A,
+        # x_b = Rab_i^T (u - o_a) + o_b  (the joint, eq. (2))
+        Rw, tw = m["Rw"], m["tw"]
+        y = (Xb[kb] - tw) @ Rw
+        u = np.einsum("kji,kj->ki", R[fb], y - m["t"][fb])
+        RabT = np.swapaxes(Rab[fb], 1, 2)
+        xb = np.einsum("kij,kj->ki", RabT, u - m["oa"]) + m["ob"]
+        Di, Dp = projection_jacobians(xb, m["ib"])
+        DpR = np.matmul(Dp, RabT)  # d pixels / d u
+        JB[:, :, ni : 2 * ni] = Di[:, :, L.free]
+        JB[:, :, k_oa : k_oa + 3] = -DpR
+        JB[:, :, k_oa + 3 : k_oa + 6] = Dp
+        rows = np.arange(n_obs_b)[:, None, None]
+        col = L.n_shared + 9 * fb[:, None] + np.arange(3)
+        JB[rows, comp, col[:, None, :]] = np.matmul(np.matmul(DpR, se3.skew(u)), Jr_r[fb])
+        DpRR = np.matmul(DpR, np.swapaxes(R[fb], 1, 2))  # d pixels / d y
+        JB[rows, comp, col[:, None, :] + 3] = -DpRR
+        Jr_q = right_jacobians(s["q"])
+        JB[rows, comp, col[:, None, :] + 6] = np.matmul(
+            np.matmul(Dp, se3.skew(xb - m["ob"])), Jr_q[fb]
+        )
+        if not shared:
+            Jr_w = right_jacobians(s["w"][None, :3])[0]
+            k_w = k_oa + 6
+            JB[:, :, k_w : k_w + 3] = np.matmul(np.matmul(DpRR, se3.skew(y)), Jr_w)
+            JB[:, :, k_w + 3 : k_w + 6] = -np.matmul(DpRR, Rw.T)
+        for j, (key, _mean, Wp) in enumerate(priors):
+            c0 = k_oa + (0 if key == "oa" else 3)
+            J[n_px + 3 * j : n_px + 3 * j + 3, c0 : c0 + 3] = prior_scale[0] * Wp
+        return J
+
+    def solve(p_start: FloatArray) -> _Solution:
+        return _levenberg_marquardt(residuals, jacobian, p_start)
+
+    sol = solve(p0)
+    dof = max(n_px - n_par, 1)
+    sigma2 = float(np.sum(sol.fun[:n_px] ** 2) / dof)
+    if priors:
+        # priors are in metres and pixel residuals have sigma_px: weigh them alike
+        prior_scale[0] = float(np.sqrt(sigma2))
+        sol = solve(sol.x)
+        sigma2 = float(np.sum(sol.fun[:n_px] ** 2) / dof)
+    J = np.asarray(sol.jac)
+    # information: pixels over their variance, plus the priors' own
+    info = J[:n_px].T @ J[:n_px] / max(sigma2, 1e-300)
+    for key, _mean, Wp in priors:
+        c0 = k_oa + (0 if key == "oa" else 3)
+        info[c0 : c0 + 3, c0 : c0 + 3] += Wp.T @ Wp
+    cov = np.linalg.pinv(info, hermitian=True)
+    m = model(sol.x)
+    s = L.split(sol.x)
+    # relative pose per frame and its covariance, by a numerical chain rule on the few
+    # parameters it depends on (o_a, o_b, the frame's q)
+    T_a_b = se3.transforms_from_rt(m["Rab"], m["oa"] - se3.rotate(m["Rab"], m["ob"]))
+    T_b_a = se3.invert_transforms(T_a_b)
+    pose_cov = np.empty((n, 6, 6))
+    idx_q = L.n_shared + 9 * np.arange(n)[:, None] + 6 + np.arange(3)
+    for_cols = np.concatenate(
+        [np.broadcast_to(np.arange(k_oa, k_oa + 6), (n, 6)), idx_q], axis=1
+    )  # (n, 9)
+    G = _relpose_jacobian(m["Rab"], m["oa"], right_jacobians(s["q"]))  # (n, 6, 9)
+    C = cov[for_cols[:, :, None], for_cols[:, None, :]]  # (n, 9, 9)
+    pose_cov[:] = np.matmul(np.matmul(G, C), np.swapaxes(G, 1, 2))
+    r = sol.fun[:n_px].reshape(-1, 2)
+    std_a, std_b = np.zeros(9), np.zeros(9)
+    dcov = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    std_a[L.free], std_b[L.free] = dcov[:ni], dcov[ni : 2 * ni]
+    T_wb_wa = np.eye(4)
+    T_wb_wa[:3, :3], T_wb_wa[:3, 3] = m["Rw"], m["tw"]
+    return ArticulatedBundle(
+        intrinsics_a=m["ia"],
+        intrinsics_b=m["ib"],
+        position_in_a=m["oa"],
+        position_in_b=m["ob"],
+        covariance_a=cov[k_oa : k_oa + 3, k_oa : k_oa + 3],
+        covariance_b=cov[k_oa + 3 : k_oa + 6, k_oa + 3 : k_oa + 6],
+        T_wa_a=se3.transforms_from_rt(m["R"], m["t"]),
+        T_wb_b=se3.transforms_from_rt(m["R_wb_b"], m["t_wb_b"]),
+        T_b_a=T_b_a,
+        T_wb_wa=T_wb_wa,
+        pose_covariances=pose_cov,
+        intrinsics_std_a=std_a,
+        intrinsics_std_b=std_b,
+        rms_px={
+            "a": float(np.sqrt(np.mean(np.sum(r[:n_obs_a] ** 2, 1)))) if n_obs_a else 0.0,
+            "b": float(np.sqrt(np.mean(np.sum(r[n_obs_a:] ** 2, 1)))) if n_obs_b else 0.0,
+        },
+        sigma_px=float(np.sqrt(sigma2)),
+        success=bool(sol.success),
+    )
+
+
+def _relpose_jacobian(Rab: FloatArray, oa: FloatArray, Jr: FloatArray) -> FloatArray:
+    """``(n, 6, 9)`` derivative of ``T_b_a``'s (right rotation perturbation, translation)
+    with respect to ``(o_a, o_b, q)``, where ``R_a_b = R0 Exp(q)`` and ``Jr`` ``(n, 3, 3)``
+    are the right Jacobians at ``q``.
+
+    ``T_b_a = [R_b_a, o_b - R_b_a o_a]`` with ``R_b_a = R_a_b^T``. A right perturbation
+    ``e`` of ``R_a_b`` gives ``R_b_a Exp(-R_a_b e)`` and moves the translation by
+    ``-[R_b_a o_a]x e``.
+    """
+    n = Rab.shape[0]
+    G = np.zeros((n, 6, 9))
+    Rt = np.swapaxes(Rab, 1, 2)
+    G[:, :3, 6:] = -np.matmul(Rab, Jr)
+    G[:, 3:, :3] = -Rt  # d t_b_a / d o_a
+    G[:, 3:, 3:6] = np.eye(3)  # d t_b_a / d o_b
+    v = np.einsum("nij,j->ni", Rt, oa)  # R_b_a o_a
+    G[:, 3:, 6:] = -np.matmul(se3.skew(v), Jr)
+    return G

@@ -31,7 +31,11 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from acs_cli.core import estimation, se3
-from acs_cli.core.joint import METHODS, lever_shapes
+from acs_cli.core.joint import (
+    METHODS,
+    MIN_ROTATION_SPREAD,
+    lever_shapes,
+)
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
@@ -41,6 +45,16 @@ COLLINEAR_RATIO = 0.02
 #: Fewest paired frames for a relative pose from a known joint, and for self-calibration.
 MIN_FRAMES = 5
 MIN_FRAMES_SELF_CALIBRATION = 14
+#: Camera A "turns about one axis only" when the weakest singular value of its stacked,
+#: centred rotations is below this fraction of the strongest (about 3 degrees of wobble
+#: per 60 degrees of turning). The paper's linear eq. (24) and self-calibration need more.
+SINGLE_AXIS_RATIO = 0.05
+#: A self-calibrated joint is "not determined" when its largest standard deviation exceeds
+#: this fraction of its distance from the camera. Seen in simulation (30 frames, up to
+#: 2.4 deg / 0.1 m pose noise): about 5% for general motion, 14-30% for a rigid or hinged
+#: joint, whatever the noise level (the information along the free direction then comes
+#: from the noise itself).
+UNDETERMINED_STD_FRACTION = 0.10
 
 
 @dataclass(frozen=True)
@@ -356,11 +370,90 @@ def estimate_relpose(
     if n < need:
         raise DegenerateMotionError(
             f"{n} paired frames; {'self-calibration' if self_cal else 'a relative pose'} needs at "
-            f"least {need} frames of general motion"
+            f"least {need} frames of general motion: record more, with the rig turning about "
+            "several axes while it moves and bends"
         )
+    if method == "paper" or self_cal:
+        # eq. (24) and the self-calibration need camera A to turn about two axes or more
+        notes = motion_diagnosis(Ta, Tb)
+        if notes["camera"]:
+            what = "the paper's Algorithm III/IV" if method == "paper" else "self-calibration"
+            raise DegenerateMotionError(
+                f"{what} cannot use this motion: {notes['camera']}. Record the rig turning "
+                "about two or more axes"
+                + (
+                    ", or give the joint from a fixed-joint session (--joint)"
+                    if self_cal
+                    else ", or use the refined method, which handles it with a known joint"
+                ),
+                details={"diagnosis": notes},
+            )
     if method == "paper":
         return _estimate_paper(Ta, Tb, prior, unknown_scale, reference)
-    return _estimate_refined(Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers)
+    est = _estimate_refined(Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers)
+    _check_determined(est, Ta, Tb)
+    return est
+
+
+def motion_diagnosis(Ta: FloatArray, Tb: FloatArray) -> dict[str, str]:
+    """What a general motion lacks, in words: ``{"camera": ..., "joint": ...}`` ("" if fine).
+
+    ``camera``: camera A hardly turns (pure translation) or turns about one axis only
+    (planar motion). ``joint``: the joint hardly bends (a rigid pair) or bends about one
+    axis only (a hinge). Thresholds: :data:`MIN_ROTATION_SPREAD` (RMS, rad) and
+    :data:`SINGLE_AXIS_RATIO`.
+    """
+    Ra = Ta[:, :3, :3]
+    R_ab = np.einsum("nji,njk->nik", Ra, Tb[:, :3, :3])  # up to the constant world rotation
+    out = {}
+    for key, R, words in (
+        ("camera", Ra, ("camera A hardly turns (pure translation)",
+                        "camera A turns about one axis only (planar motion)")),
+        ("joint", R_ab, ("the joint hardly bends (a rigid pair)",
+                         "the joint bends about one axis only (a hinge)")),
+    ):  # fmt: skip
+        s = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), compute_uv=False)
+        spread = float(s[0] / np.sqrt(R.shape[0]))
+        if spread < MIN_ROTATION_SPREAD:
+            out[key] = f"{words[0]}, RMS spread {np.degrees(spread):.2f} deg"
+        elif s[2] < SINGLE_AXIS_RATIO * s[0]:
+            out[key] = f"{words[1]}, singular value ratio {s[2] / s[0]:.3f}"
+        else:
+            out[key] = ""
+    return out
+
+
+def _check_determined(est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray) -> None:
+    """Refuse a self-calibrated joint whose standard deviation says the motion did not
+    determine it (more than :data:`UNDETERMINED_STD_FRACTION` of its distance from the
+    camera). ``T_b_a``'s own spread is dominated by the reference poses' noise and is
+    reported, not refused."""
+    if not est.self_calibrated:
+        return
+    worst = {}
+    for key, o, cov in (
+        ("the joint in A", est.position_in_a, est.covariance_a),
+        ("the joint in B", est.position_in_b, est.covariance_b),
+    ):
+        std = float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
+        worst[key] = std / max(float(np.linalg.norm(o)), 1e-12)
+    bad = {k: v for k, v in worst.items() if v > UNDETERMINED_STD_FRACTION}
+    if not bad:
+        return
+    notes = motion_diagnosis(Ta, Tb)
+    why = "; ".join(v for v in notes.values() if v) or "the motion is too narrow for the noise"
+    text = ", ".join(f"{k} (std {100 * v:.0f}% of |O|)" for k, v in bad.items())
+    raise DegenerateMotionError(
+        f"the motion does not determine {text}: {why}. Record the rig turning about several "
+        "axes while the joint bends about two or more axes"
+        + (
+            ", or give the joint from a fixed-joint session (--joint)"
+            if est.self_calibrated
+            else ""
+        )
+        + ".",
+        details={"relative_std": worst, "diagnosis": notes},
+    )
 
 
 def _estimate_paper(

@@ -2,23 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from acs_cli.core.bundle import (
-    INTRINSIC_NAMES,
-    bundle_adjust_fixed_joint,
-    camera_matrix,
-    intrinsics_vector,
-)
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
-from acs_cli.io.atomic import check_distinct_output
-from acs_cli.io.trajectory import read_npz_observations
+from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap
 from acs_cli.stages.common import (
     StageRun,
     frames_section,
@@ -27,7 +19,6 @@ from acs_cli.stages.common import (
     pairing_section,
     vector_with_std,
 )
-from acs_cli.stages.poses import read_intrinsics
 
 SCENARIOS = ("fixed_joint", "overlap")
 
@@ -59,8 +50,10 @@ class JointConfig:
     length_unit : str
         The unit of the trajectories' translations, recorded in the artifact.
     bundle : bool
-        Fixed joint, refined: when a poses NPZ carries its corners (``acscal poses``),
-        refine that camera's joint and intrinsics by bundle adjustment on them.
+        Refined method: when the poses NPZs carry their corners (``acscal poses``), refine
+        the joint and the intrinsics by bundle adjustment on them (per camera for the fixed
+        joint, both cameras together for the overlap). Trajectories without corners are
+        used as they are.
     """
 
     scenario: str = "fixed_joint"
@@ -70,7 +63,7 @@ class JointConfig:
     pair_by: str = "auto"
     max_dt: float | None = None
     length_unit: str = "m"
-    bundle: bool = False
+    bundle: bool = True
 
 
 JointRun = StageRun[JointEstimate]
@@ -90,69 +83,6 @@ def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
     return body
 
 
-def _resolve_intrinsics(recorded: str, poses: Path) -> Path | None:
-    """The intrinsics file a poses NPZ names: as recorded, or beside the NPZ."""
-    for candidate in (Path(recorded), poses.parent / Path(recorded).name):
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def _bundle(
-    poses: Path, T_w_c: np.ndarray, est: JointEstimate, cam: str
-) -> tuple[JointEstimate, dict[str, Any] | None, str | None]:
-    """Refine camera ``cam``'s joint (and intrinsics) on its corners, when they are there.
-
-    Returns the (possibly) refined estimate, the artifact's ``bundle`` section and a warning.
-    """
-    obs = read_npz_observations(poses) if poses.suffix.lower() == ".npz" else None
-    if obs is None:
-        return est, None, None
-    if obs.corners.shape[0] != T_w_c.shape[0]:
-        return est, None, f"{poses.name}: corners and poses disagree; bundle adjustment skipped"
-    intr_path = (
-        None if obs.intrinsics_file is None else _resolve_intrinsics(obs.intrinsics_file, poses)
-    )
-    if intr_path is None:
-        return est, None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
-    intr = read_intrinsics(intr_path)
-    if intr.model != "pinhole":
-        return est, None, f"bundle adjustment supports the pinhole model, not {intr.model}"
-    inl = est.inliers[cam]
-    o0 = est.position_in_a if cam == "a" else est.position_in_b
-    if o0 is None:
-        return est, None, None
-    ba = bundle_adjust_fixed_joint(
-        obs.corners[inl],
-        np.ones(obs.corners[inl].shape[:2], dtype=bool),
-        obs.board_points,
-        intrinsics_vector(intr.camera_matrix, intr.distortion),
-        T_w_c[inl],
-        o0,
-        est.position_in_world[cam],
-    )
-    cov = ba.covariance[9:12, 9:12]
-    refined = (
-        replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
-        if cam == "a"
-        else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov)
-    )
-    refined.position_in_world[cam] = ba.joint_in_world
-    section = {
-        "intrinsics_file": str(intr_path),
-        "rms_px": ba.rms_px,
-        "sigma_px": ba.sigma_px,
-        "frames": int(inl.sum()),
-        "camera_matrix": camera_matrix(ba.intrinsics).tolist(),
-        "distortion": ba.intrinsics[4:].tolist(),
-        "intrinsics_std": dict(
-            zip(INTRINSIC_NAMES, np.sqrt(np.diag(ba.covariance)[:9]).tolist(), strict=True)
-        ),
-        "converged": ba.success,
-    }
-    return refined, section, None
-
-
 def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
     """Read the trajectories, estimate the joint and write ``joint.yaml`` atomically.
 
@@ -167,6 +97,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         raise InputError(f"unknown scenario {config.scenario!r}")
     inputs = {"poses_a": poses_a} | ({"poses_b": poses_b} if poses_b is not None else {})
     check_distinct_output(output, inputs.values())
+    check_writable(output)
     warnings: list[str] = []
     quality: dict[str, Any] = {}
     if config.scenario == "overlap":
@@ -177,6 +108,11 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         )
         warnings += pair.warnings
         est = estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, config.method)
+        if config.method == "refined" and config.bundle:
+            est, section, notes = bundle_overlap((poses_a, poses_b), pair, est)
+            warnings += notes
+            if section is not None:
+                quality["bundle_adjustment"] = section
         quality["pairing"] = pairing_section(pair.pairing, config.pair_by)
         quality["frames"] = {"ab": frames_section(est.inliers["ab"], pair.a.timestamps)}
     else:
@@ -190,11 +126,10 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             for cam, path, traj in (("a", poses_a, ta), ("b", poses_b, tb)):
                 if path is None or traj is None:
                     continue
-                est, section, warning = _bundle(path, traj.T_world_cam, est, cam)
+                est, section, notes = bundle_fixed_joint(path, traj.T_world_cam, est, cam)
                 if section is not None:
                     bundles[cam] = section
-                if warning is not None:
-                    warnings.append(warning)
+                warnings += notes
             if bundles:
                 quality["bundle_adjustment"] = bundles
         quality["frames"] = {"a": frames_section(est.inliers["a"], ta.timestamps)}
@@ -216,7 +151,8 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         method=f"{config.method}: {METHOD_TEXT[(config.scenario, config.method)]}"
         + (
             "; then a bundle adjustment on the detected corners (intrinsics, joint and "
-            "per-frame rotations) for the cameras listed in quality.bundle_adjustment"
+            "per-frame rotations; overlap: both cameras together) for the cameras listed in "
+            "quality.bundle_adjustment"
             if "bundle_adjustment" in quality
             else ""
         ),

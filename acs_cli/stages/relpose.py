@@ -11,7 +11,8 @@ import numpy as np
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
-from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.stages.bundle import bundle_general
 from acs_cli.stages.common import (
     StageRun,
     frames_section,
@@ -39,6 +40,10 @@ class RelposeConfig:
         Index (among the paired frames) of the reference instant.
     format_a, format_b, pair_by, max_dt, length_unit
         As for the joint stage.
+    bundle : bool
+        Refined method, known scale: when both poses NPZs carry their corners (``acscal
+        poses``), refine the relative pose, the joint and the intrinsics by a bundle
+        adjustment on them, fused with the given joint.
     """
 
     method: str = "refined"
@@ -51,6 +56,7 @@ class RelposeConfig:
     pair_by: str = "auto"
     max_dt: float | None = None
     length_unit: str = "m"
+    bundle: bool = True
 
 
 RelposeRun = StageRun[RelposeEstimate]
@@ -59,11 +65,14 @@ RelposeRun = StageRun[RelposeEstimate]
 def _cov3(joint: dict[str, Any], which: str, path: Path) -> np.ndarray | None:
     cov = joint.get(f"covariance_{which}")
     if cov is None:
-        std = joint.get(f"position_in_{which}_std")
+        std = _vec3(joint, f"position_in_{which}_std", path)
         if std is None:
             return None
-        cov = np.diag(np.square(np.asarray(std, dtype=float)))
-    arr = np.asarray(cov, dtype=float)
+        cov = np.diag(np.square(std))
+    try:
+        arr = np.asarray(cov, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
     if arr.shape != (3, 3) or not np.all(np.isfinite(arr)):
         raise InputError(f"joint.covariance_{which} must be a finite 3x3 matrix", path=path)
     return arr
@@ -134,6 +143,7 @@ def run_relpose(
     if joint is not None:
         inputs["joint"] = joint
     check_distinct_output(output, inputs.values())
+    check_writable(output)
     prior = None if joint is None else load_prior(joint, config.joint_metric)
     pair = load_pair(
         poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
@@ -147,6 +157,10 @@ def run_relpose(
         reference=config.reference,
         method=config.method,
     )
+    bundle_section = None
+    if config.method == "refined" and config.bundle:
+        est, bundle_section, notes = bundle_general((poses_a, poses_b), pair, est, prior)
+        warnings += notes
     rpy_std, t_std = paper_pose_std(est.T_b_a, est.covariance)
     rel: dict[str, Any] = {
         "T_b_a": est.T_b_a.tolist(),
@@ -197,6 +211,8 @@ def run_relpose(
         "pairing": pairing_section(pair.pairing, config.pair_by),
         "estimated_pose_noise": est.noise or None,
     }
+    if bundle_section is not None:
+        body["quality"]["bundle_adjustment"] = bundle_section
     body["warnings"] = warnings
     mode = (
         "self-calibration"
@@ -210,6 +226,12 @@ def run_relpose(
         else f"refined: {mode}; joint in both cameras, world-to-world "
         + ("similarity" if config.unknown_scale else "rigid transform")
         + " by weighted ML over all frames, reference poses corrected by the joint constraint"
+        + (
+            "; then a bundle adjustment on both cameras' corners (intrinsics, joint, "
+            "world-to-world transform, per-frame poses of A and joint rotations)"
+            if bundle_section is not None
+            else ""
+        )
     )
     header = make_header(
         "relpose",

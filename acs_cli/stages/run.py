@@ -29,7 +29,7 @@ import yaml
 
 import acs_cli
 from acs_cli.core.intrinsics import MODELS
-from acs_cli.errors import InputError
+from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.images import list_images
@@ -55,6 +55,8 @@ STATE_SCHEMA = "acscal/run-state"
 STATE_FILE = ".acscal-run.yaml"
 #: Stage kinds, in the order they run (``--only`` takes one of them).
 STAGE_KINDS = ("intrinsics", "poses", "joint", "relpose")
+#: The HTML report every run ends with (regenerated each time, see :func:`write_run_report`).
+REPORT_FILE = "report.html"
 CAMERAS = ("a", "b")
 METHODS = ("refined", "paper")
 JOINT_SCENARIOS = ("fixed_joint", "overlap")
@@ -81,6 +83,7 @@ class JointSpec:
 
     scenario: str
     method: str = "refined"
+    bundle: bool = True
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,7 @@ class RelposeSpec:
     unknown_scale: bool = False
     self_calibrate: bool = False
     reference: int = 0
+    bundle: bool = True
 
 
 @dataclass(frozen=True)
@@ -189,6 +193,10 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
         message names the file and the dotted key.
     """
     c = _Checker(path)
+    if isinstance(doc, dict) and doc.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
+        raise c.fail(
+            "schema", f"must be {CONFIG_SCHEMA}, got {str(doc['schema'])[:60]!r}: not a run config"
+        )
     top = c.mapping(
         doc,
         "",
@@ -241,10 +249,11 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
 
     joint: JointSpec | None = None
     if top.get("joint") is not None:
-        j = c.mapping(top["joint"], "joint", required=("scenario",), optional=("method",))
+        j = c.mapping(top["joint"], "joint", required=("scenario",), optional=("method", "bundle"))
         joint = JointSpec(
             c.choice(j["scenario"], "joint.scenario", JOINT_SCENARIOS),
             c.choice(j.get("method", "refined"), "joint.method", METHODS),
+            c.boolean(j.get("bundle", True), "joint.bundle"),
         )
         for name, cam in cameras.items():
             if cam.images is None:
@@ -258,7 +267,7 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             top["relpose"],
             "relpose",
             required=("images",),
-            optional=("method", "unknown_scale", "self_calibrate", "reference"),
+            optional=("method", "unknown_scale", "self_calibrate", "reference", "bundle"),
         )
         imgs = c.mapping(r["images"], "relpose.images", required=CAMERAS)
         if "b" not in cameras:
@@ -269,6 +278,7 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             unknown_scale=c.boolean(r.get("unknown_scale", False), "relpose.unknown_scale"),
             self_calibrate=c.boolean(r.get("self_calibrate", False), "relpose.self_calibrate"),
             reference=c.integer(r.get("reference", 0), "relpose.reference", 0),
+            bundle=c.boolean(r.get("bundle", True), "relpose.bundle"),
         )
         if relpose.self_calibrate and joint is not None:
             raise c.fail(
@@ -379,8 +389,8 @@ def _options_hash(options: Mapping[str, Any]) -> str:
 def _read_state(path: Path) -> dict[str, Any]:
     """The stages recorded by earlier runs, or ``{}`` (a damaged state means: rerun all)."""
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        doc = load_yaml_file(path, "the run state (YAML)")
+    except InputError:
         return {}
     if not isinstance(doc, dict) or doc.get("schema") != STATE_SCHEMA:
         return {}
@@ -586,7 +596,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     if config.joint is not None:
         jspec = config.joint
         joint_file = out / "joint.yaml"
-        jcfg = JointConfig(scenario=jspec.scenario, method=jspec.method)
+        jcfg = JointConfig(scenario=jspec.scenario, method=jspec.method, bundle=jspec.bundle)
         pa, pb = poses["a"], poses.get("b")
         jout = joint_file
 
@@ -598,7 +608,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 "joint",
                 "joint",
                 {"poses_a": pa} | ({"poses_b": pb} if pb is not None else {}),
-                {"scenario": jspec.scenario, "method": jspec.method},
+                {"scenario": jspec.scenario, "method": jspec.method, "bundle": jspec.bundle},
                 [joint_file],
                 do_joint,
             )
@@ -610,6 +620,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             unknown_scale=rel.unknown_scale,
             self_calibrate=rel.self_calibrate,
             reference=rel.reference,
+            bundle=rel.bundle,
         )
         rout = out / "relpose.yaml"
         ga, gb = general["a"], general["b"]
@@ -628,6 +639,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "unknown_scale": rel.unknown_scale,
                     "self_calibrate": rel.self_calibrate,
                     "reference": rel.reference,
+                    "bundle": rel.bundle,
                 },
                 [rout],
                 do_relpose,
@@ -713,7 +725,11 @@ def run_pipeline(
             )
             continue
         ts = time.perf_counter()
-        warnings = stage.action()
+        try:
+            warnings = stage.action()
+        except DegenerateMotionError as exc:  # the report shows what ran, and why this failed
+            write_run_report(out, report, [f"{stage.stage} failed: {exc.one_line()}"])
+            raise
         state[stage.stage] = {
             "stamp": stamp,
             "options_sha256": _options_hash(stage.options),
@@ -734,4 +750,29 @@ def run_pipeline(
                 list(warnings),
             )
         )
+    write_run_report(out, report)
     return PipelineRun(config, results, state_file, time.perf_counter() - t0)
+
+
+def write_run_report(
+    out: Path, on_stage: StageCallback | None = None, failures: list[str] | None = None
+) -> StageResult:
+    """Write ``out/report.html`` (and its figures) from whatever the run folder holds.
+
+    Always regenerated, even when every stage was skipped: it is cheap, reads only the
+    artifacts and is not recorded in the state file. Its status is ``written`` (or
+    ``failed``, with the reason as a warning: a report never fails a run).
+    """
+    from acs_cli.stages.report import ReportConfig, run_report
+
+    ts = time.perf_counter()
+    path = out / REPORT_FILE
+    try:
+        rep = run_report(out, path, ReportConfig(extra_warnings=tuple(failures or ())))
+        res = StageResult("report", "written", [path], f"{len(rep.figures)} figures")
+    except AcsError as exc:
+        res = StageResult("report", "failed", [path], warnings=[exc.one_line()])
+    res.seconds = time.perf_counter() - ts
+    if on_stage is not None:
+        on_stage(res)
+    return res

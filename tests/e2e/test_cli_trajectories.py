@@ -59,11 +59,21 @@ def rig_files(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return files
 
 
-def test_help_has_examples() -> None:
-    for cmd in ("joint", "relpose", "export"):
+def test_every_command_help_has_an_example() -> None:
+    """Every registered command (so a new one cannot slip through) shows an example."""
+    import typer.main
+
+    from acs_cli.cli.main import app
+
+    commands = sorted(typer.main.get_command(app).commands)  # type: ignore[attr-defined]
+    assert {"intrinsics", "poses", "joint", "relpose", "run", "report", "trajectory"} <= set(
+        commands
+    )
+    for cmd in commands:
         res = acscal(cmd, "--help")
         assert res.returncode == 0, res.stderr
-        assert "Example" in res.stdout
+        assert "Example" in res.stdout, f"acscal {cmd} --help has no example"
+        assert "acscal " + cmd in res.stdout.replace("\n", " "), cmd
     assert acscal("--version").stdout.startswith("acscal ")
 
 

@@ -26,21 +26,7 @@ def _rms(errors: list[np.ndarray] | np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(e.reshape(len(e), -1) ** 2, axis=1))))
 
 
-def _corrupt(
-    rng: np.random.Generator, T: np.ndarray, o: np.ndarray, frames: np.ndarray
-) -> np.ndarray:
-    """Gross outliers: alternately a 30 degree rotation error (about an axis across the lever
-    arm ``o``, so that it moves the joint) and a 1 m translation error."""
-    out = T.copy()
-    for j, f in enumerate(frames):
-        if j % 2 == 0:
-            axis = np.cross(o, rng.normal(size=3))
-            axis /= np.linalg.norm(axis)
-            out[f, :3, :3] = out[f, :3, :3] @ se3.matrix_from_rotvec(np.radians(30.0) * axis)
-        else:
-            d = rng.normal(size=3)
-            out[f, :3, 3] += d / np.linalg.norm(d)
-    return out
+_corrupt = sim.corrupt_poses
 
 
 # ----------------------------------------------------------------------------- exact recovery

@@ -1,0 +1,255 @@
+"""Bundle adjustment on the detected corners, for the joint and relpose stages.
+
+A poses NPZ written by ``acscal poses`` carries its corners, its board and the intrinsics
+file it was solved with. When both are there, the stages refine their estimate by the
+maximum-likelihood fit on the pixels (:mod:`acs_cli.core.bundle`): the fixed-joint motion
+per camera, the overlap and general motions for the two cameras together. Each function
+returns the refined quantities, the artifact's ``bundle_adjustment`` section, and warnings;
+a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core.bundle import (
+    INTRINSIC_NAMES,
+    ArticulatedBundle,
+    bundle_adjust_articulated,
+    bundle_adjust_fixed_joint,
+    camera_matrix,
+    intrinsics_vector,
+)
+from acs_cli.core.joint import JointEstimate
+from acs_cli.core.relpose import JointPrior, RelposeEstimate
+from acs_cli.io.trajectory import read_npz_observations
+from acs_cli.stages.common import PairedTrajectories
+from acs_cli.stages.poses import read_intrinsics
+
+__all__ = ["CornerViews", "bundle_fixed_joint", "bundle_general", "bundle_overlap", "corner_views"]
+
+
+@dataclass(frozen=True)
+class CornerViews:
+    """One camera's corners with the intrinsics they were posed with.
+
+    Attributes
+    ----------
+    corners : ndarray, shape (n, m, 2)
+        Pixels, one row of corners per pose of the trajectory.
+    board_points : ndarray, shape (m, 3)
+        Metres, in the board's frame.
+    intrinsics : ndarray, shape (9,)
+        ``fx fy cx cy k1 k2 p1 p2 k3``.
+    intrinsics_file : Path
+    """
+
+    corners: np.ndarray
+    board_points: np.ndarray
+    intrinsics: np.ndarray
+    intrinsics_file: Path
+
+
+def _resolve(recorded: str, poses: Path) -> Path | None:
+    """The intrinsics file as recorded, or by its name beside the poses (a moved run)."""
+    for candidate in (Path(recorded), poses.parent / Path(recorded).name):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | None]:
+    """Read the corners behind a trajectory, or say why there are none usable.
+
+    Returns ``(views, None)``, ``(None, warning)`` or ``(None, None)`` for a trajectory
+    format that never carries corners.
+    """
+    obs = read_npz_observations(poses) if poses.suffix.lower() == ".npz" else None
+    if obs is None:
+        return None, None
+    if obs.corners.shape[0] != n_poses:
+        return None, f"{poses.name}: corners and poses disagree; no bundle adjustment"
+    path = None if obs.intrinsics_file is None else _resolve(obs.intrinsics_file, poses)
+    if path is None:
+        return None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
+    intr = read_intrinsics(path)
+    if intr.model != "pinhole":
+        return None, f"bundle adjustment supports the pinhole model, not {intr.model}"
+    vec = intrinsics_vector(intr.camera_matrix, intr.distortion)
+    return CornerViews(obs.corners, obs.board_points, vec, path), None
+
+
+def _section(
+    views: CornerViews, intr: np.ndarray, std: np.ndarray, rms: float, sigma: float, n: int
+) -> dict[str, Any]:
+    return {
+        "intrinsics_file": str(views.intrinsics_file),
+        "rms_px": rms,
+        "sigma_px": sigma,
+        "frames": n,
+        "camera_matrix": camera_matrix(intr).tolist(),
+        "distortion": intr[4:].tolist(),
+        "intrinsics_std": dict(zip(INTRINSIC_NAMES, std.tolist(), strict=True)),
+    }
+
+
+def bundle_fixed_joint(
+    poses: Path, T_w_c: np.ndarray, est: JointEstimate, cam: str
+) -> tuple[JointEstimate, dict[str, Any] | None, list[str]]:
+    """Refine camera ``cam``'s joint (and intrinsics) on its corners, when they are there."""
+    views, warning = corner_views(poses, T_w_c.shape[0])
+    o0 = est.position_in_a if cam == "a" else est.position_in_b
+    if views is None or o0 is None:
+        return est, None, [warning] if warning else []
+    inl = est.inliers[cam]
+    corners = views.corners[inl]
+    ba = bundle_adjust_fixed_joint(
+        corners,
+        np.ones(corners.shape[:2], dtype=bool),
+        views.board_points,
+        views.intrinsics,
+        T_w_c[inl],
+        o0,
+        est.position_in_world[cam],
+    )
+    if not ba.success:
+        return est, None, [f"camera {cam.upper()}: the bundle adjustment did not converge; "
+                           "the pose-based estimate is kept"]  # fmt: skip
+    cov = ba.covariance[9:12, 9:12]
+    refined = (
+        replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
+        if cam == "a"
+        else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov)
+    )
+    refined.position_in_world[cam] = ba.joint_in_world
+    std = np.sqrt(np.clip(np.diag(ba.covariance)[:9], 0.0, None))
+    section = _section(views, ba.intrinsics, std, ba.rms_px, ba.sigma_px, int(inl.sum()))
+    return refined, section, []
+
+
+def _pair_views(
+    poses: tuple[Path, Path], pair: PairedTrajectories
+) -> tuple[tuple[CornerViews, CornerViews] | None, list[str]]:
+    """Both cameras' corners, reduced to the paired frames."""
+    p = pair.pairing
+    va, wa = corner_views(poses[0], len(p.idx_a) + p.unpaired_a)
+    vb, wb = corner_views(poses[1], len(p.idx_b) + p.unpaired_b)
+    warnings = [w for w in (wa, wb) if w]
+    if va is None or vb is None:
+        if (va is None) != (vb is None) and not warnings:
+            warnings.append("only one camera's poses carry corners; no bundle adjustment")
+        return None, warnings
+    return (
+        replace(va, corners=va.corners[p.idx_a]),
+        replace(vb, corners=vb.corners[p.idx_b]),
+    ), warnings
+
+
+def _articulated(
+    views: tuple[CornerViews, CornerViews],
+    pair: PairedTrajectories,
+    inliers: np.ndarray,
+    o_a: np.ndarray,
+    o_b: np.ndarray,
+    **kwargs: Any,
+) -> tuple[ArticulatedBundle | None, dict[str, Any] | None, str | None]:
+    """The two-camera bundle over the paired inlier frames: result, section, warning."""
+    ca, cb = views[0].corners[inliers], views[1].corners[inliers]
+    ba = bundle_adjust_articulated(
+        ca, np.ones(ca.shape[:2], bool), views[0].board_points,
+        cb, np.ones(cb.shape[:2], bool), views[1].board_points,
+        views[0].intrinsics, views[1].intrinsics,
+        pair.a.T_world_cam[inliers], pair.b.T_world_cam[inliers], o_a, o_b, **kwargs,
+    )  # fmt: skip
+    if not ba.success:
+        return None, None, "the bundle adjustment did not converge; the pose-based estimate is kept"
+    n = int(inliers.sum())
+    sections = {
+        "a": _section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
+                      ba.sigma_px, n),
+        "b": _section(views[1], ba.intrinsics_b, ba.intrinsics_std_b, ba.rms_px["b"],
+                      ba.sigma_px, n),
+    }  # fmt: skip
+    return ba, sections, None
+
+
+def bundle_overlap(
+    poses: tuple[Path, Path], pair: PairedTrajectories, est: JointEstimate
+) -> tuple[JointEstimate, dict[str, Any] | None, list[str]]:
+    """Refine the overlap scenario's joint on both cameras' corners of the shared board.
+
+    ``pair`` holds the paired poses of the two files (one world: the shared board).
+    """
+    views, warnings = _pair_views(poses, pair)
+    if views is None or est.position_in_b is None:
+        return est, None, warnings
+    if views[0].corners.shape[1] != views[1].corners.shape[1] or not np.allclose(
+        views[0].board_points, views[1].board_points
+    ):
+        return est, None, [*warnings, "the two cameras saw different boards; no bundle "
+                           "adjustment (the overlap scenario needs one shared board)"]  # fmt: skip
+    ba, sections, warning = _articulated(
+        views, pair, est.inliers["ab"], est.position_in_a, est.position_in_b
+    )
+    if ba is None:
+        return est, None, [*warnings, str(warning)]
+    refined = replace(
+        est,
+        position_in_a=ba.position_in_a,
+        covariance_a=ba.covariance_a,
+        position_in_b=ba.position_in_b,
+        covariance_b=ba.covariance_b,
+    )
+    return refined, sections, warnings
+
+
+def bundle_general(
+    poses: tuple[Path, Path],
+    pair: PairedTrajectories,
+    est: RelposeEstimate,
+    prior: JointPrior | None,
+) -> tuple[RelposeEstimate, dict[str, Any] | None, list[str]]:
+    """Refine the general scenario's relative pose and joint on both cameras' corners.
+
+    Each camera sees its own board; the world-A-to-world-B transform is one more unknown.
+    A joint from a fixed-joint session (``prior``, metric) is fused with the corners.
+    """
+    if est.unknown_scale:
+        return est, None, ["no bundle adjustment under unknown scale (corners are metric)"]
+    views, warnings = _pair_views(poses, pair)
+    if views is None:
+        return est, None, warnings
+    inl = est.inliers
+    if not inl[est.reference]:
+        return est, None, [*warnings, "the reference frame was rejected as an outlier; no "
+                           "bundle adjustment"]  # fmt: skip
+    priors: dict[str, tuple[np.ndarray, np.ndarray] | None] = {"a": None, "b": None}
+    if prior is not None:
+        for key, pos, cov in (
+            ("a", prior.position_in_a, prior.covariance_a),
+            ("b", prior.position_in_b, prior.covariance_b),
+        ):
+            if pos is not None and cov is not None:
+                priors[key] = (np.asarray(pos), np.asarray(cov))
+    ba, sections, warning = _articulated(
+        views, pair, inl, est.position_in_a, est.position_in_b,
+        T_wb_wa0=est.T_wb_wa, prior_a=priors["a"], prior_b=priors["b"],
+    )  # fmt: skip
+    if ba is None:
+        return est, None, [*warnings, str(warning)]
+    k = int(np.count_nonzero(inl[: est.reference]))  # the reference among the frames used
+    refined = replace(
+        est,
+        T_b_a=ba.T_b_a[k],
+        covariance=ba.pose_covariances[k],
+        position_in_a=ba.position_in_a,
+        covariance_a=ba.covariance_a,
+        position_in_b=ba.position_in_b,
+        covariance_b=ba.covariance_b,
+        T_wb_wa=ba.T_wb_wa,
+    )
+    return refined, sections, warnings

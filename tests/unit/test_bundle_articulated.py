@@ -1,0 +1,166 @@
+"""Two-camera bundle adjustment with the joint constraint (overlap and general scenarios)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from acs_cli.core import se3
+from acs_cli.core.bundle import bundle_adjust_articulated, intrinsics_vector, project_points
+from acs_cli.errors import InputError
+
+W, H = 1024, 768
+BOARD = np.array([[c * 0.04, r * 0.04, 0.0] for r in range(6) for c in range(9)])
+CENTRE = BOARD.mean(axis=0)
+
+
+def _look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """``T_world_cam`` of a camera at ``eye`` looking at ``target`` (z forward, y down)."""
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(-up, z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    T[:3, 3] = eye
+    return T
+
+
+def _intrinsics(rng: np.random.Generator) -> np.ndarray:
+    K = np.array([[900 * rng.uniform(0.95, 1.05), 0, 512 + rng.normal(0, 5)],
+                  [0, 900 * rng.uniform(0.95, 1.05), 384 + rng.normal(0, 5)],
+                  [0, 0, 1]])  # fmt: skip
+    d = [rng.uniform(-0.25, 0.05), rng.uniform(-0.05, 0.1), *rng.normal(0, 1e-3, 2), 0.0]
+    return intrinsics_vector(K, np.array(d))
+
+
+def _in_view(uv: np.ndarray) -> bool:
+    return bool(np.all(uv > 5) and np.all(uv[:, 0] < W - 5) and np.all(uv[:, 1] < H - 5))
+
+
+def _scene(rng: np.random.Generator, overlap: bool, sigma_px: float, n: int = 20) -> dict:
+    """Camera A looks at board A 0.75 m away; B hangs on a joint beside A and looks at the
+    same board (overlap) or at its own board behind A (general)."""
+    ia, ib = _intrinsics(rng), _intrinsics(rng)
+    up = np.array([0.0, -1.0, 0.0])
+    T_wa_a_rest = _look_at(CENTRE + np.array([-0.15, 0, -0.75]), CENTRE, up)
+    if overlap:
+        T_wa_b_rest = _look_at(CENTRE + np.array([0.15, 0, -0.75]), CENTRE, up)
+        T_wa_boardb = np.eye(4)
+    else:
+        T_wa_b_rest = _look_at(
+            CENTRE + np.array([0.15, 0, -0.75]), CENTRE + np.array([0.15, 0, -1.5]), up
+        )
+        T_wa_boardb = _look_at(
+            CENTRE + np.array([0.35, 0.1, -1.5]), CENTRE + np.array([0.35, 0.1, -3]), up
+        )
+        T_wa_boardb[:3, 3] -= T_wa_boardb[:3, :3] @ CENTRE  # board B's centre there
+    joint_w = CENTRE + np.array([0.0, -0.12, -0.78])
+    o_a = (np.linalg.inv(T_wa_a_rest) @ [*joint_w, 1])[:3]
+    o_b = (np.linalg.inv(T_wa_b_rest) @ [*joint_w, 1])[:3]
+    T_a_b_rest = np.linalg.inv(T_wa_a_rest) @ T_wa_b_rest
+    T_wb_wa = np.linalg.inv(T_wa_boardb)
+    Ta, Tb, ca, cb, Tab = [], [], [], [], []
+    while len(Ta) < n:
+        d = np.eye(4)
+        d[:3, :3] = se3.matrix_from_rotvec(rng.normal(0, 0.08, 3))
+        d[:3, 3] = rng.normal(0, 0.05, 3)
+        T_wa_a = T_wa_a_rest @ d
+        R_ab = T_a_b_rest[:3, :3] @ se3.matrix_from_rotvec(rng.normal(0, 0.12, 3))
+        T_a_b = np.eye(4)
+        T_a_b[:3, :3], T_a_b[:3, 3] = R_ab, o_a - R_ab @ o_b
+        T_wb_b = T_wb_wa @ T_wa_a @ T_a_b
+        ua = project_points(
+            BOARD @ np.linalg.inv(T_wa_a)[:3, :3].T + np.linalg.inv(T_wa_a)[:3, 3], ia
+        )
+        Tbw = np.linalg.inv(T_wb_b)
+        ub = project_points(BOARD @ Tbw[:3, :3].T + Tbw[:3, 3], ib)
+        if not (_in_view(ua) and _in_view(ub)):
+            continue
+        Ta.append(T_wa_a)
+        Tb.append(T_wb_b)
+        Tab.append(T_a_b)
+        ca.append(ua + rng.normal(0, sigma_px, ua.shape))
+        cb.append(ub + rng.normal(0, sigma_px, ub.shape))
+    return {
+        "ia": ia, "ib": ib, "o_a": o_a, "o_b": o_b, "T_wa_a": np.array(Ta),
+        "T_wb_b": np.array(Tb), "T_b_a": np.linalg.inv(np.array(Tab)), "T_wb_wa": T_wb_wa,
+        "ca": np.array(ca), "cb": np.array(cb),
+    }  # fmt: skip
+
+
+def _perturb(T: np.ndarray, rng: np.random.Generator, rot: float, trans: float) -> np.ndarray:
+    d = se3.transforms_from_rt(
+        se3.matrix_from_rotvec(rng.normal(0, rot, (len(T), 3))), rng.normal(0, trans, (len(T), 3))
+    )
+    return np.matmul(T, d)
+
+
+def _run(s: dict, rng: np.random.Generator, overlap: bool, **kw: object):
+    valid = np.ones(s["ca"].shape[:2], bool)
+    scale = np.array([1.01, 0.99, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    return bundle_adjust_articulated(
+        s["ca"], valid, BOARD, s["cb"], valid, BOARD,
+        s["ia"] * scale + [0, 0, 3, -2, 0.01, 0, 0, 0, 0], s["ib"] * scale[::-1],
+        _perturb(s["T_wa_a"], rng, 0.01, 0.005), _perturb(s["T_wb_b"], rng, 0.01, 0.005),
+        s["o_a"] + rng.normal(0, 0.01, 3), s["o_b"] + rng.normal(0, 0.01, 3),
+        T_wb_wa0=None if overlap else _perturb(s["T_wb_wa"][None], rng, 0.01, 0.01)[0],
+        **kw,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("overlap", [True, False], ids=["overlap", "general"])
+def test_exact_recovery(rng: np.random.Generator, overlap: bool) -> None:
+    s = _scene(rng, overlap, sigma_px=0.0)
+    ba = _run(s, rng, overlap)
+    assert ba.success
+    assert ba.rms_px["a"] < 1e-6 and ba.rms_px["b"] < 1e-6
+    np.testing.assert_allclose(ba.intrinsics_a, s["ia"], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(ba.intrinsics_b, s["ib"], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(ba.position_in_a, s["o_a"], atol=1e-8)
+    np.testing.assert_allclose(ba.position_in_b, s["o_b"], atol=1e-8)
+    np.testing.assert_allclose(ba.T_b_a, s["T_b_a"], atol=1e-8)
+    np.testing.assert_allclose(ba.T_wb_wa, s["T_wb_wa"], atol=1e-8)
+    np.testing.assert_allclose(ba.T_wb_b, s["T_wb_b"], atol=1e-8)
+
+
+@pytest.mark.parametrize("overlap", [True, False], ids=["overlap", "general"])
+def test_reported_std_matches_the_spread(overlap: bool) -> None:
+    """Over seeded trials, the joint's and T_b_a's errors divided by the reported standard
+    deviations have unit spread (within sampling error of the trial count)."""
+    z_joint, z_pose = [], []
+    for seed in range(12):
+        rng = np.random.default_rng([seed, overlap])
+        s = _scene(rng, overlap, sigma_px=0.3)
+        ba = _run(s, rng, overlap)
+        z_joint.append((ba.position_in_a - s["o_a"]) / np.sqrt(np.diag(ba.covariance_a)))
+        T = ba.T_b_a[0]
+        e_rot = se3.rotvec_from_matrix((s["T_b_a"][0][:3, :3].T @ T[:3, :3])[None])[0]
+        e = np.concatenate([e_rot, T[:3, 3] - s["T_b_a"][0][:3, 3]])
+        z_pose.append(e / np.sqrt(np.diag(ba.pose_covariances[0])))
+    for z in (np.array(z_joint), np.array(z_pose)):
+        spread = float(np.sqrt(np.mean(z**2)))
+        assert 0.6 < spread < 1.5, spread
+
+
+def test_joint_prior_is_fused(rng: np.random.Generator) -> None:
+    s = _scene(rng, overlap=False, sigma_px=0.3)
+    free = _run(s, np.random.default_rng(1), overlap=False)
+    tight = 1e-8 * np.eye(3)  # 0.1 mm
+    fused = _run(
+        s, np.random.default_rng(1), overlap=False,
+        prior_a=(s["o_a"], tight), prior_b=(s["o_b"], tight),
+    )  # fmt: skip
+    np.testing.assert_allclose(fused.position_in_a, s["o_a"], atol=4e-4)
+    assert np.all(np.diag(fused.covariance_a) < 1e-8)
+    assert np.all(np.diag(free.covariance_a) > np.diag(fused.covariance_a))
+
+
+def test_rejects_mismatched_frames(rng: np.random.Generator) -> None:
+    s = _scene(rng, overlap=True, sigma_px=0.0, n=4)
+    valid = np.ones(s["ca"].shape[:2], bool)
+    with pytest.raises(InputError, match="same paired frames"):
+        bundle_adjust_articulated(
+            s["ca"], valid, BOARD, s["cb"][:3], valid[:3], BOARD, s["ia"], s["ib"],
+            s["T_wa_a"], s["T_wb_b"][:3], s["o_a"], s["o_b"],
+        )  # fmt: skip
