@@ -15,7 +15,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BoardPose", "board_pose", "camera_in_board"]
+__all__ = [
+    "BoardPose",
+    "board_pose",
+    "camera_in_board",
+    "consistent_corner_order",
+    "reversed_order_transform",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,3 +117,63 @@ def board_pose(
     if not np.all(np.isfinite(T)) or not np.isfinite(rms):
         return None
     return BoardPose(T, rms)
+
+
+def reversed_order_transform(cols: int, rows: int, square: float) -> FloatArray:
+    """``T_w1_w2``: the board frame of the reversed corner order (``w2``) in the frame of
+    the original order (``w1``).
+
+    A board of ``cols != rows`` inner corners looks the same turned by 180 degrees about
+    its normal, so its corners can be labelled in two orders: corner ``k`` of one is
+    corner ``m - 1 - k`` of the other, and ``X1 = Rz(180 deg) X2 + ((cols-1) s, (rows-1) s, 0)``.
+    """
+    T = np.eye(4)
+    T[0, 0] = T[1, 1] = -1.0
+    T[:3, 3] = [(cols - 1) * square, (rows - 1) * square, 0.0]
+    return T
+
+
+def consistent_corner_order(R_cam_board: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Which frames of a sequence to relabel so the board's frame does not jump by 180 deg.
+
+    Each frame's corner order is chosen from the image alone (the board's x axis pointing
+    right), so a camera that rolls past 90 degrees relative to the board flips the board's
+    frame mid-sequence. Of the two labellings of every frame (``R`` and ``R Rz(180 deg)``)
+    this picks the sequence with the least total rotation between consecutive frames
+    (dynamic programming over the two states), and of that sequence and its complement
+    (equally smooth) the one that relabels fewer frames.
+
+    Parameters
+    ----------
+    R_cam_board : ndarray, shape (n, 3, 3)
+        Rotations of ``T_cam_board`` in sequence order.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True where the frame's corner order should be reversed.
+    """
+    R = np.asarray(R_cam_board, dtype=float)
+    if R.ndim != 3 or R.shape[1:] != (3, 3):
+        raise ValueError(f"R_cam_board must have shape (n, 3, 3), got {R.shape}")
+    n = R.shape[0]
+    if n < 2:
+        return np.zeros(n, dtype=bool)
+    F = np.diag([-1.0, -1.0, 1.0])
+    states = np.stack([R, R @ F], axis=1)  # (n, 2, 3, 3)
+    # cost[i, a, b]: angle between frame i in state a and frame i+1 in state b
+    rel = np.einsum("nakj,nbkl->nabjl", states[:-1], states[1:])
+    tr = np.trace(rel, axis1=-2, axis2=-1)
+    cost = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+    best = np.zeros(2)
+    back = np.zeros((n - 1, 2), dtype=int)
+    for i in range(n - 1):  # Viterbi: two states a frame
+        total = best[:, None] + cost[i]
+        back[i] = np.argmin(total, axis=0)
+        best = total[back[i], [0, 1]]
+    path = np.zeros(n, dtype=int)
+    path[-1] = int(np.argmin(best))
+    for i in range(n - 2, -1, -1):
+        path[i] = back[i, path[i + 1]]
+    flips = path.astype(bool)
+    return ~flips if flips.sum() * 2 > n else flips

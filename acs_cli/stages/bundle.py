@@ -30,7 +30,36 @@ from acs_cli.io.trajectory import read_npz_observations
 from acs_cli.stages.common import PairedTrajectories
 from acs_cli.stages.poses import read_intrinsics
 
-__all__ = ["CornerViews", "bundle_fixed_joint", "bundle_general", "bundle_overlap", "corner_views"]
+__all__ = [
+    "MAX_BUNDLE_FRAMES",
+    "CornerViews",
+    "bundle_fixed_joint",
+    "bundle_general",
+    "bundle_overlap",
+    "corner_views",
+]
+
+#: Most frames a bundle adjustment takes (its dense Jacobian grows with their square:
+#: about 160 MB for 100 frames of two 9x6 boards); longer recordings use this many,
+#: evenly spaced, and say so.
+MAX_BUNDLE_FRAMES = 100
+
+
+def bundle_frames(used: np.ndarray, keep: int | None = None) -> tuple[np.ndarray, str | None]:
+    """The frames to adjust: ``used`` (a mask), thinned evenly to :data:`MAX_BUNDLE_FRAMES`
+    (always keeping frame ``keep``), and a warning when thinned."""
+    idx = np.flatnonzero(used)
+    if idx.size <= MAX_BUNDLE_FRAMES:
+        return used, None
+    pick = idx[np.round(np.linspace(0, idx.size - 1, MAX_BUNDLE_FRAMES)).astype(int)]
+    if keep is not None and keep not in pick:
+        pick[np.argmin(np.abs(pick - keep))] = keep
+    out = np.zeros_like(used)
+    out[pick] = True
+    return out, (
+        f"bundle adjustment on {MAX_BUNDLE_FRAMES} of {idx.size} frames (evenly spaced), "
+        "to bound its memory"
+    )
 
 
 @dataclass(frozen=True)
@@ -105,7 +134,8 @@ def bundle_fixed_joint(
     o0 = est.position_in_a if cam == "a" else est.position_in_b
     if views is None or o0 is None:
         return est, None, [warning] if warning else []
-    inl = est.inliers[cam]
+    inl, thinned = bundle_frames(est.inliers[cam])
+    notes = [thinned] if thinned else []
     corners = views.corners[inl]
     ba = bundle_adjust_fixed_joint(
         corners,
@@ -117,8 +147,8 @@ def bundle_fixed_joint(
         est.position_in_world[cam],
     )
     if not ba.success:
-        return est, None, [f"camera {cam.upper()}: the bundle adjustment did not converge; "
-                           "the pose-based estimate is kept"]  # fmt: skip
+        return est, None, [*notes, f"camera {cam.upper()}: the bundle adjustment did not "
+                           "converge; the pose-based estimate is kept"]  # fmt: skip
     cov = ba.covariance[9:12, 9:12]
     refined = (
         replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
@@ -128,7 +158,7 @@ def bundle_fixed_joint(
     refined.position_in_world[cam] = ba.joint_in_world
     std = np.sqrt(np.clip(np.diag(ba.covariance)[:9], 0.0, None))
     section = _section(views, ba.intrinsics, std, ba.rms_px, ba.sigma_px, int(inl.sum()))
-    return refined, section, []
+    return refined, section, notes
 
 
 def _pair_views(
@@ -156,8 +186,13 @@ def _articulated(
     o_a: np.ndarray,
     o_b: np.ndarray,
     **kwargs: Any,
-) -> tuple[ArticulatedBundle | None, dict[str, Any] | None, str | None]:
-    """The two-camera bundle over the paired inlier frames: result, section, warning."""
+) -> tuple[ArticulatedBundle | None, dict[str, Any] | None, list[str]]:
+    """The two-camera bundle over the paired inlier frames (``inliers`` is thinned in place
+    to the frames adjusted): result, section, warnings."""
+    keep = kwargs.pop("keep", None)
+    used, thinned = bundle_frames(inliers, keep)
+    inliers[:] = used
+    notes = [thinned] if thinned else []
     ca, cb = views[0].corners[inliers], views[1].corners[inliers]
     ba = bundle_adjust_articulated(
         ca, np.ones(ca.shape[:2], bool), views[0].board_points,
@@ -166,7 +201,8 @@ def _articulated(
         pair.a.T_world_cam[inliers], pair.b.T_world_cam[inliers], o_a, o_b, **kwargs,
     )  # fmt: skip
     if not ba.success:
-        return None, None, "the bundle adjustment did not converge; the pose-based estimate is kept"
+        return None, None, [*notes, "the bundle adjustment did not converge; the pose-based "
+                            "estimate is kept"]  # fmt: skip
     n = int(inliers.sum())
     sections = {
         "a": _section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
@@ -174,7 +210,7 @@ def _articulated(
         "b": _section(views[1], ba.intrinsics_b, ba.intrinsics_std_b, ba.rms_px["b"],
                       ba.sigma_px, n),
     }  # fmt: skip
-    return ba, sections, None
+    return ba, sections, notes
 
 
 def bundle_overlap(
@@ -192,11 +228,12 @@ def bundle_overlap(
     ):
         return est, None, [*warnings, "the two cameras saw different boards; no bundle "
                            "adjustment (the overlap scenario needs one shared board)"]  # fmt: skip
-    ba, sections, warning = _articulated(
-        views, pair, est.inliers["ab"], est.position_in_a, est.position_in_b
+    ba, sections, notes = _articulated(
+        views, pair, est.inliers["ab"].copy(), est.position_in_a, est.position_in_b
     )
+    warnings += notes
     if ba is None:
-        return est, None, [*warnings, str(warning)]
+        return est, None, warnings
     refined = replace(
         est,
         position_in_a=ba.position_in_a,
@@ -223,7 +260,7 @@ def bundle_general(
     views, warnings = _pair_views(poses, pair)
     if views is None:
         return est, None, warnings
-    inl = est.inliers
+    inl = est.inliers.copy()
     if not inl[est.reference]:
         return est, None, [*warnings, "the reference frame was rejected as an outlier; no "
                            "bundle adjustment"]  # fmt: skip
@@ -235,12 +272,13 @@ def bundle_general(
         ):
             if pos is not None and cov is not None:
                 priors[key] = (np.asarray(pos), np.asarray(cov))
-    ba, sections, warning = _articulated(
-        views, pair, inl, est.position_in_a, est.position_in_b,
+    ba, sections, notes = _articulated(
+        views, pair, inl, est.position_in_a, est.position_in_b, keep=est.reference,
         T_wb_wa0=est.T_wb_wa, prior_a=priors["a"], prior_b=priors["b"],
     )  # fmt: skip
+    warnings += notes
     if ba is None:
-        return est, None, [*warnings, str(warning)]
+        return est, None, warnings
     k = int(np.count_nonzero(inl[: est.reference]))  # the reference among the frames used
     refined = replace(
         est,

@@ -15,7 +15,12 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS, board_points
-from acs_cli.core.pnp import board_pose, camera_in_board
+from acs_cli.core.pnp import (
+    board_pose,
+    camera_in_board,
+    consistent_corner_order,
+    reversed_order_transform,
+)
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import get_path, make_header, read_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output, check_writable
@@ -198,11 +203,26 @@ def run_poses(
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
     t, has_t = _timestamps(names, all_names)
-    T_wc = camera_in_board(np.stack(T_cb))
+    warnings: list[str] = []
+    # one board frame for the whole sequence: undo 180-degree relabellings of the board
+    T_cb_arr = np.stack(T_cb)
+    if cols != rows:
+        order = np.argsort(t, kind="stable")
+        flip = np.zeros(len(names), dtype=bool)
+        flip[order] = consistent_corner_order(T_cb_arr[order, :3, :3])
+        if flip.any():
+            T_cb_arr[flip] = T_cb_arr[flip] @ reversed_order_transform(cols, rows, square)
+            for i in np.flatnonzero(flip):
+                corners[i] = corners[i][::-1].copy()
+            warnings.append(
+                f"{int(flip.sum())} image(s) had the board's corners in the other of its two "
+                "orders (the camera rolled past 90 degrees); relabelled so the board's frame "
+                "is one for the whole sequence"
+            )
+    T_wc = camera_in_board(T_cb_arr)
     traj = Trajectory(
         t, T_wc, source=str(output), format="npz", has_timestamps=has_t, names=tuple(names)
     )
-    warnings: list[str] = []
     if skipped:
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     header = make_header(

@@ -164,3 +164,18 @@ def test_rejects_mismatched_frames(rng: np.random.Generator) -> None:
             s["ca"], valid, BOARD, s["cb"][:3], valid[:3], BOARD, s["ia"], s["ib"],
             s["T_wa_a"], s["T_wb_b"][:3], s["o_a"], s["o_b"],
         )  # fmt: skip
+
+
+def test_long_recordings_are_thinned_evenly() -> None:
+    """A bundle adjustment takes at most MAX_BUNDLE_FRAMES frames, evenly spaced among the
+    frames used, the reference among them, and says so."""
+    from acs_cli.stages.bundle import MAX_BUNDLE_FRAMES, bundle_frames
+
+    used = np.ones(250, bool)
+    used[::7] = False
+    mask, note = bundle_frames(used, keep=8)
+    assert mask.sum() == MAX_BUNDLE_FRAMES and mask[8] and not np.any(mask & ~used)
+    assert np.diff(np.flatnonzero(mask)).max() <= 4
+    assert note is not None and f"{MAX_BUNDLE_FRAMES} of {used.sum()}" in note
+    short = np.ones(30, bool)
+    assert bundle_frames(short)[1] is None and bundle_frames(short)[0].all()
