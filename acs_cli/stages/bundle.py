@@ -37,6 +37,7 @@ __all__ = [
     "bundle_general",
     "bundle_overlap",
     "corner_views",
+    "shared_board_flip",
 ]
 
 #: Most frames a bundle adjustment takes (its dense Jacobian grows with their square:
@@ -161,10 +162,33 @@ def bundle_fixed_joint(
     return refined, section, notes
 
 
+def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:
+    """``T_w1_w2`` between the two corner orders of one board both cameras saw, or None.
+
+    A board that looks the same turned by 180 degrees about its normal (any checkerboard)
+    can be labelled in two orders; two cameras that see it at very different rolls may
+    pick different ones, and then their "one world" differs by this transform (see
+    :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both files are poses
+    NPZs of the same, symmetric board.
+    """
+    obs = [read_npz_observations(p) if p.suffix.lower() == ".npz" else None for p in poses]
+    if obs[0] is None or obs[1] is None:
+        return None
+    X = obs[0].board_points
+    if X.shape != obs[1].board_points.shape or not np.allclose(X, obs[1].board_points):
+        return None
+    F = np.diag([-1.0, -1.0, 1.0, 1.0])
+    F[:3, 3] = X[0] + X[-1]
+    if not np.allclose(X @ F[:3, :3].T + F[:3, 3], X[::-1], atol=1e-9):
+        return None
+    return F
+
+
 def _pair_views(
-    poses: tuple[Path, Path], pair: PairedTrajectories
+    poses: tuple[Path, Path], pair: PairedTrajectories, reverse_b: bool = False
 ) -> tuple[tuple[CornerViews, CornerViews] | None, list[str]]:
-    """Both cameras' corners, reduced to the paired frames."""
+    """Both cameras' corners, reduced to the paired frames (B's in reversed order when its
+    board labelling was turned round to A's)."""
     p = pair.pairing
     va, wa = corner_views(poses[0], len(p.idx_a) + p.unpaired_a)
     vb, wb = corner_views(poses[1], len(p.idx_b) + p.unpaired_b)
@@ -175,7 +199,7 @@ def _pair_views(
         return None, warnings
     return (
         replace(va, corners=va.corners[p.idx_a]),
-        replace(vb, corners=vb.corners[p.idx_b]),
+        replace(vb, corners=vb.corners[p.idx_b][:, ::-1] if reverse_b else vb.corners[p.idx_b]),
     ), warnings
 
 
@@ -214,13 +238,18 @@ def _articulated(
 
 
 def bundle_overlap(
-    poses: tuple[Path, Path], pair: PairedTrajectories, est: JointEstimate
+    poses: tuple[Path, Path],
+    pair: PairedTrajectories,
+    est: JointEstimate,
+    reverse_b: bool = False,
 ) -> tuple[JointEstimate, dict[str, Any] | None, list[str]]:
     """Refine the overlap scenario's joint on both cameras' corners of the shared board.
 
-    ``pair`` holds the paired poses of the two files (one world: the shared board).
+    ``pair`` holds the paired poses of the two files (one world: the shared board);
+    ``reverse_b``: B's poses were brought to A's labelling of the board, so its corners are
+    read in reversed order.
     """
-    views, warnings = _pair_views(poses, pair)
+    views, warnings = _pair_views(poses, pair, reverse_b)
     if views is None or est.position_in_b is None:
         return est, None, warnings
     if views[0].corners.shape[1] != views[1].corners.shape[1] or not np.allclose(

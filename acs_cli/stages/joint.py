@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
-from acs_cli.errors import InputError
+from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output, check_writable
-from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap
+from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap, shared_board_flip
 from acs_cli.stages.common import (
+    PairedTrajectories,
     StageRun,
     frames_section,
     load_pair,
@@ -83,6 +84,46 @@ def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
     return body
 
 
+def _overlap_in_one_board_order(
+    pair: PairedTrajectories, poses: tuple[Path, Path], method: str
+) -> tuple[JointEstimate, PairedTrajectories, bool]:
+    """Algorithm I, with B's board labelling turned to A's when that is what fits.
+
+    Two cameras of an overlap rig can label the shared board in its two orders (see
+    :func:`acs_cli.stages.bundle.shared_board_flip`); then the worlds differ by a half turn
+    and the joint constraint fits badly or looks degenerate. Both labellings are tried
+    when the poses carry their board; the turned one wins when its residual is less than
+    half the other's (the wrong one is off by the board's size, not by noise). A pair that
+    looks rigid as labelled is reported as such: turning a rigid pair's frame invents an
+    articulation (seen on OpenCV's stereo photographs: a 5 cm residual and "6 deg" of
+    rotation noise).
+    """
+    est0: JointEstimate | None = None
+    error: DegenerateMotionError | None = None
+    try:
+        est0 = estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, method)
+    except DegenerateMotionError as exc:
+        error = exc
+    F = shared_board_flip(poses)
+    if F is not None:
+        turned = replace(pair, b=replace(pair.b, T_world_cam=F @ pair.b.T_world_cam))
+        try:
+            est1 = estimate_joint_overlap(turned.a.T_world_cam, turned.b.T_world_cam, method)
+        except DegenerateMotionError:
+            est1 = None
+        # a rigid-looking pair (est0 degenerate) is trusted as it is: turning one camera's
+        # board frame of a rigid pair makes a spurious articulation, not a better fit
+        if (
+            est0 is not None
+            and est1 is not None
+            and est1.residual_rms["ab"] < 0.5 * est0.residual_rms["ab"]
+        ):
+            return est1, turned, True
+    if est0 is None:
+        raise error if error is not None else DegenerateMotionError("the joint cannot be observed")
+    return est0, pair, False
+
+
 def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
     """Read the trajectories, estimate the joint and write ``joint.yaml`` atomically.
 
@@ -107,9 +148,14 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
         )
         warnings += pair.warnings
-        est = estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, config.method)
+        est, pair, turned = _overlap_in_one_board_order(pair, (poses_a, poses_b), config.method)
+        if turned:
+            warnings.append(
+                "the two cameras labelled the shared board in opposite orders (their rolls "
+                "differ by more than 90 degrees); B's poses were turned to A's board frame"
+            )
         if config.method == "refined" and config.bundle:
-            est, section, notes = bundle_overlap((poses_a, poses_b), pair, est)
+            est, section, notes = bundle_overlap((poses_a, poses_b), pair, est, turned)
             warnings += notes
             if section is not None:
                 quality["bundle_adjustment"] = section

@@ -286,3 +286,51 @@ def test_simulate_writes_study(tmp_path: Path) -> None:
     assert all(p.stat().st_size > 10_000 for p in pngs)
     summary = (out / "summary.csv").read_text()
     assert "paper" in summary and "refined" in summary
+
+
+def test_overlap_cameras_labelling_the_board_in_opposite_orders(
+    rig_files: dict, tmp_path: Path
+) -> None:
+    """Camera B rolled by more than 90 degrees from A labels the shared 9x6 board the other
+    way round: its world is A's turned by half a turn. The joint stage notices (both
+    labellings are tried when the poses NPZs carry the board) and says so."""
+    from acs_cli.core.intrinsics import board_points
+    from acs_cli.core.pnp import reversed_order_transform
+    from acs_cli.io.trajectory import Trajectory, read_trajectory, write_npz_poses
+
+    board = board_points(9, 6, 0.025)
+    F = reversed_order_transform(9, 6, 0.025)
+    paths = {}
+    for cam in ("a", "b"):
+        traj = read_trajectory(rig_files[f"overlap_{cam}"])
+        T = traj.T_world_cam if cam == "a" else np.linalg.inv(F) @ traj.T_world_cam
+        n = len(T)
+        paths[cam] = tmp_path / f"{cam}.npz"
+        write_npz_poses(
+            paths[cam],
+            Trajectory(traj.timestamps, T, source="test", format="npz", has_timestamps=True),
+            {"board_points": board, "corners": np.zeros((n, len(board), 2))},
+        )
+    res = acscal(
+        "joint", "--overlap", "--no-bundle", "--poses-a", paths["a"], "--poses-b", paths["b"],
+        "-o", tmp_path / "joint.yaml",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    doc = load(tmp_path / "joint.yaml")
+    rig = rig_files["rig"]
+    assert np.linalg.norm(np.array(doc["joint"]["position_in_a"]) - rig.o_a) < 0.02
+    assert np.linalg.norm(np.array(doc["joint"]["position_in_b"]) - rig.o_b) < 0.02
+    assert any("opposite orders" in w for w in doc["warnings"])
+    # the same files as TUM (no board): nothing to turn, and the fit is far off or refused
+    for cam in ("a", "b"):
+        traj = read_trajectory(paths[cam])
+        write_tum(tmp_path / f"{cam}.tum", traj.timestamps, traj.T_world_cam)
+    res = acscal(
+        "joint", "--overlap", "--poses-a", tmp_path / "a.tum", "--poses-b", tmp_path / "b.tum",
+        "-o", tmp_path / "joint_tum.yaml",
+    )  # fmt: skip
+    if res.returncode == 0:
+        off = load(tmp_path / "joint_tum.yaml")["joint"]["position_in_a"]
+        assert np.linalg.norm(np.array(off) - rig.o_a) > 0.05
+    else:
+        assert res.returncode == 3, res.stderr
