@@ -167,7 +167,9 @@ def _levenberg_marquardt(
             if lam > 1e12:
                 return _Solution(x, r, J, converged)
         small_step = np.linalg.norm(step) <= tol * (np.linalg.norm(x) + tol)
-        small_gain = cost - cost_new <= tol * max(cost, 1e-300)
+        # a small gain means convergence only for a near Gauss-Newton step, not a step
+        # shortened by heavy damping far from the minimum
+        small_gain = cost - cost_new <= tol * max(cost, 1e-300) and lam <= 1e-2
         x, r, cost = x_new, r_new, cost_new
         J = jacobian(x)
         lam = max(lam / 10.0, 1e-12)

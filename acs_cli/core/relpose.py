@@ -395,31 +395,36 @@ def estimate_relpose(
     return est
 
 
-def motion_diagnosis(Ta: FloatArray, Tb: FloatArray) -> dict[str, str]:
+def motion_diagnosis(
+    Ta: FloatArray, Tb: FloatArray, R_wb_wa: FloatArray | None = None
+) -> dict[str, str]:
     """What a general motion lacks, in words: ``{"camera": ..., "joint": ...}`` ("" if fine).
 
     ``camera``: camera A hardly turns (pure translation) or turns about one axis only
     (planar motion). ``joint``: the joint hardly bends (a rigid pair) or bends about one
-    axis only (a hinge). Thresholds: :data:`MIN_ROTATION_SPREAD` (RMS, rad) and
-    :data:`SINGLE_AXIS_RATIO`.
+    axis only (a hinge); it needs the rotation from world A to world B, ``R_wb_wa``
+    ``(3, 3)`` (identity for one world), and is left empty without it. Thresholds:
+    :data:`MIN_ROTATION_SPREAD` (RMS, rad) and :data:`SINGLE_AXIS_RATIO`.
     """
     Ra = Ta[:, :3, :3]
-    R_ab = np.einsum("nji,njk->nik", Ra, Tb[:, :3, :3])  # up to the constant world rotation
-    out = {}
-    for key, R, words in (
-        ("camera", Ra, ("camera A hardly turns (pure translation)",
-                        "camera A turns about one axis only (planar motion)")),
-        ("joint", R_ab, ("the joint hardly bends (a rigid pair)",
-                         "the joint bends about one axis only (a hinge)")),
-    ):  # fmt: skip
+    checks = [("camera", Ra)]
+    if R_wb_wa is not None:
+        # the articulation R_a_b = R_a_wa R_wa_wb R_wb_b
+        checks.append(("joint", np.einsum("nji,jk,nkl->nil", Ra, R_wb_wa.T, Tb[:, :3, :3])))
+    words = {
+        "camera": ("camera A hardly turns (pure translation)",
+                   "camera A turns about one axis only (planar motion)"),
+        "joint": ("the joint hardly bends (a rigid pair)",
+                  "the joint bends about one axis only (a hinge)"),
+    }  # fmt: skip
+    out = {"camera": "", "joint": ""}
+    for key, R in checks:
         s = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), compute_uv=False)
         spread = float(s[0] / np.sqrt(R.shape[0]))
         if spread < MIN_ROTATION_SPREAD:
-            out[key] = f"{words[0]}, RMS spread {np.degrees(spread):.2f} deg"
+            out[key] = f"{words[key][0]}, RMS spread {np.degrees(spread):.2f} deg"
         elif s[2] < SINGLE_AXIS_RATIO * s[0]:
-            out[key] = f"{words[1]}, singular value ratio {s[2] / s[0]:.3f}"
-        else:
-            out[key] = ""
+            out[key] = f"{words[key][1]}, singular value ratio {s[2] / s[0]:.3f}"
     return out
 
 
@@ -431,16 +436,20 @@ def _check_determined(est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray) -> N
     if not est.self_calibrated:
         return
     worst = {}
-    for key, o, cov in (
-        ("the joint in A", est.position_in_a, est.covariance_a),
-        ("the joint in B", est.position_in_b, est.covariance_b),
+    for key, o, cov, T in (
+        ("the joint in A", est.position_in_a, est.covariance_a, Ta),
+        ("the joint in B", est.position_in_b, est.covariance_b, Tb),
     ):
         std = float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
-        worst[key] = std / max(float(np.linalg.norm(o)), 1e-12)
+        # the rig's length scale: |O|, or a tenth of the camera's travel for a joint near
+        # the optical centre (a pan-tilt head), whose std does not shrink with |O|
+        travel = float(np.sqrt(np.mean(np.sum((T[:, :3, 3] - T[:, :3, 3].mean(0)) ** 2, 1))))
+        worst[key] = std / max(float(np.linalg.norm(o)), 0.1 * travel, 1e-12)
     bad = {k: v for k, v in worst.items() if v > UNDETERMINED_STD_FRACTION}
     if not bad:
         return
-    notes = motion_diagnosis(Ta, Tb)
+    R_w = se3.project_to_rotation(est.T_wb_wa[:3, :3])[0]
+    notes = motion_diagnosis(Ta, Tb, R_w)
     why = "; ".join(v for v in notes.values() if v) or "the motion is too narrow for the noise"
     text = ", ".join(f"{k} (std {100 * v:.0f}% of |O|)" for k, v in bad.items())
     raise DegenerateMotionError(
@@ -653,7 +662,7 @@ def _estimate_refined(
 
 
 #: Standard deviation (in the trajectory's units) assumed for a prior joint given without one.
-_DEFAULT_PRIOR_STD = 1e-6
+DEFAULT_PRIOR_STD = 1e-6
 
 
 def _prior_rows(prior: JointPrior, L: _Layout, metric: bool):
@@ -664,7 +673,7 @@ def _prior_rows(prior: JointPrior, L: _Layout, metric: bool):
         (prior.position_in_b, prior.covariance_b, L.ob),
     ):
         if pos is not None:
-            C = np.eye(3) * _DEFAULT_PRIOR_STD**2 if cov is None else np.asarray(cov, float)
+            C = np.eye(3) * DEFAULT_PRIOR_STD**2 if cov is None else np.asarray(cov, float)
             C = C + np.eye(3) * 1e-12 * max(1.0, float(np.trace(C)))
             items.append((np.asarray(pos, float), np.linalg.inv(C), sl))
     if not items:

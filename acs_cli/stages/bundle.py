@@ -25,7 +25,7 @@ from acs_cli.core.bundle import (
     intrinsics_vector,
 )
 from acs_cli.core.joint import JointEstimate
-from acs_cli.core.relpose import JointPrior, RelposeEstimate
+from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
 from acs_cli.io.trajectory import read_npz_observations
 from acs_cli.stages.common import PairedTrajectories
 from acs_cli.stages.poses import read_intrinsics
@@ -299,8 +299,9 @@ def bundle_general(
             ("a", prior.position_in_a, prior.covariance_a),
             ("b", prior.position_in_b, prior.covariance_b),
         ):
-            if pos is not None and cov is not None:
-                priors[key] = (np.asarray(pos), np.asarray(cov))
+            if pos is not None:  # a joint given without uncertainty is taken as exact
+                C = np.eye(3) * DEFAULT_PRIOR_STD**2 if cov is None else np.asarray(cov)
+                priors[key] = (np.asarray(pos), C)
     ba, sections, notes = _articulated(
         views, pair, inl, est.position_in_a, est.position_in_b, keep=est.reference,
         T_wb_wa0=est.T_wb_wa, prior_a=priors["a"], prior_b=priors["b"],

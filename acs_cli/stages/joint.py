@@ -6,6 +6,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
@@ -109,8 +111,16 @@ def _overlap_in_one_board_order(
         turned = replace(pair, b=replace(pair.b, T_world_cam=F @ pair.b.T_world_cam))
         try:
             est1 = estimate_joint_overlap(turned.a.T_world_cam, turned.b.T_world_cam, method)
-        except DegenerateMotionError:
+        except DegenerateMotionError as exc:
             est1 = None
+            if est0 is not None and _rigid_spread(turned) < 0.5 * est0.residual_rms["ab"]:
+                # turned, the pair is rigid (fits to noise); as labelled, its "joint" only
+                # absorbs the half turn: a rigid pair labelled in opposite orders
+                raise DegenerateMotionError(
+                    exc.message + " (the two cameras labelled the shared board in opposite "
+                    "orders; turned to one order, they move rigidly together)",
+                    details=exc.details,
+                ) from None
         # a rigid-looking pair (est0 degenerate) is trusted as it is: turning one camera's
         # board frame of a rigid pair makes a spurious articulation, not a better fit
         if (
@@ -122,6 +132,13 @@ def _overlap_in_one_board_order(
     if est0 is None:
         raise error if error is not None else DegenerateMotionError("the joint cannot be observed")
     return est0, pair, False
+
+
+def _rigid_spread(pair: PairedTrajectories) -> float:
+    """RMS spread of B's position in A's frame over the frames (0 for a rigid pair)."""
+    T_a_b = np.matmul(np.linalg.inv(pair.a.T_world_cam), pair.b.T_world_cam)
+    t = T_a_b[:, :3, 3]
+    return float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
 
 
 def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:

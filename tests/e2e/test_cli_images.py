@@ -127,6 +127,25 @@ def test_rigid_stereo_pair_joint_is_unobservable(
     assert res.returncode == 3, res.stderr
     assert "cannot be observed" in res.stderr
     assert not j.exists()
+    # the same pair with the right camera's board labelled the other way round (as a camera
+    # rolled by more than 90 degrees would): still a rigid pair, and said to be one
+    from acs_cli.core.pnp import reversed_order_transform
+
+    with np.load(calibrated["right_poses"], allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["T_world_cam"] = (
+        np.linalg.inv(reversed_order_transform(9, 6, 0.025)) @ arrays["T_world_cam"]
+    )
+    arrays["corners"] = arrays["corners"][:, ::-1]
+    turned = tmp_path / "right_turned.npz"
+    np.savez(turned, **arrays)
+    res = acscal(
+        "joint", "--overlap", "--poses-a", calibrated["left_poses"], "--poses-b", turned,
+        "-o", j,
+    )  # fmt: skip
+    assert res.returncode == 3, res.stderr
+    assert "opposite orders" in res.stderr and "rigidly" in res.stderr
+    assert not j.exists()
 
 
 def _bad_folder(kind: str, root: Path) -> tuple[Path, list[str]]:

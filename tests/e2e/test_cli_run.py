@@ -196,3 +196,27 @@ def test_config_error_exits_2_naming_the_key(tmp_path: Path) -> None:
     assert len(lines) == 1
     assert "'board.square'" in lines[0] and str(config) in lines[0]
     assert "Traceback" not in res.stderr
+
+
+def test_a_joint_without_uncertainty_is_held_by_the_bundle_adjustment(
+    workspace: dict[str, object], tmp_path: Path
+) -> None:
+    """A joint file with positions only is taken as exact by both the pose-based estimate
+    and the bundle adjustment (which would otherwise re-estimate the joint from corners)."""
+    run = Path(str(workspace["root"])) / "run"
+    doc = yaml.safe_load((run / "joint.yaml").read_text())
+    for key in ("position_in_a_std", "position_in_b_std", "covariance_a", "covariance_b"):
+        doc["joint"].pop(key)
+    given = tmp_path / "joint_exact.yaml"
+    given.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    out = tmp_path / "relpose.yaml"
+    res = acscal(
+        "relpose", "--joint", given, "--poses-a", run / "cam_a" / "poses_general.npz",
+        "--poses-b", run / "cam_b" / "poses_general.npz", "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    rel = yaml.safe_load(out.read_text())
+    assert "bundle_adjustment" in rel["quality"]
+    for cam in ("a", "b"):
+        got = np.array(rel["joint"][f"position_in_{cam}"])
+        np.testing.assert_allclose(got, doc["joint"][f"position_in_{cam}"], atol=1e-5)

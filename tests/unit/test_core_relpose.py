@@ -697,3 +697,26 @@ def test_ten_percent_gross_outliers_leave_the_relative_pose_as_good() -> None:
     # the outliers matter: the paper's estimator (no rejection) is hurt by them
     assert np.linalg.norm(rms["paper_dirty"]) > 1.25 * np.linalg.norm(rms["paper"])
     assert np.mean(flagged) >= 2.5, flagged
+
+
+def test_diagnosis_of_the_joint_accounts_for_the_world_rotation(rng: np.random.Generator) -> None:
+    """A rigid pair is a rigid pair whatever the rotation between the two worlds."""
+    T_w_a, T_w_b, _ = _rig_motion(rng, "all", "none")
+    R_w = se3.matrix_from_rotvec(np.array([[0.3, 2.5, -0.4]]))[0]  # world A -> world B
+    T_wb = np.eye(4)
+    T_wb[:3, :3] = R_w
+    notes = relpose.motion_diagnosis(T_w_a, T_wb @ T_w_b, R_w)
+    assert "rigid pair" in notes["joint"] and notes["camera"] == ""
+    assert relpose.motion_diagnosis(T_w_a, T_w_b)["joint"] == ""  # not judged without R_wb_wa
+
+
+def test_self_calibration_of_a_joint_near_the_optical_centre(rng: np.random.Generator) -> None:
+    """A pan-tilt head: the joint 1 cm from the cameras is determined as well as any (its
+    std does not shrink with |O|), so it is not refused for a std large against |O|."""
+    rig = sim.make_rig(rng)
+    small = sim.SyntheticRig(**{**rig.__dict__, "o_a": rig.o_a * 0.01, "o_b": rig.o_b * 0.01})
+    seq = sim.general_sequence(rng, small, N_FRAMES)
+    Ta = _noisy(rng, seq.T_wa_a, 0.1, 0.004)
+    Tb = _noisy(rng, seq.T_wb_b, 0.1, 0.004)
+    r = estimate_relpose(Ta, Tb)  # got: std 19% of |O| = 1.5 cm, error 3 mm
+    assert np.linalg.norm(r.position_in_a - small.o_a) < 0.01
