@@ -9,6 +9,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from acs_cli.core.pairing import PairingResult, pair_trajectories
+from acs_cli.errors import InputError
 from acs_cli.io.trajectory import Trajectory, read_trajectory
 
 TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
@@ -46,6 +47,22 @@ class PairedTrajectories:
     b: Trajectory
     pairing: PairingResult
     warnings: list[str] = field(default_factory=list)
+
+
+#: Largest difference (seconds or frame numbers) for two timestamps to be the same sample.
+TIME_TOL = 1e-6
+
+
+def finite_vec3(value: Any, what: str, path: Path | None) -> np.ndarray:
+    """Three finite numbers from an artifact's value, or an :class:`InputError` naming
+    ``what`` and the file."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise InputError(f"{what} must be three finite numbers", path=path)
+    return arr
 
 
 def load_trajectory(path: Path, fmt: str = "auto") -> Trajectory:

@@ -15,6 +15,7 @@ from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.stages.bundle import bundle_general
 from acs_cli.stages.common import (
     StageRun,
+    finite_vec3,
     frames_section,
     load_pair,
     pairing_section,
@@ -80,15 +81,7 @@ def _cov3(joint: dict[str, Any], which: str, path: Path) -> np.ndarray | None:
 
 def _vec3(joint: dict[str, Any], key: str, path: Path) -> np.ndarray | None:
     value = joint.get(key)
-    if value is None:
-        return None
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise InputError(f"joint.{key} must be three finite numbers", path=path)
-    return arr
+    return None if value is None else finite_vec3(value, f"joint.{key}", path)
 
 
 def load_prior(path: Path, metric: bool) -> JointPrior:

@@ -31,7 +31,7 @@ from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text, check_disti
 from acs_cli.io.trajectory import read_npz_header, read_npz_observations, read_npz_poses
 from acs_cli.report import figures as F
 from acs_cli.report.html import Page
-from acs_cli.stages.common import PairedTrajectories, load_pair, load_trajectory
+from acs_cli.stages.common import TIME_TOL, PairedTrajectories, load_pair, load_trajectory
 from acs_cli.stages.trajectory import recover_from_relpose
 
 __all__ = ["FIGURE_NAMES", "ReportConfig", "ReportRun", "figures_dir_for", "run_report"]
@@ -45,7 +45,6 @@ FIGURE_NAMES = {
     "reprojection": "reprojection.png",
     "coverage": "coverage.png",
 }
-TIME_TOL = 1e-6
 
 
 @dataclass(frozen=True)

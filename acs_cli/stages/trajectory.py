@@ -28,8 +28,10 @@ from acs_cli.io.artifacts import (
 from acs_cli.io.atomic import check_distinct_output
 from acs_cli.io.trajectory import write_tum
 from acs_cli.stages.common import (
+    TIME_TOL,
     PairedTrajectories,
     StageRun,
+    finite_vec3,
     load_pair,
     pairing_section,
 )
@@ -51,8 +53,6 @@ OUTPUT_NAMES = {
     "joint": "joint.tum",
     "artifact": "trajectory.yaml",
 }
-#: Largest difference (seconds or frame numbers) for a timestamp to match the reference's.
-TIME_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -122,16 +122,6 @@ RELPOSE_KEYS = (
 def read_relpose(path: Path) -> dict[str, Any]:
     """A ``relpose.yaml`` with the keys the trajectory needs (``InputError`` otherwise)."""
     return read_yaml_artifact(path, "relpose", RELPOSE_KEYS)
-
-
-def _vec3(value: Any, what: str, path: Path | None) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise InputError(f"{what} must be three finite numbers", path=path)
-    return arr
 
 
 def _number(value: Any, what: str, path: Path) -> float | None:
@@ -236,19 +226,19 @@ def recover_from_relpose(
     phi, mu_a, mu_b = _scale(relpose_doc, relpose_path)
     if joint_path is None:
         joint = relpose_doc["joint"]
-        o_a = _vec3(joint.get("position_in_a"), "joint.position_in_a", relpose_path)
-        o_b = _vec3(joint.get("position_in_b"), "joint.position_in_b", relpose_path)
+        o_a = finite_vec3(joint.get("position_in_a"), "joint.position_in_a", relpose_path)
+        o_b = finite_vec3(joint.get("position_in_b"), "joint.position_in_b", relpose_path)
         source = f"{relpose_path} (joint estimated with the relative pose)"
     else:
         joint = read_joint(joint_path)
-        o_a = _vec3(joint.get("position_in_a"), "joint.position_in_a", joint_path)
+        o_a = finite_vec3(joint.get("position_in_a"), "joint.position_in_a", joint_path)
         if joint.get("position_in_b") is None:
             raise InputError(
                 "has no joint.position_in_b: the trajectory needs the joint in both cameras "
                 "(or leave out --joint to use relpose.yaml's joint)",
                 path=joint_path,
             )
-        o_b = _vec3(joint.get("position_in_b"), "joint.position_in_b", joint_path)
+        o_b = finite_vec3(joint.get("position_in_b"), "joint.position_in_b", joint_path)
         source = str(joint_path)
         if mu_a is not None and mu_b is not None:
             o_a, o_b = o_a * mu_a, o_b * mu_b
