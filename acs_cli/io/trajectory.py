@@ -737,6 +737,26 @@ def read_npz_observations(path: str | Path) -> BoardObservations | None:
     return BoardObservations(corners, board, None if intr is None else str(intr))
 
 
+def read_npz_quality(path: str | Path) -> tuple[np.ndarray, list[str]]:
+    """Per-pose reprojection RMS (px, ``(n,)``; empty when absent) and the names of the
+    images without a pose, as ``acscal poses`` stores them.
+
+    Raises
+    ------
+    InputError
+        An unreadable NPZ or a non-numeric ``reprojection_rms``.
+    """
+    p = Path(path)
+    arrays = _load_npz(p)
+    rms = (
+        _npz_numeric(arrays, "reprojection_rms", p).reshape(-1)
+        if "reprojection_rms" in arrays
+        else np.zeros(0)
+    )
+    skipped = [str(v) for v in np.asarray(arrays.get("skipped_images", [])).reshape(-1)]
+    return rms, skipped
+
+
 def write_npz_poses(
     path: str | Path,
     traj: Trajectory,

@@ -9,7 +9,6 @@ is skipped with a note; a folder with no artifact at all is an :class:`InputErro
 
 from __future__ import annotations
 
-import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -28,7 +27,12 @@ from acs_cli.core.acs_trajectory import (
 from acs_cli.errors import AcsError, InputError
 from acs_cli.io.artifacts import get_path, read_yaml_artifact, sha256_of
 from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text, check_distinct_output
-from acs_cli.io.trajectory import read_npz_header, read_npz_observations, read_npz_poses
+from acs_cli.io.trajectory import (
+    read_npz_header,
+    read_npz_observations,
+    read_npz_poses,
+    read_npz_quality,
+)
 from acs_cli.report import figures as F
 from acs_cli.report.html import Page
 from acs_cli.stages.common import TIME_TOL, PairedTrajectories, load_pair, load_trajectory
@@ -342,18 +346,6 @@ def _joint_series(found: _Found, path: Path, doc: dict[str, Any]) -> list[F.Resi
     return series
 
 
-def _npz_rms(path: Path) -> np.ndarray:
-    """``reprojection_rms`` (px) of a poses NPZ (empty when it has none)."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if "reprojection_rms" not in z.files:
-                return np.zeros(0)
-            rms = np.asarray(z["reprojection_rms"], dtype=float).reshape(-1)
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
-        raise InputError(f"cannot read reprojection_rms ({exc})", path=path) from exc
-    return rms
-
-
 def _reprojection(found: _Found) -> list[F.ReprojectionData]:
     data = []
     for cam in CAMERAS:
@@ -372,7 +364,7 @@ def _reprojection(found: _Found) -> list[F.ReprojectionData]:
                 overall = float(doc["rms_px"])
         poses = {}
         for p in found.poses.get(cam, []):
-            r = _npz_rms(p)
+            r = read_npz_quality(p)[0]
             if r.size:
                 poses[p.name] = r
         data.append(F.ReprojectionData(cam, names, rms, overall, poses))
@@ -603,11 +595,8 @@ def _collect_warnings(found: _Found) -> None:
             try:
                 header = read_npz_header(p)
                 n = len(read_npz_poses(p))
-                with np.load(p, allow_pickle=False) as z:
-                    skipped = (
-                        [str(s) for s in z["skipped_images"]] if "skipped_images" in z.files else []
-                    )
-            except (AcsError, OSError, ValueError, zipfile.BadZipFile) as exc:
+                skipped = read_npz_quality(p)[1]
+            except AcsError as exc:
                 found.notes.append(f"{src} could not be read: {exc}")
                 continue
             for w in header.get("warnings") or []:

@@ -14,13 +14,13 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cli_runner
 import cv2
 import numpy as np
 import pytest
@@ -36,8 +36,11 @@ from acs_cli.stages.poses import PosesConfig, run_poses
 from acs_cli.stages.relpose import RelposeConfig, run_relpose
 from sample_data_gen import acs_sim
 
-ACSCAL = Path(sys.executable).with_name("acscal")
 SIZE = (320, 240)
+
+
+def acscal(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return cli_runner.acscal(*args, cwd=cwd, timeout=120)
 
 
 # ----------------------------------------------------------------------------- synthetic data
@@ -813,14 +816,6 @@ class Outcome:
     listing_before: set[Path]
     fresh: bool
     seconds: float
-
-
-def acscal(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
-    return subprocess.run(
-        [str(ACSCAL), *map(str, args)], capture_output=True, text=True, env=env, cwd=cwd,
-        timeout=120,
-    )  # fmt: skip
 
 
 def _snapshot(paths: list[Path]) -> dict[Path, tuple[bytes, int, int]]:

@@ -2,30 +2,22 @@
 
 from __future__ import annotations
 
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
+from cli_runner import acscal
 
 from acs_cli.io.trajectory import read_npz_header, read_trajectory
 
-ACSCAL = Path(sys.executable).with_name("acscal")
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "opencv_chessboard"
 
 needs_data = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"OpenCV sample photographs not found at {DATA}"
 )
-
-
-def acscal(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
-    return subprocess.run([str(ACSCAL), *map(str, args)], capture_output=True, text=True, env=env)
 
 
 def _copy(pattern: str, dest: Path) -> Path:

@@ -7,24 +7,22 @@ One module fixture renders a small image set (fixed-joint and general motion), r
 from __future__ import annotations
 
 import base64
-import os
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
+from cli_runner import acscal
 
 from acs_cli.core import se3
 from acs_cli.io.trajectory import read_tum
 from sample_data_gen.render import render_scenario
 from sample_data_gen.writer import SCENARIOS, make_sequence, rig_for_seed, write_scenario
 
-ACSCAL = Path(sys.executable).with_name("acscal")
 FIGURES = {
     "rig_trajectory.png",
     "rig_reference.png",
@@ -47,11 +45,6 @@ relpose:
   images: {a: ../images/general/cam_a, b: ../images/general/cam_b}
   method: refined
 """
-
-
-def acscal(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
-    return subprocess.run([str(ACSCAL), *map(str, args)], capture_output=True, text=True, env=env)
 
 
 def load(path: Path) -> dict:

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -12,10 +10,10 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from cli_runner import acscal
 
 from sample_data_gen.render import render_scenario
 
-ACSCAL = Path(sys.executable).with_name("acscal")
 STAGES_A = ["intrinsics a", "poses a", "poses general a", "joint", "relpose"]
 STAGES_B = ["intrinsics b", "poses b", "poses general b"]
 
@@ -32,11 +30,6 @@ relpose:
   images: {a: ../images/general/cam_a, b: ../images/general/cam_b}
   method: refined
 """
-
-
-def acscal(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
-    return subprocess.run([str(ACSCAL), *map(str, args)], capture_output=True, text=True, env=env)
 
 
 def _status(stdout: str) -> dict[str, str]:

@@ -2,29 +2,18 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
+from cli_runner import acscal
 
 from acs_cli.core import se3
 from acs_cli.io.trajectory import write_kitti, write_tum
 from sample_data_gen import acs_sim
-
-ACSCAL = Path(sys.executable).with_name("acscal")
-
-
-def acscal(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    """Run the installed console script as a user would."""
-    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
-    return subprocess.run(
-        [str(ACSCAL), *map(str, args)], capture_output=True, text=True, cwd=cwd, env=env
-    )
 
 
 def load(path: Path) -> dict:

@@ -12,7 +12,6 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -21,11 +20,11 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from cli_runner import ACSCAL
 from scipy.spatial.transform import Rotation
 
 from acs_cli.io.detections import read_detections
 
-ACSCAL = Path(sys.executable).with_name("acscal")
 SIZE = (640, 480)
 BOARD = (9, 6)
 SQUARE = 0.025

@@ -510,3 +510,26 @@ def test_readers_raise_only_input_error(data: bytes | str) -> None:
                 reader(path)
             except InputError as exc:
                 assert "\n" not in str(exc)
+
+
+def test_npz_quality_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
+    """Reprojection RMS and skipped images as `acscal poses` stores them; absent -> empty."""
+    from acs_cli.io.trajectory import Trajectory, read_npz_quality, write_npz_poses
+
+    T = Rotation.random(4, random_state=rng).as_matrix()
+    poses = np.tile(np.eye(4), (4, 1, 1))
+    poses[:, :3, :3] = T
+    traj = Trajectory(np.arange(4.0), poses, source="t", format="npz", has_timestamps=True)
+    full = tmp_path / "full.npz"
+    write_npz_poses(
+        full, traj, {"reprojection_rms": np.full(4, 0.2), "skipped_images": np.array(["x.png"])}
+    )
+    rms, skipped = read_npz_quality(full)
+    np.testing.assert_allclose(rms, 0.2)
+    assert skipped == ["x.png"]
+    bare = tmp_path / "bare.npz"
+    write_npz_poses(bare, traj)
+    rms, skipped = read_npz_quality(bare)
+    assert rms.size == 0 and skipped == []
+    with pytest.raises(InputError):
+        read_npz_quality(tmp_path / "missing.npz")
