@@ -24,6 +24,7 @@ class Stage(str, Enum):
     poses = "poses"
     joint = "joint"
     relpose = "relpose"
+    rig = "rig"
 
 
 def run(

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PAIR_BY",
     "PairingResult",
+    "common_timeline",
     "default_max_dt",
     "pair_by_index",
     "pair_by_timestamp",
@@ -239,3 +240,54 @@ def pair_trajectories(
             f"{result.max_dt:.6g} s; are both on the same clock?"
         )
     return result
+
+
+def common_timeline(
+    times: dict[str, ArrayLike], max_dt: float | None = None
+) -> tuple[NDArray[np.float64], dict[str, IntArray]]:
+    """Put every camera's samples on one timeline (a rig's cameras, paired all at once).
+
+    Samples of all cameras are sorted together and grouped: a group (a *slot*) starts at a
+    sample more than ``max_dt`` after the group's first sample. Each camera contributes at
+    most its nearest sample to a slot's time (the slot's first sample time).
+
+    Parameters
+    ----------
+    times : dict of str to array, shape (n_c,)
+        Each camera's increasing timestamps (seconds).
+    max_dt : float, optional
+        Largest spread of one slot; default half the smallest median frame interval.
+
+    Returns
+    -------
+    slot_times : ndarray, shape (m,)
+    index : dict of str to ndarray of int, shape (m,)
+        For each camera, its sample in each slot, or -1.
+    """
+    ts = {c: _as_times(t, f"times[{c}]") for c, t in times.items()}
+    if max_dt is None:
+        intervals = [_median_interval(t) for t in ts.values()]
+        max_dt = min(intervals) / 2.0 if intervals else float("inf")
+    if not np.isfinite(max_dt):
+        max_dt = float("inf")
+    allt = np.sort(np.concatenate([t for t in ts.values()] or [np.zeros(0)]))
+    slots: list[float] = []
+    for v in allt:  # one pass over the sorted samples, grouping them into slots
+        if not slots or v - slots[-1] > max_dt:
+            slots.append(float(v))
+    slot_times = np.asarray(slots, dtype=float)
+    index: dict[str, IntArray] = {}
+    for c, t in ts.items():
+        idx = np.full(slot_times.shape[0], -1, dtype=np.intp)
+        if t.size and slot_times.size:
+            # each sample to its slot (the last slot starting at or before it)
+            s = np.clip(np.searchsorted(slot_times, t, side="right") - 1, 0, None)
+            d = np.abs(t - slot_times[s])
+            order = np.lexsort((d, s))  # by slot, nearest first
+            first = np.ones(order.size, dtype=bool)
+            first[1:] = s[order][1:] != s[order][:-1]
+            keep = order[first]
+            keep = keep[d[keep] <= max_dt]
+            idx[s[keep]] = keep
+        index[c] = idx
+    return slot_times, index

@@ -266,3 +266,21 @@ def rotation_angle_deg(R: ArrayLike) -> FloatArray:
     arr = np.asarray(R, dtype=float)
     c = (np.trace(arr, axis1=-2, axis2=-1) - 1.0) / 2.0
     return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def right_jacobians_inv(rotvec: ArrayLike) -> FloatArray:
+    """``(n, 3, 3)`` inverse right Jacobians of SO(3) at rotation vectors ``(n, 3)``.
+
+    ``Log(Exp(phi) Exp(d)) = phi + Jr^-1(phi) d`` to first order in ``d``.
+    """
+    phi = np.atleast_2d(np.asarray(rotvec, dtype=float))
+    th = np.linalg.norm(phi, axis=1)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    c = np.where(
+        small,
+        1.0 / 12.0 + th**2 / 720.0,
+        1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(np.where(small, 1.0, ths))),
+    )
+    S = skew(phi)
+    return np.asarray(np.eye(3) + 0.5 * S + c[:, None, None] * np.matmul(S, S))

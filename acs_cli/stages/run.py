@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -33,6 +33,9 @@ from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.images import list_images
+
+if TYPE_CHECKING:
+    from acs_cli.stages.rig import RigRunConfig
 
 __all__ = [
     "CONFIG_SCHEMA",
@@ -54,7 +57,7 @@ CONFIG_VERSION = 1
 STATE_SCHEMA = "acscal/run-state"
 STATE_FILE = ".acscal-run.yaml"
 #: Stage kinds, in the order they run (``--only`` takes one of them).
-STAGE_KINDS = ("intrinsics", "poses", "joint", "relpose")
+STAGE_KINDS = ("intrinsics", "poses", "joint", "relpose", "rig")
 #: The HTML report every run ends with (regenerated each time, see :func:`write_run_report`).
 REPORT_FILE = "report.html"
 CAMERAS = ("a", "b")
@@ -315,16 +318,24 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
     )
 
 
-def load_run_config(path: Path) -> RunConfig:
-    """Read a run configuration file and check it (see :func:`parse_run_config`).
+def load_run_config(path: Path) -> RunConfig | RigRunConfig:
+    """Read a run configuration file and check it.
+
+    A config with ``joints`` (``schema_version: 2``) is a rig of named cameras
+    (:func:`acs_cli.stages.rig.parse_rig_config`); version 1 (cameras ``a`` and ``b``) is
+    checked by :func:`parse_run_config`.
 
     Raises
     ------
     InputError
         A missing or unreadable file, bad YAML, or a bad key.
     """
+    from acs_cli.stages.rig import is_rig_config, parse_rig_config
+
     p = Path(path)
     doc = load_yaml_file(p, "a run config (YAML)")
+    if is_rig_config(doc):
+        return parse_rig_config(doc, p)
     return parse_run_config(doc, p)
 
 
@@ -347,7 +358,7 @@ class StageResult:
 class PipelineRun:
     """What :func:`run_pipeline` did."""
 
-    config: RunConfig
+    config: RunConfig | RigRunConfig
     stages: list[StageResult]
     state_file: Path
     seconds: float
@@ -398,7 +409,7 @@ def _read_state(path: Path) -> dict[str, Any]:
     return dict(stages) if isinstance(stages, dict) else {}
 
 
-def _write_state(path: Path, config: RunConfig, stages: Mapping[str, Any]) -> None:
+def _write_state(path: Path, config: RunConfig | RigRunConfig, stages: Mapping[str, Any]) -> None:
     doc = {
         "schema": STATE_SCHEMA,
         "schema_version": 1,
@@ -484,6 +495,13 @@ def _numbers(kind: str, output: Path) -> str:
             if j.get("position_in_b") is not None:
                 text += f", O_b {_fmt(j['position_in_b'])}"
             return text + f" {j.get('units', 'm')}"
+        if kind == "rig":
+            cams, joints = doc["cameras"], doc["joints"]
+            unk = [n for n, c in cams.items() if c.get("unknown_scale")]
+            text = f"{len(cams)} cameras, {len(joints)} joints"
+            if unk:
+                text += ", scale " + ", ".join(f"{n} {float(cams[n]['scale']):.4g}" for n in unk)
+            return text
         if kind == "relpose":
             rel = doc["relative_pose"]
             text = (
@@ -648,8 +666,85 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     return stages, intrinsics
 
 
+def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
+    """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
+    from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
+    from acs_cli.stages.poses import PosesConfig, run_poses
+    from acs_cli.stages.rig import RIG_FILE, run_rig
+
+    out = config.output
+    stages: list[_Stage] = []
+    intrinsics: dict[str, Path] = {}
+    poses: dict[str, Path] = {}
+    for name, cam in config.cameras.items():
+        if cam.images is None or config.board is None:
+            continue
+        cols, rows, square = config.board
+        board = {"cols": cols, "rows": rows, "square": square}
+        cam_dir = out / f"cam_{name}"
+        intr_out = cam_dir / "intrinsics.yaml"
+        intrinsics[name] = intr_out
+        icfg = IntrinsicsConfig(
+            cols=cols, rows=rows, square=square, model=cam.model, workers=config.workers
+        )
+        images = cam.images
+
+        def do_intrinsics(
+            images: Path = images, intr_out: Path = intr_out, icfg: IntrinsicsConfig = icfg
+        ) -> list[str]:
+            return run_intrinsics(images, intr_out, icfg).warnings
+
+        stages.append(
+            _Stage(
+                f"intrinsics {name}",
+                "intrinsics",
+                {"images": images},
+                {**board, "model": cam.model},
+                [intr_out],
+                do_intrinsics,
+            )
+        )
+        npz, tum = cam_dir / "poses.npz", cam_dir / "poses.tum"
+        pcfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=config.workers)
+
+        def do_poses(
+            images: Path = images, intr: Path = intr_out, npz: Path = npz, pcfg: PosesConfig = pcfg
+        ) -> list[str]:
+            return run_poses(images, intr, npz, pcfg).warnings
+
+        stages.append(
+            _Stage(
+                f"poses {name}",
+                "poses",
+                {"images": images, "intrinsics": intr_out},
+                dict(board),
+                [npz, tum],
+                do_poses,
+            )
+        )
+        poses[name] = npz
+    rig_out = out / RIG_FILE
+    inputs = {f"poses_{n}": c.poses for n, c in config.cameras.items() if c.poses is not None}
+    inputs |= {f"poses_{n}": p for n, p in poses.items()}
+
+    def do_rig() -> list[str]:
+        return run_rig(config, poses, rig_out).warnings
+
+    stages.append(
+        _Stage(
+            "rig",
+            "rig",
+            inputs | {"config": config.path},
+            {"reference": [config.reference_camera, config.reference_frame]},
+            [rig_out],
+            do_rig,
+        )
+    )
+    return stages, intrinsics
+
+
 def run_pipeline(
-    config: RunConfig,
+    config: RunConfig | RigRunConfig,
     *,
     force: bool = False,
     only: str | None = None,
@@ -682,7 +777,12 @@ def run_pipeline(
     out = config.output
     state_file = out / STATE_FILE
     state = _read_state(state_file)
-    stages, intrinsics = _plan(config)
+    from acs_cli.stages.rig import RigRunConfig
+
+    if isinstance(config, RigRunConfig):
+        stages, intrinsics = _plan_rig(config)
+    else:
+        stages, intrinsics = _plan(config)
     results: list[StageResult] = []
 
     def report(res: StageResult) -> None:
@@ -690,7 +790,7 @@ def run_pipeline(
         if on_stage is not None:
             on_stage(res)
 
-    if config.intrinsics_from is not None:
+    if not isinstance(config, RigRunConfig) and config.intrinsics_from is not None:
         for name, path in intrinsics.items():
             if not path.is_file():
                 raise InputError(

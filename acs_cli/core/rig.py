@@ -1,0 +1,275 @@
+"""The rig: cameras are nodes, joints are the edges of a tree.
+
+An articulated camera system of many cameras is a kinematic tree. Each camera sits on a
+rigid body; an edge joins two cameras and has a type:
+
+- ``ball``: a spherical joint (the paper's model). Fixed at ``position_in[p]`` in camera
+  ``p``'s frame and at ``position_in[q]`` in camera ``q``'s, whatever the articulation.
+- ``hinge``: a revolute joint. An axis fixed in both bodies (``axis_in[p]``, ``axis_in[q]``,
+  unit vectors) and a point on it, the same physical point in both cameras. The point is
+  the one on the axis nearest camera ``p``'s optical centre (``p`` the edge's first camera).
+- ``rigid``: both cameras on one body; ``T_q_p`` is constant.
+
+The pose between any two cameras at one instant chains along the tree's unique path, as in
+pytransform3d's ``TransformManager``: ``T_c_a = T_c_b @ T_b_a``. An edge ``between: [p, q]``
+stores ``T_q_p`` (maps points of ``p``'s frame into ``q``'s); walking it from ``q`` to ``p``
+uses its inverse.
+
+This module is topology and chaining only (no estimation): :class:`RigTopology` validates
+a tree (every error names the offending key) and answers paths; :func:`chain_transforms`
+composes per-edge transforms into ``T_cam_ref`` for every camera.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from acs_cli.core import se3
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import InputError
+
+#: The joint types an edge can have.
+JOINT_TYPES = ("ball", "hinge", "rigid")
+
+
+@dataclass(frozen=True)
+class RigJoint:
+    """One edge of the rig's tree.
+
+    Attributes
+    ----------
+    name : str
+        The joint's key in the config (``joints.<name>``).
+    between : tuple of str
+        ``(p, q)``: the two cameras it joins. Quantities of the edge are expressed in
+        ``p``'s and ``q``'s frames; its transform is ``T_q_p``.
+    type : {"ball", "hinge", "rigid"}
+    """
+
+    name: str
+    between: tuple[str, str]
+    type: str
+
+    def other(self, camera: str) -> str:
+        """The camera at the other end of the edge from ``camera``."""
+        p, q = self.between
+        if camera == p:
+            return q
+        if camera == q:
+            return p
+        raise ValueError(f"camera {camera!r} is not on joint {self.name!r}")
+
+
+@dataclass(frozen=True)
+class PathStep:
+    """One step of a path through the tree: along ``joint`` from ``source`` to ``target``.
+
+    ``forward`` is True when the step goes from the edge's first camera to its second
+    (so that it applies the edge's ``T_q_p``), False when it applies the inverse.
+    """
+
+    joint: RigJoint
+    source: str
+    target: str
+
+    @property
+    def forward(self) -> bool:
+        return self.joint.between == (self.source, self.target)
+
+
+@dataclass(frozen=True)
+class RigTopology:
+    """A validated tree of cameras and joints with a reference camera.
+
+    Build it with :func:`rig_topology`, which checks it. ``cameras`` keeps the config's
+    order; ``joints`` too.
+    """
+
+    cameras: tuple[str, ...]
+    joints: tuple[RigJoint, ...]
+    reference: str
+
+    def joint(self, name: str) -> RigJoint:
+        """The joint called ``name``."""
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(name)
+
+    def edges_of(self, camera: str) -> list[RigJoint]:
+        """The joints that touch ``camera``, in config order."""
+        return [j for j in self.joints if camera in j.between]
+
+    def tree_order(self) -> list[PathStep]:
+        """Breadth-first steps from the reference camera: each camera (but the reference)
+        appears once as a ``target``, after its parent."""
+        steps: list[PathStep] = []
+        seen = {self.reference}
+        queue = deque([self.reference])
+        while queue:
+            c = queue.popleft()
+            for j in self.edges_of(c):
+                d = j.other(c)
+                if d not in seen:
+                    seen.add(d)
+                    steps.append(PathStep(j, c, d))
+                    queue.append(d)
+        return steps
+
+    def parents(self) -> dict[str, PathStep]:
+        """For every camera but the reference, the step that reaches it from its parent."""
+        return {s.target: s for s in self.tree_order()}
+
+    def path(self, source: str, target: str) -> list[PathStep]:
+        """The steps from ``source`` to ``target`` along the tree's unique path."""
+        for name in (source, target):
+            if name not in self.cameras:
+                raise ValueError(f"unknown camera {name!r}; the rig has {', '.join(self.cameras)}")
+        parents = self.parents()
+
+        def to_root(c: str) -> list[str]:
+            out = [c]
+            while out[-1] != self.reference:
+                out.append(parents[out[-1]].source)
+            return out
+
+        up, down = to_root(source), to_root(target)
+        common = next(c for c in up if c in down)
+        steps: list[PathStep] = []
+        for c in up[: up.index(common)]:
+            s = parents[c]
+            steps.append(PathStep(s.joint, c, s.source))
+        for c in reversed(down[: down.index(common)]):
+            steps.append(parents[c])
+        return steps
+
+
+def rig_topology(
+    cameras: Iterable[str],
+    joints: Iterable[tuple[str, Iterable[str], str]],
+    reference: str,
+    *,
+    key: str = "joints",
+) -> RigTopology:
+    """Check and build a rig's tree.
+
+    Parameters
+    ----------
+    cameras : iterable of str
+        Camera names, in order.
+    joints : iterable of (name, between, type)
+        The edges; ``between`` names two cameras.
+    reference : str
+        The reference camera.
+    key : str
+        The config key the joints come from, for messages (``joints.<name>.between``).
+
+    Raises
+    ------
+    InputError
+        Naming the key: an unknown joint type, a joint not between two distinct known
+        cameras, two joints between the same pair, a cycle, a camera in no joint (or a
+        rig in several pieces), an unknown reference camera.
+    """
+    cams = tuple(str(c) for c in cameras)
+    if not cams:
+        raise InputError("a rig needs at least one camera (cameras)")
+    if len(set(cams)) != len(cams):
+        raise InputError("cameras: a camera name is given twice")
+    if reference not in cams:
+        raise InputError(
+            f"reference.camera: {reference!r} is not one of the cameras ({', '.join(cams)})"
+        )
+    edges: list[RigJoint] = []
+    pairs: dict[frozenset[str], str] = {}
+    # union-find over cameras: an edge joining two already-connected cameras closes a cycle
+    root = {c: c for c in cams}
+
+    def find(c: str) -> str:
+        while root[c] != c:
+            root[c] = root[root[c]]
+            c = root[c]
+        return c
+
+    for name, between, jtype in joints:
+        name = str(name)
+        b = tuple(str(c) for c in between)
+        where = f"{key}.{name}"
+        if jtype not in JOINT_TYPES:
+            raise InputError(
+                f"{where}.type: {jtype!r} is not a joint type; choose one of "
+                + ", ".join(JOINT_TYPES)
+            )
+        if len(b) != 2:
+            raise InputError(f"{where}.between: needs two cameras, got {len(b)}")
+        for c in b:
+            if c not in cams:
+                raise InputError(
+                    f"{where}.between: unknown camera {c!r}; the cameras are {', '.join(cams)}"
+                )
+        if b[0] == b[1]:
+            raise InputError(f"{where}.between: joins camera {b[0]!r} to itself")
+        pair = frozenset(b)
+        if pair in pairs:
+            raise InputError(
+                f"{where}.between: {b[0]} and {b[1]} are already joined by {key}.{pairs[pair]}; "
+                "two cameras have at most one joint between them"
+            )
+        pairs[pair] = name
+        ra, rb = find(b[0]), find(b[1])
+        if ra == rb:
+            raise InputError(
+                f"{where}.between: joining {b[0]} and {b[1]} closes a cycle (they are already "
+                "connected through other joints); a rig's joints must form a tree"
+            )
+        root[ra] = rb
+        edges.append(RigJoint(name, (b[0], b[1]), str(jtype)))
+    if len(cams) > 1:
+        used = {c for e in edges for c in e.between}
+        lonely = [c for c in cams if c not in used]
+        if lonely:
+            raise InputError(
+                f"cameras.{lonely[0]}: the camera is in no joint; join it to the rig "
+                f"({key}.<name>: {{between: [{lonely[0]}, <camera>], type: ...}}) or remove it"
+            )
+        groups = {find(c) for c in cams}
+        if len(groups) > 1:
+            raise InputError(
+                f"{key}: the rig falls into {len(groups)} separate pieces; join them with a joint"
+            )
+    return RigTopology(cams, tuple(edges), reference)
+
+
+def chain_transforms(
+    topology: RigTopology, edge_transforms: Mapping[str, FloatArray]
+) -> dict[str, FloatArray]:
+    """``T_cam_ref`` ``(4, 4)`` for every camera from one ``T_q_p`` per edge.
+
+    Parameters
+    ----------
+    topology : RigTopology
+    edge_transforms : mapping of joint name to ndarray, shape (4, 4)
+        ``T_q_p`` of each edge ``between: [p, q]`` at one instant.
+
+    Returns
+    -------
+    dict
+        Camera name to ``T_cam_ref``; the reference camera's is the identity.
+    """
+    out: dict[str, FloatArray] = {topology.reference: np.eye(4)}
+    for step in topology.tree_order():
+        T_qp = se3.check_transforms(edge_transforms[step.joint.name], name=step.joint.name)[0]
+        T = T_qp if step.forward else se3.invert_transforms(T_qp)
+        out[step.target] = T @ out[step.source]  # T_target_ref = T_target_source T_source_ref
+    return out
+
+
+def transform_between(
+    topology: RigTopology, T_cam_ref: Mapping[str, FloatArray], a: str, b: str
+) -> FloatArray:
+    """``T_a_b`` from every camera's ``T_cam_ref``: ``T_a_ref @ inv(T_b_ref)``."""
+    return np.asarray(T_cam_ref[a] @ se3.invert_transforms(T_cam_ref[b]))

@@ -1,0 +1,1097 @@
+"""One maximum-likelihood solve over a whole rig: every edge at once.
+
+Each camera ``c`` has a trajectory ``T_wc_c[i]`` in its own world ``wc`` and its own units.
+A similarity ``X_c`` (rotation ``R_Xc``, translation ``t_Xc``, scale ``s_c``) maps it into the
+reference camera's world and units, so every camera's pose in one frame is
+
+    G_c[i] = [R_Xc R_c[i],  s_c R_Xc t_c[i] + t_Xc]                 (ref world, ref units)
+
+(``X_ref`` is the identity). Each edge ``between: [p, q]`` adds its constraint at every
+frame where both cameras have a pose (the paper's eq. (24) generalised from a pair to a tree):
+
+- ``ball``: ``G_p o_p = G_q o_q``: the joint is one point (eq. (24)).
+- ``hinge``: the same for a point on the axis, and ``R_Gp u_p = R_Gq u_q``: one axis
+  (``o_p . u_p = 0`` fixes which point: the one nearest ``p``'s centre).
+- ``rigid``: ``G_p = G_q T_q_p``: the hand-eye constraint.
+
+A camera shared by two edges ties them together: its ``X_c`` appears in both. Scales are
+free for every camera whose units differ from the reference's (unknown scale on either
+side). Joint priors (e.g. from fixed-joint sessions) add rows. The reference instant's poses
+are unknowns too, tied to their measurements by the pose noise, so that ``T_cam_ref`` is
+the maximum-likelihood pose and not the noisy measured one.
+
+Weights: the point residual of a ball or hinge has covariance ``theta_t I + theta_r L_i``
+with ``L_i`` the lever shapes of both cameras (as in :mod:`acs_cli.core.estimation`), the
+noise levels fitted per edge; axis and rigid residuals have one fitted variance each. The
+solve alternates scipy's ``least_squares`` (``jac_sparsity`` from the edge structure) with
+refitting the noise levels, and rejects per edge and frame the residuals beyond a
+chi-square bound. Covariances come from the final whitened Jacobian.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix, csr_matrix
+
+from acs_cli.core import se3
+from acs_cli.core.bundle import right_jacobians
+from acs_cli.core.estimation import fit_variance_components
+from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
+from acs_cli.core.relpose import SINGLE_AXIS_RATIO, UNDETERMINED_STD_FRACTION, _initial_lifted
+from acs_cli.core.rig import RigJoint, RigTopology
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import DegenerateMotionError, InputError
+
+#: Fewest frames an edge needs in common (as for a self-calibrated pair).
+MIN_EDGE_FRAMES = 14
+#: Tail probability per residual block for outlier rejection (as ``estimation.OUTLIER_ALPHA``).
+OUTLIER_ALPHA = 0.01
+#: Largest share of an edge's frames rejected as outliers.
+MAX_OUTLIER_FRACTION = 0.3
+#: Noise-level refits (each followed by a solve).
+REWEIGHT_ROUNDS = 4
+#: Normalised information eigenvalue below which a direction is not determined at all.
+NULL_EIGENVALUE = 1e-9
+#: Noise levels are kept above these (radians, and a share of the rig's length scale): a
+#: noiseless recording would otherwise weigh its rows beyond what differences resolve.
+NOISE_FLOOR_ROT = 1e-6
+NOISE_FLOOR_LENGTH = 1e-6
+
+
+@dataclass(frozen=True)
+class CameraTrack:
+    """One camera's poses on the rig's common timeline.
+
+    Attributes
+    ----------
+    T_w_c : ndarray, shape (n, 4, 4)
+        ``T_world_cam`` in the camera's own world and units; rows where ``valid`` is False
+        are ignored (fill them with the identity).
+    valid : ndarray of bool, shape (n,)
+    unknown_scale : bool
+        The trajectory's translations carry an unknown factor (monocular SLAM).
+    """
+
+    T_w_c: FloatArray
+    valid: np.ndarray
+    unknown_scale: bool = False
+
+
+@dataclass(frozen=True)
+class EdgePrior:
+    """A joint known beforehand: ``position_in[camera]`` ``(3,)`` in reference units, with
+    ``covariance_in[camera]`` ``(3, 3)`` (a fixed-joint session's result, or a measurement).
+    A hinge may also give ``axis_in[camera]``."""
+
+    position_in: dict[str, FloatArray] = field(default_factory=dict)
+    covariance_in: dict[str, FloatArray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CameraEstimate:
+    """``T_cam_ref`` ``(4, 4)`` with the covariance ``(6, 6)`` of (right rotation
+    perturbation (rad), translation (ref units)); scale (ref units per own unit)."""
+
+    T_cam_ref: FloatArray
+    covariance: FloatArray
+    scale: float = 1.0
+    scale_std: float | None = None
+
+    @property
+    def rotation_std_deg(self) -> FloatArray:
+        return np.degrees(np.sqrt(np.maximum(np.diag(self.covariance)[:3], 0.0)))
+
+    @property
+    def translation_std(self) -> FloatArray:
+        return np.sqrt(np.maximum(np.diag(self.covariance)[3:], 0.0))
+
+
+@dataclass(frozen=True)
+class EdgeEstimate:
+    """One edge's result; positions and axes in reference units, in each camera's frame."""
+
+    joint: RigJoint
+    position_in: dict[str, FloatArray]
+    position_cov_in: dict[str, FloatArray]
+    axis_in: dict[str, FloatArray]
+    axis_std_deg_in: dict[str, float]
+    T_q_p: FloatArray
+    residual_rms: float
+    frames_used: int
+    frames_rejected: int
+    inliers: np.ndarray
+    noise: dict[str, float]
+
+
+@dataclass(frozen=True)
+class RigEstimate:
+    """The calibrated rig (see :func:`estimate_rig`)."""
+
+    topology: RigTopology
+    reference_frame: int
+    cameras: dict[str, CameraEstimate]
+    edges: dict[str, EdgeEstimate]
+    cost: float
+    iterations: int
+    warnings: list[str] = field(default_factory=list)
+
+
+# --------------------------------------------------------------------------- layout
+
+
+class _Layout:
+    """Where each unknown lives in the parameter vector."""
+
+    def __init__(self, topo: RigTopology, tracks: dict[str, CameraTrack]):
+        ref = topo.reference
+        ref_unknown = tracks[ref].unknown_scale
+        k = 0
+        self.rot: dict[str, slice] = {}
+        self.trans: dict[str, slice] = {}
+        self.logs: dict[str, int] = {}
+        for c in topo.cameras:
+            if c == ref:
+                continue
+            self.rot[c], self.trans[c] = slice(k, k + 3), slice(k + 3, k + 6)
+            k += 6
+            if ref_unknown or tracks[c].unknown_scale:
+                self.logs[c] = k
+                k += 1
+        # ball: o_p, o_q (3 + 3). hinge: o_p in the plane across its axis (2), o_q (3), and
+        # each axis as a 2-dof step from its starting direction (2 + 2). rigid: T_q_p (3 + 3).
+        self.edge: dict[str, slice] = {}
+        for j in topo.joints:
+            size = {"ball": 6, "hinge": 9, "rigid": 6}[j.type]
+            self.edge[j.name] = slice(k, k + size)
+            k += size
+        self.delta: dict[str, slice] = {}
+        for c in topo.cameras:
+            self.delta[c] = slice(k, k + 6)
+            k += 6
+        self.size = k
+
+    def camera_columns(self, c: str) -> list[int]:
+        cols = list(range(self.size))[self.delta[c]]
+        if c in self.rot:
+            cols += list(range(self.size))[self.rot[c]] + list(range(self.size))[self.trans[c]]
+        if c in self.logs:
+            cols.append(self.logs[c])
+        return cols
+
+    def edge_columns(self, name: str) -> list[int]:
+        return list(range(self.size))[self.edge[name]]
+
+
+@dataclass
+class _State:
+    """Everything the residual function needs besides ``x``."""
+
+    topo: RigTopology
+    L: _Layout
+    R: dict[str, FloatArray]
+    t: dict[str, FloatArray]
+    R0X: dict[str, FloatArray]
+    R0rig: dict[str, FloatArray]
+    u0: dict[str, tuple[FloatArray, FloatArray]]  # per hinge: starting axes in p and q
+    ref_frame: int
+    frames: dict[str, np.ndarray]  # per edge: frame indices where both cameras are valid
+    mask: dict[str, np.ndarray]  # per edge: inlier mask over its frames
+    whiten_pos: dict[str, FloatArray]  # per edge: (m, 3, 3) inverse Cholesky factors
+    w_rot: dict[str, float]  # per edge: 1 / sigma of axis or rigid-rotation rows
+    w_trans: dict[str, float]  # per edge: 1 / sigma of rigid-translation rows
+    w_delta: dict[str, FloatArray]  # per camera: (6,) 1 / sigma of reference-pose priors
+    priors: list[tuple[str, int, FloatArray, FloatArray]]  # (joint, side, value, whitening)
+    length: float = 1.0  # the rig's length scale (reference units), for noise floors
+    frames_cur: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+def _poses(st: _State, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
+    """``G_c`` for every frame: rotations ``(n, 3, 3)`` and translations ``(n, 3)``."""
+    L = st.L
+    R, t = st.R[c], st.t[c]
+    d = x[L.delta[c]]
+    k = st.ref_frame
+    # the reference instant's pose is an unknown near its measurement
+    R = R.copy()
+    t = t.copy()
+    R[k] = R[k] @ se3.matrix_from_rotvec(d[:3])
+    t[k] = t[k] + d[3:]
+    if c not in L.rot:
+        return R, t
+    RX = st.R0X[c] @ se3.matrix_from_rotvec(x[L.rot[c]])
+    s = float(np.exp(x[L.logs[c]])) if c in L.logs else 1.0
+    return np.matmul(RX, R), s * t @ RX.T + x[L.trans[c]]
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    return v / max(float(np.linalg.norm(v)), 1e-300)
+
+
+def tangent_basis(u: FloatArray) -> FloatArray:
+    """``(3, 2)``: two unit vectors across the unit vector ``u`` (and across each other)."""
+    a = np.eye(3)[int(np.argmin(np.abs(u)))]
+    b1 = _unit(np.cross(u, a))
+    return np.stack([b1, np.cross(u, b1)], axis=1)
+
+
+def joint_geometry(
+    st: _State, x: FloatArray, j: RigJoint
+) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
+    """``o_p, o_q`` (reference units) and, for a hinge, the unit axes ``u_p, u_q``.
+
+    A hinge's axes are steps ``u = unit(u0 + B a)`` from their starting directions ``u0``
+    (``B`` across ``u0``); its point in ``p`` lies in the plane across ``u_p`` through ``p``'s
+    centre (the axis point nearest the camera), 2 unknowns.
+    """
+    e = x[st.L.edge[j.name]]
+    if j.type == "ball":
+        return e[:3], e[3:6], None, None
+    u0p, u0q = st.u0[j.name]
+    Bp, Bq = tangent_basis(u0p), tangent_basis(u0q)
+    up = _unit(u0p + Bp @ e[5:7])
+    uq = _unit(u0q + Bq @ e[7:9])
+    o_p = Bp @ e[:2]
+    o_p = o_p - (o_p @ up) * up
+    return o_p, e[2:5], up, uq
+
+
+def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, FloatArray]:
+    """Raw (unwhitened) residuals of one edge over its frames: ``pos`` ``(m, 3)``, and
+    ``rot`` ``(m, 3)`` (axis or rigid rotation) and ``trans`` ``(m, 3)`` where they apply."""
+    p, q = j.between
+    f = st.frames[j.name]
+    Rp, tp = G[p][0][f], G[p][1][f]
+    Rq, tq = G[q][0][f], G[q][1][f]
+    out: dict[str, FloatArray] = {}
+    if j.type in ("ball", "hinge"):
+        o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
+        out["pos"] = (se3.rotate(Rp, o_p) + tp) - (se3.rotate(Rq, o_q) + tq)  # eq. (24)
+        if u_p is not None and u_q is not None:
+            out["rot"] = se3.rotate(Rp, u_p) - se3.rotate(Rq, u_q)  # one axis
+    if j.type == "rigid":
+        e = x[st.L.edge[j.name]]
+        Rqp = st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3])
+        # G_p = G_q T_q_p
+        out["rot"] = se3.rotvec_from_matrix(np.einsum("nji,njk,kl->nil", Rp, Rq, Rqp))
+        out["trans"] = se3.rotate(Rq, e[3:6]) + tq - tp
+    return out
+
+
+def _residuals(st: _State, x: FloatArray) -> FloatArray:
+    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    parts: list[FloatArray] = []
+    for j in st.topo.joints:
+        m = st.mask[j.name][:, None]
+        b = _edge_blocks(st, x, j, G)
+        if "pos" in b:
+            w = np.matmul(st.whiten_pos[j.name], b["pos"][:, :, None])[:, :, 0]
+            parts.append((w * m).ravel())
+        if "rot" in b:
+            parts.append((b["rot"] * st.w_rot[j.name] * m).ravel())
+        if "trans" in b:
+            parts.append((b["trans"] * st.w_trans[j.name] * m).ravel())
+    for c in st.topo.cameras:
+        parts.append(x[st.L.delta[c]] * st.w_delta[c])
+    for name, side, value, Wh in st.priors:
+        point = joint_geometry(st, x, st.topo.joint(name))[side]
+        assert point is not None  # sides 0 and 1 are the joint's points
+        parts.append(Wh @ (point - value))
+    return np.concatenate(parts)
+
+
+def _geometry_jacobian(st: _State, x: FloatArray, j: RigJoint) -> FloatArray:
+    """``(12, k)``: derivatives of ``(o_p, o_q, u_p, u_q)`` by the edge's ``k`` unknowns.
+
+    Central differences of :func:`joint_geometry` (a few vector operations, no frames).
+    """
+    sl = st.L.edge[j.name]
+    size = sl.stop - sl.start
+    h = 1e-7
+    E = np.eye(size) * h
+
+    def g(dx: FloatArray) -> FloatArray:
+        xx = x.copy()
+        xx[sl] += dx
+        parts = joint_geometry(st, xx, j)
+        return np.concatenate([v if v is not None else np.zeros(3) for v in parts])
+
+    return np.stack([(g(E[i]) - g(-E[i])) / (2 * h) for i in range(size)], axis=1)
+
+
+def _camera_parts(st: _State, x: FloatArray, c: str) -> dict[str, FloatArray]:
+    """What a camera's Jacobian blocks need: ``R_X``, ``s``, ``Jr`` of its rotation and of its
+    reference-instant correction, its (corrected) measured rotations."""
+    L = st.L
+    d = x[L.delta[c]]
+    R = st.R[c].copy()
+    R[st.ref_frame] = R[st.ref_frame] @ se3.matrix_from_rotvec(d[:3])
+    t = st.t[c].copy()
+    t[st.ref_frame] = t[st.ref_frame] + d[3:]
+    if c in L.rot:
+        w = x[L.rot[c]]
+        RX = st.R0X[c] @ se3.matrix_from_rotvec(w)
+        Jw = right_jacobians(w[None])[0]
+    else:
+        RX, Jw = np.eye(3), np.zeros((3, 3))
+    s = float(np.exp(x[L.logs[c]])) if c in L.logs else 1.0
+    return {
+        "RX": RX,
+        "Jw": Jw,
+        "s": np.array(s),
+        "R": R,
+        "t": t,
+        "Jd": right_jacobians(d[None, :3])[0],
+    }
+
+
+def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
+    """The Jacobian of :func:`_residuals` (analytic; rotations perturbed on the right)."""
+    L, k = st.L, st.ref_frame
+    P = {c: _camera_parts(st, x, c) for c in st.topo.cameras}
+    rows_i: list[np.ndarray] = []
+    cols_i: list[np.ndarray] = []
+    vals: list[np.ndarray] = []
+    row0 = 0
+
+    def put(block: FloatArray, cols: list[int], first_row: int) -> None:
+        # block (m, 3, len(cols)) for rows first_row + 3 i + a
+        m = block.shape[0]
+        r = first_row + np.arange(3 * m)
+        rows_i.append(np.repeat(r, len(cols)))
+        cols_i.append(np.tile(np.asarray(cols), 3 * m))
+        vals.append(block.reshape(-1))
+
+    def cam_block(c: str, y: FloatArray, sign: float, with_t: bool) -> tuple[FloatArray, list[int]]:
+        """Derivatives of ``sign * (R_X y + [s R_X t + t_X])`` by the camera's similarity."""
+        pc = P[c]
+        m = y.shape[0]
+        blocks, cols = [], []
+        if c in L.rot:
+            RX = pc["RX"]
+            # d(R_X Exp(dw) y) = -R_X [y]x Jr(w) dw
+            blocks.append(-sign * np.matmul(se3.left_multiply(RX, se3.skew(y)), pc["Jw"]))
+            cols += list(range(L.rot[c].start, L.rot[c].stop))
+            if with_t:
+                blocks.append(sign * np.broadcast_to(np.eye(3), (m, 3, 3)))
+                cols += list(range(L.trans[c].start, L.trans[c].stop))
+        if c in L.logs and with_t:
+            blocks.append(sign * (pc["s"] * pc["t"][st.frames_cur] @ pc["RX"].T)[:, :, None])
+            cols.append(L.logs[c])
+        if not blocks:
+            return np.zeros((m, 3, 0)), []
+        return np.concatenate(blocks, axis=2), cols
+
+    for j in st.topo.joints:
+        p, q = j.between
+        f = st.frames[j.name]
+        st.frames_cur = f
+        m = f.size
+        mask = st.mask[j.name].astype(float)[:, None, None]
+        kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any
+        ecols = L.edge_columns(j.name)
+        Pp, Pq = P[p], P[q]
+        RGp = se3.left_multiply(Pp["RX"], Pp["R"][f])
+        RGq = se3.left_multiply(Pq["RX"], Pq["R"][f])
+        if j.type in ("ball", "hinge"):
+            o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
+            Dg = _geometry_jacobian(st, x, j)
+            Wp = st.whiten_pos[j.name] * mask
+            yp = se3.rotate(Pp["R"][f], o_p) + Pp["s"] * Pp["t"][f]
+            yq = se3.rotate(Pq["R"][f], o_q) + Pq["s"] * Pq["t"][f]
+            for c, y, sign in ((p, yp, 1.0), (q, yq, -1.0)):
+                B, cols = cam_block(c, y, sign, True)
+                if cols:
+                    put(np.matmul(Wp, B), cols, row0)
+            # joint unknowns: R_Gp do_p - R_Gq do_q
+            Be = np.matmul(RGp, Dg[0:3]) - np.matmul(RGq, Dg[3:6])
+            put(np.matmul(Wp, Be), ecols, row0)
+            if kk.size:
+                i = int(kk[0])
+                for c, o, sign in ((p, o_p, 1.0), (q, o_q, -1.0)):
+                    pc = P[c]
+                    Dr = -sign * pc["RX"] @ pc["R"][k] @ se3.skew(o) @ pc["Jd"]
+                    Dt = sign * pc["s"] * pc["RX"]
+                    blk = Wp[i] @ np.concatenate([Dr, Dt], axis=1)
+                    put(blk[None], list(range(L.delta[c].start, L.delta[c].stop)), row0 + 3 * i)
+            row0 += 3 * m
+            if j.type == "hinge":
+                assert u_p is not None and u_q is not None
+                w = st.w_rot[j.name] * mask
+                for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
+                    B, cols = cam_block(c, se3.rotate(P[c]["R"][f], u), sign, False)
+                    if cols:
+                        put(w * B, cols, row0)
+                Be = np.matmul(RGp, Dg[6:9]) - np.matmul(RGq, Dg[9:12])
+                put(w * Be, ecols, row0)
+                if kk.size:
+                    i = int(kk[0])
+                    for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
+                        pc = P[c]
+                        Dr = -sign * pc["RX"] @ pc["R"][k] @ se3.skew(u) @ pc["Jd"]
+                        put(
+                            (w[i] * Dr)[None],
+                            list(range(L.delta[c].start, L.delta[c].start + 3)),
+                            row0 + 3 * i,
+                        )
+                row0 += 3 * m
+        else:
+            e = x[L.edge[j.name]]
+            Rqp = st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3])
+            E = np.einsum("nji,njk,kl->nil", RGp, RGq, Rqp)
+            rho = se3.rotvec_from_matrix(E)
+            Ji = se3.right_jacobians_inv(rho) * st.w_rot[j.name] * mask
+            Et = np.swapaxes(E, 1, 2)
+            # q's similarity: E Exp((R_q R_qp)^T dw); p's: E Exp(-E^T R_p^T dw)
+            if q in L.rot:
+                A = np.swapaxes(np.matmul(Pq["R"][f], Rqp), 1, 2)
+                put(np.matmul(Ji, A @ Pq["Jw"]), list(range(L.rot[q].start, L.rot[q].stop)), row0)
+            if p in L.rot:
+                A = -np.matmul(Et, np.swapaxes(Pp["R"][f], 1, 2))
+                put(np.matmul(Ji, A @ Pp["Jw"]), list(range(L.rot[p].start, L.rot[p].stop)), row0)
+            Jre = right_jacobians(e[None, :3])[0]
+            blk = np.concatenate([np.matmul(Ji, Jre), np.zeros((m, 3, 3))], axis=2)
+            put(blk, ecols, row0)
+            if kk.size:
+                i = int(kk[0])
+                put(
+                    (Ji[i] @ Rqp.T @ Pq["Jd"])[None],
+                    list(range(L.delta[q].start, L.delta[q].start + 3)),
+                    row0 + 3 * i,
+                )
+                put(
+                    (-Ji[i] @ Et[i] @ Pp["Jd"])[None],
+                    list(range(L.delta[p].start, L.delta[p].start + 3)),
+                    row0 + 3 * i,
+                )
+            row0 += 3 * m
+            # translation: R_Gq t_qp + t_Gq - t_Gp
+            wt = st.w_trans[j.name] * mask
+            yq = se3.rotate(Pq["R"][f], e[3:6]) + Pq["s"] * Pq["t"][f]
+            B, cols = cam_block(q, yq, 1.0, True)
+            if cols:
+                put(wt * B, cols, row0)
+            B, cols = cam_block(p, Pp["s"] * Pp["t"][f], -1.0, True)
+            if cols:
+                put(wt * B, cols, row0)
+            blk = np.concatenate([np.zeros((m, 3, 3)), RGq], axis=2)
+            put(wt * blk, ecols, row0)
+            if kk.size:
+                i = int(kk[0])
+                Dr = -Pq["RX"] @ Pq["R"][k] @ se3.skew(e[3:6]) @ Pq["Jd"]
+                put(
+                    (wt[i] * np.concatenate([Dr, Pq["s"] * Pq["RX"]], axis=1))[None],
+                    list(range(L.delta[q].start, L.delta[q].stop)),
+                    row0 + 3 * i,
+                )
+                put(
+                    (wt[i] * np.concatenate([np.zeros((3, 3)), -Pp["s"] * Pp["RX"]], axis=1))[None],
+                    list(range(L.delta[p].start, L.delta[p].stop)),
+                    row0 + 3 * i,
+                )
+            row0 += 3 * m
+    for c in st.topo.cameras:
+        D = np.diag(st.w_delta[c])  # the correction is its own unknown
+        put(D.reshape(2, 3, 6), list(range(L.delta[c].start, L.delta[c].stop)), row0)
+        row0 += 6
+    for name, side, value, Wh in st.priors:
+        j = st.topo.joint(name)
+        Dg = _geometry_jacobian(st, x, j)
+        put((Wh @ Dg[3 * side : 3 * side + 3])[None], L.edge_columns(name), row0)
+        row0 += value.size
+    r = np.concatenate(rows_i)
+    cidx = np.concatenate(cols_i)
+    v = np.concatenate(vals)
+    return csr_matrix(coo_matrix((v, (r, cidx)), shape=(row0, L.size)))
+
+
+# --------------------------------------------------------------------------- init
+
+
+def _initial(
+    topo: RigTopology,
+    tracks: dict[str, CameraTrack],
+    frames: dict[str, np.ndarray],
+    L: _Layout,
+) -> tuple[
+    FloatArray,
+    dict[str, FloatArray],
+    dict[str, FloatArray],
+    dict[str, tuple[FloatArray, FloatArray]],
+]:
+    """Starting point: each edge from the reference outward by the linear self-calibration
+    (:func:`acs_cli.core.relpose._initial_lifted`), in the reference world and units."""
+    x = np.zeros(L.size)
+    R0X: dict[str, FloatArray] = {}
+    R0rig: dict[str, FloatArray] = {}
+    u0: dict[str, tuple[FloatArray, FloatArray]] = {}
+    X: dict[str, tuple[FloatArray, FloatArray, float]] = {
+        topo.reference: (np.eye(3), np.zeros(3), 1.0)
+    }
+    for step in topo.tree_order():
+        j = step.joint
+        s_name, t_name = step.source, step.target
+        f = frames[j.name]
+        RXs, tXs, ss = X[s_name]
+        Ts = tracks[s_name].T_w_c[f]
+        Gs = se3.transforms_from_rt(np.matmul(RXs, Ts[:, :3, :3]), ss * Ts[:, :3, 3] @ RXs.T + tXs)
+        Tt = tracks[t_name].T_w_c[f]
+        # j_t = phi R j_s + t  (target units, target world)
+        R, tt, phi, o_s, o_t = _initial_lifted(Gs, Tt, None)
+        phi = max(phi, 1e-9)
+        RXt = R.T
+        st_ = 1.0 / phi
+        tXt = -R.T @ tt / phi
+        free = t_name in L.logs
+        if not free:
+            st_ = 1.0
+        X[t_name] = (RXt, tXt, st_)
+        R0X[t_name] = RXt
+        x[L.trans[t_name]] = tXt
+        if free:
+            x[L.logs[t_name]] = np.log(st_)
+        o_t = o_t * st_
+        o = {s_name: o_s, t_name: o_t}
+        Gt_R = np.matmul(RXt, Tt[:, :3, :3])
+        Gt_t = st_ * Tt[:, :3, 3] @ RXt.T + tXt
+        p, q = j.between
+        e = L.edge[j.name]
+        if j.type == "ball":
+            x[e] = np.concatenate([o[p], o[q]])
+        elif j.type == "hinge":
+            # relative rotations R_s_t[i] = Rot(u_s, theta_i) R0: u_t with R_s_t u_t constant
+            Rst = np.einsum("nji,njk->nik", Gs[:, :3, :3], Gt_R)
+            _, _, Vt = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3))
+            u = {t_name: Vt[2], s_name: _unit(Rst.mean(axis=0) @ Vt[2])}
+            # slide the point along the axis to the one nearest p's centre
+            lam = -float(o[p] @ u[p])
+            o = {c: o[c] + lam * u[c] for c in o}
+            u0[j.name] = (u[p], u[q])
+            x[e] = np.concatenate([tangent_basis(u[p]).T @ o[p], o[q], np.zeros(4)])
+        else:
+            # G_p = G_q T_q_p: T_q_p from the frames' average
+            Rg = {s_name: Gs[:, :3, :3], t_name: Gt_R}
+            tg = {s_name: Gs[:, :3, 3], t_name: Gt_t}
+            Rqp, _ = se3.project_to_rotation(np.einsum("nji,njk->ik", Rg[q], Rg[p]))
+            tqp = np.mean(np.einsum("nji,nj->ni", Rg[q], tg[p] - tg[q]), axis=0)
+            R0rig[j.name] = Rqp
+            x[e] = np.concatenate([np.zeros(3), tqp])
+    return x, R0X, R0rig, u0
+
+
+# --------------------------------------------------------------------------- weights
+
+
+def _chol_whiteners(S: FloatArray) -> FloatArray:
+    """``W_i`` ``(m, 3, 3)`` with ``W_i S_i W_i^T = I`` (inverse Cholesky factors)."""
+    Lc = np.linalg.cholesky(S + 1e-300 * np.eye(3))
+    return np.asarray(np.linalg.inv(Lc))
+
+
+def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[str, float]]:
+    """Per-edge noise levels from the current residuals; updates the weights in ``st``."""
+    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    noise: dict[str, dict[str, float]] = {}
+    cam_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
+    cam_trans: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
+    share = n_params / max(sum(int(m.sum()) for m in st.mask.values()), 1)
+    for j in st.topo.joints:
+        p, q = j.between
+        f = st.frames[j.name]
+        m = st.mask[j.name]
+        b = _edge_blocks(st, x, j, G)
+        d: dict[str, float] = {}
+        if "pos" in b:
+            o_p, o_q, _, _ = joint_geometry(st, x, j)
+            Lsh = lever_shapes(G[p][0][f], o_p) + lever_shapes(G[q][0][f], o_q)
+            th = fit_variance_components(b["pos"][m], Lsh[m], int(np.ceil(share * m.sum())))
+            th = np.maximum(th, [(NOISE_FLOOR_LENGTH * st.length) ** 2, NOISE_FLOOR_ROT**2])
+            # rotation noise is per camera: the two lever shapes share theta_r
+            S = th[1] * Lsh
+            S[:, [0, 1, 2], [0, 1, 2]] += th[0]
+            st.whiten_pos[j.name] = _chol_whiteners(S)
+            d["sigma_trans"] = float(np.sqrt(th[0] / 2.0))
+            d["sigma_rot_deg"] = float(np.degrees(np.sqrt(th[1])))
+            for c in (p, q):
+                cam_rot[c].append(th[1])
+                cam_trans[c].append(th[0] / 2.0)
+        if "rot" in b:
+            dof = 2.0 if j.type == "hinge" else 3.0
+            v = max(float(np.mean(np.sum(b["rot"][m] ** 2, axis=1))) / dof, NOISE_FLOOR_ROT**2)
+            st.w_rot[j.name] = 1.0 / np.sqrt(v)
+            d["sigma_rot_deg"] = float(np.degrees(np.sqrt(v / 2.0)))
+            if j.type == "rigid":
+                for c in (p, q):
+                    cam_rot[c].append(v / 2.0)
+        if "trans" in b:
+            v = max(
+                float(np.mean(np.sum(b["trans"][m] ** 2, axis=1))) / 3.0,
+                (NOISE_FLOOR_LENGTH * st.length) ** 2,
+            )
+            st.w_trans[j.name] = 1.0 / np.sqrt(v)
+            d["sigma_trans"] = float(np.sqrt(v / 2.0))
+            for c in (p, q):
+                cam_trans[c].append(v / 2.0)
+        noise[j.name] = d
+    for c in st.topo.cameras:
+        vr = float(np.mean(cam_rot[c])) if cam_rot[c] else 1e-6
+        vt = float(np.mean(cam_trans[c])) if cam_trans[c] else 1e-6
+        # translation noise of the measured pose is in the camera's own units
+        s = float(np.exp(x[st.L.logs[c]])) if c in st.L.logs else 1.0
+        st.w_delta[c] = np.array([1 / np.sqrt(vr)] * 3 + [s / np.sqrt(vt)] * 3)
+    return noise
+
+
+def _reject(st: _State, x: FloatArray) -> int:
+    """Drop residual blocks beyond the chi-square bound; returns how many were dropped."""
+    from scipy.stats import chi2  # lazily: importing scipy.stats costs ~0.6 s a command
+
+    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    dropped = 0
+    for j in st.topo.joints:
+        b = _edge_blocks(st, x, j, G)
+        d2 = np.zeros(st.frames[j.name].size)
+        dof = 0
+        if "pos" in b:
+            w = np.matmul(st.whiten_pos[j.name], b["pos"][:, :, None])[:, :, 0]
+            d2 += np.sum(w**2, axis=1)
+            dof += 3
+        if "rot" in b:
+            d2 += np.sum((b["rot"] * st.w_rot[j.name]) ** 2, axis=1)
+            dof += 2 if j.type == "hinge" else 3
+        if "trans" in b:
+            d2 += np.sum((b["trans"] * st.w_trans[j.name]) ** 2, axis=1)
+            dof += 3
+        m = st.mask[j.name]
+        n = m.size
+        thr = float(chi2.isf(OUTLIER_ALPHA / max(n, 1), dof))
+        room = int(np.floor(MAX_OUTLIER_FRACTION * n)) - int((~m).sum())
+        bad = np.flatnonzero(m & (d2 > thr))
+        if bad.size and room > 0:
+            bad = bad[np.argsort(d2[bad])[::-1][:room]]
+            m[bad] = False
+            dropped += bad.size
+    return dropped
+
+
+# --------------------------------------------------------------------------- solve
+
+
+def _check_tracks(topo: RigTopology, tracks: dict[str, CameraTrack], ref_frame: int) -> int:
+    n = None
+    for c in topo.cameras:
+        if c not in tracks:
+            raise InputError(f"cameras.{c}: no poses given")
+        tr = tracks[c]
+        se3.check_transforms(tr.T_w_c, name=f"cameras.{c} poses")
+        if n is None:
+            n = tr.T_w_c.shape[0]
+        if tr.T_w_c.shape[0] != n or tr.valid.shape != (n,):
+            raise InputError(f"cameras.{c}: poses are not on the rig's common timeline")
+    assert n is not None
+    if not -n <= ref_frame < n:
+        raise InputError(f"reference.frame: {ref_frame} is outside the {n} frames")
+    k = ref_frame % n
+    missing = [c for c in topo.cameras if not tracks[c].valid[k]]
+    if missing:
+        raise InputError(
+            f"reference.frame: camera {missing[0]} has no pose at frame {k}; choose a frame "
+            "where every camera has one"
+        )
+    return k
+
+
+def estimate_rig(
+    topology: RigTopology,
+    tracks: dict[str, CameraTrack],
+    *,
+    reference_frame: int = 0,
+    priors: dict[str, EdgePrior] | None = None,
+    reject_outliers: bool = True,
+) -> RigEstimate:
+    """Calibrate a rig from every camera's general motion: one maximum-likelihood solve.
+
+    Parameters
+    ----------
+    topology : RigTopology
+        Cameras, joints (ball, hinge, rigid) and the reference camera.
+    tracks : dict of CameraTrack
+        Every camera's poses on one timeline (``(n, 4, 4)`` each, with a validity mask).
+    reference_frame : int
+        The instant at which ``T_cam_ref`` is reported.
+    priors : dict of EdgePrior, optional
+        Joints known beforehand, by joint name (reference units).
+    reject_outliers : bool
+
+    Returns
+    -------
+    RigEstimate
+
+    Raises
+    ------
+    InputError
+        Missing cameras, tracks off the timeline, a bad reference frame.
+    DegenerateMotionError
+        An edge with too few frames in common, or a motion that leaves part of the rig
+        undetermined; the message names the edge and what to record (or configure) instead.
+    """
+    k = _check_tracks(topology, tracks, reference_frame)
+    priors = priors or {}
+    frames: dict[str, np.ndarray] = {}
+    for j in topology.joints:
+        p, q = j.between
+        f = np.flatnonzero(tracks[p].valid & tracks[q].valid)
+        if f.size < MIN_EDGE_FRAMES:
+            raise DegenerateMotionError(
+                f"joint {j.name} ({p}-{q}): the two cameras have poses at {f.size} common "
+                f"instants; the rig needs at least {MIN_EDGE_FRAMES} of general motion. Record "
+                "more frames where both cameras track.",
+                details={"joint": j.name, "frames": int(f.size)},
+            )
+        frames[j.name] = f
+    L = _Layout(topology, tracks)
+    x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L)
+    Rm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, :3]) for c in topology.cameras}
+    tm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, 3]) for c in topology.cameras}
+    # the rig's length scale: for noise floors and for judging what is determined
+    travel = float(
+        np.sqrt(np.mean(np.sum((tm[topology.reference] - tm[topology.reference].mean(0)) ** 2, 1)))
+    )
+    prior_rows: list[tuple[str, int, FloatArray, FloatArray]] = []
+    for name, pr in priors.items():
+        j = topology.joint(name)
+        if j.type == "rigid":
+            raise InputError(f"joints.{name}: a rigid joint has no position to give")
+        for c, pos in pr.position_in.items():
+            if c not in j.between:
+                raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
+            C = pr.covariance_in.get(c)
+            if C is None:
+                C = np.eye(3) * (1e-4 * max(travel, 1e-3)) ** 2
+            try:
+                Wh = np.linalg.inv(np.linalg.cholesky(np.asarray(C, float)))
+            except np.linalg.LinAlgError:
+                raise InputError(
+                    f"joints.{name}: the covariance given for {c} is not positive definite"
+                ) from None
+            side = j.between.index(c)
+            prior_rows.append((name, side, np.asarray(pos, float), Wh))
+            if j.type == "ball":
+                x0[L.edge[name]][3 * side : 3 * side + 3] = pos
+    st = _State(
+        topo=topology,
+        L=L,
+        R=Rm,
+        t=tm,
+        R0X=R0X,
+        R0rig=R0rig,
+        u0=u0,
+        ref_frame=k,
+        frames=frames,
+        mask={j.name: np.ones(frames[j.name].size, bool) for j in topology.joints},
+        whiten_pos={
+            j.name: np.broadcast_to(np.eye(3), (frames[j.name].size, 3, 3)).copy()
+            for j in topology.joints
+        },
+        w_rot={j.name: 1.0 for j in topology.joints},
+        w_trans={j.name: 1.0 for j in topology.joints},
+        w_delta={c: np.full(6, 1e3) for c in topology.cameras},
+        priors=prior_rows,
+        length=max(travel, 1e-9),
+    )
+
+    def fun(x: FloatArray) -> FloatArray:
+        return _residuals(st, x)
+
+    def jac(x: FloatArray) -> csr_matrix:
+        return _jacobian(st, x)
+
+    def run(x: FloatArray) -> tuple[FloatArray, int, Any]:
+        sol = least_squares(
+            fun, x, jac=jac, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10,
+            gtol=1e-10, max_nfev=200,
+        )  # fmt: skip
+        return sol.x, int(sol.nfev), sol
+
+    x = x0
+    nfev = 0
+    noise: dict[str, dict[str, float]] = {}
+    sol = None
+    for _ in range(REWEIGHT_ROUNDS):
+        before = noise
+        noise = _refit_weights(st, x, L.size)
+        if before and _settled(before, noise):
+            break
+        x, nf, sol = run(x)
+        nfev += nf
+    if reject_outliers:
+        for _ in range(4):
+            if _reject(st, x) == 0:
+                break
+            noise = _refit_weights(st, x, L.size)
+            x, nf, sol = run(x)
+            nfev += nf
+    noise = _refit_weights(st, x, L.size)
+    x, nf, sol = run(x)
+    nfev += nf
+    assert sol is not None
+    J = sol.jac
+    H = np.asarray((J.T @ J).toarray() if hasattr(J, "toarray") else J.T @ J)
+    cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
+    est = _assemble(st, x, cov, noise, float(sol.cost), nfev)
+    _check_determined(st, x, H, cov, est, travel)
+    return est
+
+
+def _settled(a: dict[str, dict[str, float]], b: dict[str, dict[str, float]]) -> bool:
+    """Whether refitted noise levels moved by less than 2% (then the weights are final)."""
+    for name, d in b.items():
+        for key, v in d.items():
+            old = a.get(name, {}).get(key)
+            if old is None or abs(v - old) > 0.02 * max(abs(old), 1e-300):
+                return False
+    return True
+
+
+def _propagate(
+    f: Callable[[FloatArray], FloatArray], x: FloatArray, cov: FloatArray, cols: list[int]
+) -> tuple[FloatArray, FloatArray]:
+    """``f(x)`` and its covariance from ``cov`` by one-sided differences over ``cols``."""
+    y0 = f(x)
+    G = np.zeros((y0.size, x.size))
+    for c in cols:  # the unknowns that f depends on (a handful), not frames
+        h = 1e-7 * max(1.0, abs(float(x[c])))
+        xc = x.copy()
+        xc[c] += h
+        G[:, c] = (f(xc) - y0) / h
+    return y0, G @ cov @ G.T
+
+
+def _assemble(
+    st: _State,
+    x: FloatArray,
+    cov: FloatArray,
+    noise: dict[str, dict[str, float]],
+    cost: float,
+    nfev: int,
+) -> RigEstimate:
+    topo, L, k = st.topo, st.L, st.ref_frame
+    ref = topo.reference
+
+    def pose_at_ref(xx: FloatArray, c: str) -> FloatArray:
+        R, t = _poses(st, xx, c)
+        return se3.transforms_from_rt(R[k], t[k])
+
+    cams: dict[str, CameraEstimate] = {}
+    for c in topo.cameras:
+        T0 = se3.invert_transforms(pose_at_ref(x, c)) @ pose_at_ref(x, ref)
+
+        def vec(xx: FloatArray, c: str = c, T0: FloatArray = T0) -> FloatArray:
+            T = se3.invert_transforms(pose_at_ref(xx, c)) @ pose_at_ref(xx, ref)
+            return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
+
+        cols = sorted(set(L.camera_columns(c) + L.camera_columns(ref)))
+        _, C6 = _propagate(vec, x, cov, cols)
+        scale, scale_std = 1.0, None
+        if c in L.logs:
+            scale = float(np.exp(x[L.logs[c]]))
+            scale_std = float(scale * np.sqrt(max(cov[L.logs[c], L.logs[c]], 0.0)))
+        cams[c] = CameraEstimate(T0 if c != ref else np.eye(4), C6, scale, scale_std)
+    edges: dict[str, EdgeEstimate] = {}
+    G = {c: _poses(st, x, c) for c in topo.cameras}
+    for j in topo.joints:
+        p, q = j.between
+        pos: dict[str, FloatArray] = {}
+        pcov: dict[str, FloatArray] = {}
+        axis: dict[str, FloatArray] = {}
+        astd: dict[str, float] = {}
+        if j.type in ("ball", "hinge"):
+            cols = L.edge_columns(j.name)
+
+            def geometry(xx: FloatArray, j: RigJoint = j) -> FloatArray:
+                return np.concatenate([v for v in joint_geometry(st, xx, j) if v is not None])
+
+            g, Cg = _propagate(geometry, x, cov, cols)
+            for side, c in enumerate((p, q)):
+                sl = slice(3 * side, 3 * side + 3)
+                pos[c], pcov[c] = g[sl], Cg[sl, sl]
+                if j.type == "hinge":
+                    sl = slice(6 + 3 * side, 9 + 3 * side)
+                    axis[c] = g[sl]
+                    astd[c] = float(np.degrees(np.sqrt(max(np.trace(Cg[sl, sl]), 0.0))))
+        T_q_p = cams[q].T_cam_ref @ se3.invert_transforms(cams[p].T_cam_ref)
+        b = _edge_blocks(st, x, j, G)
+        m = st.mask[j.name]
+        r = b.get("pos", b.get("trans"))
+        rms = float(np.sqrt(np.mean(np.sum(r[m] ** 2, axis=1)))) if r is not None else 0.0
+        edges[j.name] = EdgeEstimate(
+            joint=j,
+            position_in=pos,
+            position_cov_in=pcov,
+            axis_in=axis,
+            axis_std_deg_in=astd,
+            T_q_p=T_q_p,
+            residual_rms=rms,
+            frames_used=int(m.sum()),
+            frames_rejected=int((~m).sum()),
+            inliers=np.asarray(st.frames[j.name][m]),
+            noise=noise.get(j.name, {}),
+        )
+    return RigEstimate(topo, k, cams, edges, cost, nfev)
+
+
+# --------------------------------------------------------------------------- degeneracy
+
+
+def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
+    """``"turns about one axis only"`` and the like for rotations ``(n, 3, 3)``, or ``""``."""
+    s = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), compute_uv=False)
+    spread = float(s[0] / np.sqrt(R.shape[0]))
+    if spread < MIN_ROTATION_SPREAD:
+        return f"{what} hardly turns (RMS spread {np.degrees(spread):.2f} deg)"
+    if s[2] < SINGLE_AXIS_RATIO * s[0] and not hinge_ok:
+        return f"{what} turns about one axis only (singular value ratio {s[2] / s[0]:.3f})"
+    return ""
+
+
+def _single_axis(R: FloatArray) -> FloatArray | None:
+    """The world axis ``(3,)`` of rotations ``(n, 3, 3)`` that turn about one axis only, or
+    None. (The axis ``v`` in the body with ``R_i v`` constant; ``mean(R_i) v`` in the world.)"""
+    _, s, Vt = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3))
+    if s[0] <= 0 or s[2] >= SINGLE_AXIS_RATIO * s[0]:
+        return None
+    return _unit(R.mean(axis=0) @ Vt[2])
+
+
+#: Two axes are "the same" within this angle (degrees) for the planar-motion rule.
+PARALLEL_AXES_DEG = 10.0
+
+
+def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
+    """The component a planar motion hides on an edge, in words, or ``""``.
+
+    When camera ``p`` turns about one world axis only and the joint turns about that same
+    axis (a hinge along it, a ball bending about it only, or a rigid edge), nothing in the
+    motion tells how far apart along that axis the two cameras' parts of the joint are: a
+    truck and its trailer on flat ground.
+    """
+    p, q = j.between
+    f = st.frames[j.name]
+    Rp = _poses(st, x, p)[0][f]
+    a = _single_axis(Rp)
+    if a is None:
+        return ""
+    cos = np.cos(np.radians(PARALLEL_AXES_DEG))
+    if j.type == "hinge":
+        u_p = joint_geometry(st, x, j)[2]
+        assert u_p is not None
+        if abs(float(np.mean(se3.rotate(Rp, u_p), axis=0) @ a)) < cos:
+            return ""
+        return (
+            f"the offset between {p} and {q} along the hinge axis: both turn about that axis "
+            "only (planar motion with the axis along the plane's normal)"
+        )
+    if j.type == "ball":
+        Rq = _poses(st, x, q)[0][f]
+        b = _single_axis(np.einsum("nji,njk->nik", Rp, Rq))
+        if b is None:
+            return ""
+        if abs(float(np.mean(se3.rotate(Rp, b), axis=0) @ a)) < cos:
+            return ""
+        return (
+            f"the offset between {p} and {q} along the vertical of the motion: the rig turns "
+            f"and joint {j.name} bends about that axis only (planar motion)"
+        )
+    return (
+        f"the offset between {p} and {q} along the axis {p} turns about: a rigid pair that "
+        "turns about one axis only (planar motion) cannot see it"
+    )
+
+
+def _check_determined(
+    st: _State, x: FloatArray, H: FloatArray, cov: FloatArray, est: RigEstimate, travel: float
+) -> None:
+    """Name each edge whose part of the rig the motion leaves undetermined (exit 3)."""
+    topo, L = st.topo, st.L
+    with_prior = {name for name, *_ in st.priors}
+    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    Hn = H / np.outer(d, d)
+    w, V = np.linalg.eigh(Hn)
+    null = V[:, w < NULL_EIGENVALUE * max(float(w[-1]), 1e-300)]
+    parents = topo.parents()
+    G = {c: _poses(st, x, c) for c in topo.cameras}
+    problems: list[str] = []
+    details: dict[str, object] = {}
+    flagged: set[str] = set()
+    for step in topo.tree_order():  # parents first: a problem upstream explains the rest
+        j = step.joint
+        p, q = j.between
+        upstream = {s.joint.name for s in topo.path(topo.reference, step.source)}
+        if upstream & flagged:
+            continue
+        cols = L.edge_columns(j.name)
+        # the child camera of this edge in the tree carries the edge's world transform
+        child = q if parents.get(q) is not None and parents[q].joint.name == j.name else p
+        cols_all = cols + L.camera_columns(child)
+        in_null = float(np.sum(null[cols_all, :] ** 2)) if null.size else 0.0
+        scale_len = max(travel, 1e-12)
+        worst = 0.0
+        what = ""
+        if j.type in ("ball", "hinge"):
+            for c in (p, q):
+                C = est.edges[j.name].position_cov_in[c]
+                ev, evec = np.linalg.eigh(C)
+                std = float(np.sqrt(max(ev[-1], 0.0)))
+                o = est.edges[j.name].position_in[c]
+                rel = std / max(float(np.linalg.norm(o)), 0.1 * scale_len, 1e-12)
+                if rel > worst:
+                    worst, what = rel, f"the joint's position in {c}"
+                    if j.type == "hinge":
+                        u = est.edges[j.name].axis_in[c]
+                        if abs(float(evec[:, -1] @ u)) > 0.9:
+                            what = (
+                                f"the offset between {p} and {q} along the hinge axis "
+                                f"(the joint's position along the axis in {c})"
+                            )
+        planar = "" if j.name in with_prior else planar_offset(st, x, j)
+        if planar:
+            what, in_null = planar, 1.0
+        elif in_null < 0.5 and worst <= UNDETERMINED_STD_FRACTION:
+            continue
+        f = st.frames[j.name]
+        Rst = np.einsum("nji,njk->nik", G[p][0][f], G[q][0][f])
+        why = [
+            _motion_words(G[p][0][f], f"camera {p}", False),
+            _motion_words(Rst, f"joint {j.name}", j.type == "hinge") if j.type != "rigid" else "",
+        ]
+        if j.type == "ball":
+            s = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), compute_uv=False)
+            if s[2] < SINGLE_AXIS_RATIO * s[0]:
+                why.append(f"joint {j.name} bends about one axis only: declare it type: hinge")
+        because = "; ".join(w for w in why if w) or "the motion is too narrow for the noise"
+        advice = (
+            f"record the rig turning about several axes (tilting, not only turning on flat "
+            f"ground) while joint {j.name} moves"
+        )
+        if j.type in ("ball", "hinge"):
+            advice += (
+                f", or give the joint in the config (joints.{j.name}.position_in.{q}: "
+                f"[x, y, z] in metres, measured on the rig)"
+            )
+        size = (
+            "cannot be determined"
+            if in_null >= 0.5
+            else f"is not determined (std {100 * worst:.0f}% of its size)"
+        )
+        problems.append(f"joint {j.name} ({p}-{q}): {what} {size} ({because}); {advice}")
+        flagged.add(j.name)
+        details[j.name] = {"relative_std": worst, "null_share": in_null}
+    if problems:
+        raise DegenerateMotionError(
+            "the motion does not determine the rig: " + " | ".join(problems) + ".",
+            details=details,
+        )

@@ -1,0 +1,299 @@
+"""The rig artifact: ``rig.yaml``, every camera's pose and every joint of a calibrated rig.
+
+Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
+
+    reference: {camera: cam0, frame: 0}
+    length_unit: m                      # the reference camera's trajectory unit
+    cameras:
+      <name>:
+        T_cam_ref: 4x4                  # reference camera's frame (reference instant) -> this one's
+        T_cam_ref_std: {rotation_deg: [3], translation: [3]}   # right perturbation of R, then t
+        unknown_scale: bool
+        scale: float                    # reference units per trajectory unit of this camera
+        scale_std: float | fixed        # "fixed" where the scale is not estimated
+    joints:
+      <name>:
+        type: ball | hinge | rigid
+        between: [p, q]
+        position_in: {p: [3], q: [3]}   # ball centre, or the hinge point (nearest p's centre)
+        position_std_in: {p: [3], q: [3]}
+        axis_in: {p: [3], q: [3]}       # hinge only: unit vectors
+        axis_std_deg_in: {p: float, q: float}
+        residual_rms: float             # of the joint constraint over the frames used
+        frames_used: int
+        frames_rejected: int
+    warnings: [str]
+
+Every length (``T_cam_ref`` translations, joint positions) is in the reference camera's
+units (metres when its trajectory is metric). A camera with unknown scale converts its own
+trajectory units to these with ``scale``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core import se3
+from acs_cli.core.rig import JOINT_TYPES
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import read_yaml_artifact, write_yaml_artifact
+
+KIND = "rig"
+
+__all__ = ["KIND", "RigArtifact", "RigCameraResult", "RigJointResult"]
+
+
+@dataclass(frozen=True)
+class RigCameraResult:
+    """One camera of a calibrated rig (see the module doc for units and frames)."""
+
+    name: str
+    T_cam_ref: FloatArray
+    rotation_std_deg: FloatArray
+    translation_std: FloatArray
+    unknown_scale: bool = False
+    scale: float = 1.0
+    scale_std: float | None = None  # None: fixed, not estimated
+
+
+@dataclass(frozen=True)
+class RigJointResult:
+    """One joint (edge) of a calibrated rig."""
+
+    name: str
+    type: str
+    between: tuple[str, str]
+    position_in: dict[str, FloatArray] = field(default_factory=dict)
+    position_std_in: dict[str, FloatArray] = field(default_factory=dict)
+    axis_in: dict[str, FloatArray] = field(default_factory=dict)
+    axis_std_deg_in: dict[str, float] = field(default_factory=dict)
+    residual_rms: float = 0.0
+    frames_used: int = 0
+    frames_rejected: int = 0
+
+
+def _array(value: Any, shape: tuple[int, ...], key: str, path: Path) -> FloatArray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"'{key}' must be numbers of shape {shape}", path=path) from None
+    if arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise InputError(
+            f"'{key}' must be finite numbers of shape {shape}, got shape {arr.shape}", path=path
+        )
+    return arr
+
+
+def _number(value: Any, key: str, path: Path) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise InputError(f"'{key}' must be a finite number, got {type(value).__name__}", path=path)
+    return float(value)
+
+
+def _mapping(value: Any, key: str, path: Path) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise InputError(f"'{key}' must be a mapping", path=path)
+    return value
+
+
+@dataclass(frozen=True)
+class RigArtifact:
+    """A calibrated rig: load, save, validate, summarise.
+
+    Attributes
+    ----------
+    reference_camera : str
+    reference_frame : int
+    length_unit : str
+    cameras : dict of RigCameraResult
+    joints : dict of RigJointResult
+    warnings : list of str
+    header : dict
+        The artifact header (tool, inputs, method, units, frames); set when loaded or saved.
+    """
+
+    reference_camera: str
+    reference_frame: int
+    length_unit: str
+    cameras: dict[str, RigCameraResult]
+    joints: dict[str, RigJointResult]
+    warnings: list[str] = field(default_factory=list)
+    header: dict[str, Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ queries
+
+    def T_a_b(self, a: str, b: str) -> FloatArray:
+        """``T_a_b`` at the reference instant: ``T_a_ref @ inv(T_b_ref)``."""
+        return np.asarray(
+            self.cameras[a].T_cam_ref @ se3.invert_transforms(self.cameras[b].T_cam_ref)
+        )
+
+    def summary(self) -> str:
+        """A few lines for a person: each camera's position, each joint."""
+        u = self.length_unit
+        lines = [f"rig: {len(self.cameras)} cameras, {len(self.joints)} joints, "
+                 f"reference {self.reference_camera} at frame {self.reference_frame}"]  # fmt: skip
+        for c in self.cameras.values():
+            centre = -c.T_cam_ref[:3, :3].T @ c.T_cam_ref[:3, 3]
+            s = (
+                f"  {c.name}: centre in {self.reference_camera} ["
+                + " ".join(f"{v:+.4f}" for v in centre)
+                + f"] {u} (std {float(np.max(c.translation_std)):.2g})"
+            )
+            if c.unknown_scale:
+                s += f", scale {c.scale:.5g}" + (
+                    "" if c.scale_std is None else f" +- {c.scale_std:.2g}"
+                )
+            lines.append(s)
+        for j in self.joints.values():
+            s = f"  {j.name} ({j.type}, {j.between[0]}-{j.between[1]})"
+            if j.type != "rigid":
+                p = j.position_in[j.between[0]]
+                s += f": point in {j.between[0]} [" + " ".join(f"{v:+.4f}" for v in p) + f"] {u}"
+            if j.type == "hinge":
+                a = j.axis_in[j.between[0]]
+                s += ", axis [" + " ".join(f"{v:+.3f}" for v in a) + "]"
+            s += f", residual RMS {j.residual_rms:.3g}"
+            lines.append(s)
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------ io
+
+    def body(self) -> dict[str, Any]:
+        """The YAML body (everything but the header)."""
+        cams = {}
+        for c in self.cameras.values():
+            cams[c.name] = {
+                "T_cam_ref": c.T_cam_ref,
+                "T_cam_ref_std": {
+                    "rotation_deg": c.rotation_std_deg,
+                    "translation": c.translation_std,
+                },
+                "unknown_scale": c.unknown_scale,
+                "scale": c.scale,
+                "scale_std": "fixed" if c.scale_std is None else c.scale_std,
+            }
+        joints = {}
+        for j in self.joints.values():
+            d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
+            if j.type != "rigid":
+                d["position_in"] = dict(j.position_in)
+                d["position_std_in"] = dict(j.position_std_in)
+            if j.type == "hinge":
+                d["axis_in"] = dict(j.axis_in)
+                d["axis_std_deg_in"] = dict(j.axis_std_deg_in)
+            d["residual_rms"] = j.residual_rms
+            d["frames_used"] = j.frames_used
+            d["frames_rejected"] = j.frames_rejected
+            joints[j.name] = d
+        return {
+            "reference": {"camera": self.reference_camera, "frame": self.reference_frame},
+            "length_unit": self.length_unit,
+            "cameras": cams,
+            "joints": joints,
+            "warnings": list(self.warnings),
+        }
+
+    def save(self, path: str | Path, header: dict[str, Any]) -> RigArtifact:
+        """Write ``rig.yaml`` atomically with ``header`` (from ``make_header("rig", ...)``)."""
+        write_yaml_artifact(path, header, self.body())
+        return RigArtifact(**{**self.__dict__, "header": dict(header)})
+
+    @classmethod
+    def load(cls, path: str | Path) -> RigArtifact:
+        """Read and validate a ``rig.yaml``; errors name the file and the key."""
+        p = Path(path)
+        doc = read_yaml_artifact(p, KIND, ["reference.camera", "cameras", "joints"])
+        ref = _mapping(doc["reference"], "reference", p)
+        frame = ref.get("frame", 0)
+        if isinstance(frame, bool) or not isinstance(frame, int):
+            raise InputError("'reference.frame' must be an integer", path=p)
+        cams_doc = _mapping(doc["cameras"], "cameras", p)
+        cameras: dict[str, RigCameraResult] = {}
+        for name, c in cams_doc.items():
+            k = f"cameras.{name}"
+            c = _mapping(c, k, p)
+            T = _array(c.get("T_cam_ref"), (4, 4), f"{k}.T_cam_ref", p)
+            try:
+                se3.check_transforms(T, name=f"{k}.T_cam_ref")
+            except InputError as exc:
+                raise InputError(exc.message, path=p) from None
+            std = _mapping(c.get("T_cam_ref_std", {}), f"{k}.T_cam_ref_std", p)
+            scale_std = c.get("scale_std", "fixed")
+            cameras[str(name)] = RigCameraResult(
+                name=str(name),
+                T_cam_ref=T,
+                rotation_std_deg=_array(
+                    std.get("rotation_deg", [0, 0, 0]), (3,), f"{k}.T_cam_ref_std.rotation_deg", p
+                ),
+                translation_std=_array(
+                    std.get("translation", [0, 0, 0]), (3,), f"{k}.T_cam_ref_std.translation", p
+                ),
+                unknown_scale=bool(c.get("unknown_scale", False)),
+                scale=_number(c.get("scale", 1.0), f"{k}.scale", p),
+                scale_std=None if scale_std == "fixed" else _number(scale_std, f"{k}.scale_std", p),
+            )
+        reference = str(ref["camera"])
+        if reference not in cameras:
+            raise InputError(f"'reference.camera' {reference!r} is not one of the cameras", path=p)
+        joints: dict[str, RigJointResult] = {}
+        for name, j in _mapping(doc["joints"], "joints", p).items():
+            k = f"joints.{name}"
+            j = _mapping(j, k, p)
+            jtype = j.get("type")
+            if jtype not in JOINT_TYPES:
+                raise InputError(f"'{k}.type' must be one of {', '.join(JOINT_TYPES)}", path=p)
+            between = j.get("between")
+            if (
+                not isinstance(between, list)
+                or len(between) != 2
+                or any(str(b) not in cameras for b in between)
+            ):
+                raise InputError(f"'{k}.between' must name two of the rig's cameras", path=p)
+            b = (str(between[0]), str(between[1]))
+
+            def per_cam(key: str, shape: tuple[int, ...], k: str = k, j: Any = j, b: Any = b):
+                d = _mapping(j.get(key, {}), f"{k}.{key}", p)
+                return {c: _array(d[c], shape, f"{k}.{key}.{c}", p) for c in b if c in d}
+
+            pos = per_cam("position_in", (3,)) if jtype != "rigid" else {}
+            if jtype != "rigid" and len(pos) != 2:
+                raise InputError(f"'{k}.position_in' needs both {b[0]} and {b[1]}", path=p)
+            axis = per_cam("axis_in", (3,)) if jtype == "hinge" else {}
+            if jtype == "hinge" and len(axis) != 2:
+                raise InputError(f"'{k}.axis_in' needs both {b[0]} and {b[1]}", path=p)
+            ax_std = _mapping(j.get("axis_std_deg_in", {}), f"{k}.axis_std_deg_in", p)
+            joints[str(name)] = RigJointResult(
+                name=str(name),
+                type=str(jtype),
+                between=b,
+                position_in=pos,
+                position_std_in=per_cam("position_std_in", (3,)) if jtype != "rigid" else {},
+                axis_in=axis,
+                axis_std_deg_in={
+                    str(c): _number(v, f"{k}.axis_std_deg_in.{c}", p) for c, v in ax_std.items()
+                },
+                residual_rms=_number(j.get("residual_rms", 0.0), f"{k}.residual_rms", p),
+                frames_used=int(j.get("frames_used", 0)),
+                frames_rejected=int(j.get("frames_rejected", 0)),
+            )
+        warnings = doc.get("warnings") or []
+        if not isinstance(warnings, list):
+            raise InputError("'warnings' must be a list", path=p)
+        keys = ("schema", "schema_version", "tool", "created", "inputs", "method", "units")
+        header: dict[str, Any] = {k: doc[k] for k in (*keys, "frames") if k in doc}
+        return cls(
+            reference_camera=reference,
+            reference_frame=frame,
+            length_unit=str(doc.get("length_unit", "m")),
+            cameras=cameras,
+            joints=joints,
+            warnings=[str(w) for w in warnings],
+            header=header,
+        )

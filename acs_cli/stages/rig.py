@@ -1,0 +1,394 @@
+"""The rig stage: every camera and joint of a rig calibrated at once (``rig.yaml``).
+
+A rig run config (``schema_version: 2``) names cameras and the joints between them::
+
+    schema: acscal/run-config
+    schema_version: 2
+    output: out/
+    reference: {camera: cam0, frame: 0}
+    cameras:
+      cam0: {poses: cam0.tum}                  # TUM, KITTI, COLMAP or NPZ
+      cam1: {poses: cam1.tum, scale: unknown}  # monocular SLAM: metric scale unknown
+      cam2: {images: imgs/cam2, model: pinhole}  # intrinsics and poses from a board
+    joints:
+      j01: {between: [cam0, cam1], type: ball}
+      j12: {between: [cam1, cam2], type: hinge}
+
+:func:`parse_rig_config` checks it (every error names the key); :func:`run_rig` reads each
+camera's trajectory, puts all cameras on one timeline, solves the whole rig
+(:func:`acs_cli.core.rig_solve.estimate_rig`) and writes ``rig.yaml``
+(:class:`acs_cli.io.rig.RigArtifact`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acs_cli.core.intrinsics import MODELS
+from acs_cli.core.pairing import PAIR_BY, common_timeline
+from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
+from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import make_header
+from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
+from acs_cli.io.trajectory import Trajectory, read_trajectory
+
+RIG_CONFIG_VERSION = 2
+SCALES = ("known", "unknown")
+TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
+RIG_FILE = "rig.yaml"
+
+
+@dataclass(frozen=True)
+class RigCameraSpec:
+    """One camera of a rig config: a trajectory file, or an image folder of a board."""
+
+    name: str
+    poses: Path | None = None
+    format: str = "auto"
+    images: Path | None = None
+    model: str = "pinhole"
+    unknown_scale: bool = False
+
+
+@dataclass(frozen=True)
+class RigJointSpec:
+    """One joint of a rig config, with an optional prior on its position (metres)."""
+
+    name: str
+    between: tuple[str, str]
+    type: str
+    position_in: dict[str, np.ndarray] = field(default_factory=dict)
+    position_std: float | None = None
+
+
+@dataclass(frozen=True)
+class RigRunConfig:
+    """A checked rig run configuration (``schema_version: 2``); paths are resolved."""
+
+    path: Path
+    output: Path
+    reference_camera: str
+    reference_frame: int
+    cameras: dict[str, RigCameraSpec]
+    joints: dict[str, RigJointSpec]
+    topology: RigTopology
+    board: tuple[int, int, float] | None = None
+    pair_by: str = "auto"
+    max_dt: float | None = None
+    workers: int | None = None
+
+
+def is_rig_config(doc: Any) -> bool:
+    """Whether a loaded run config is a rig config (version 2, or it has ``joints``)."""
+    return isinstance(doc, dict) and (
+        doc.get("schema_version") == RIG_CONFIG_VERSION or "joints" in doc
+    )
+
+
+def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
+    """Check a rig run config; every error is an :class:`InputError` naming the key.
+
+    Raises
+    ------
+    InputError
+        Unknown or missing keys, wrong values, and a joint graph that is not a tree: a
+        cycle, an unknown camera in a joint, two joints between one pair, a camera in no
+        joint.
+    """
+    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker
+
+    c = _Checker(path)
+    top = c.mapping(
+        doc,
+        "",
+        required=("output", "cameras", "joints"),
+        optional=(
+            "schema", "schema_version", "reference", "board", "pair_by", "max_dt", "workers",
+        ),
+    )  # fmt: skip
+    if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
+        raise c.fail("schema", f"must be {CONFIG_SCHEMA}, got {str(top['schema'])[:60]!r}")
+    version = c.integer(top.get("schema_version", RIG_CONFIG_VERSION), "schema_version", 1)
+    if version != RIG_CONFIG_VERSION:
+        raise c.fail(
+            "schema_version",
+            f"a config with joints is version {RIG_CONFIG_VERSION}, got {version}",
+        )
+    output = c.path(top["output"], "output")
+    cams_doc = c.mapping(top["cameras"], "cameras", optional=tuple(map(str, top["cameras"])))
+    if not cams_doc:
+        raise c.fail("cameras", "names no camera")
+    cameras: dict[str, RigCameraSpec] = {}
+    for name, cam in cams_doc.items():
+        key = f"cameras.{name}"
+        cam = c.mapping(
+            cam if cam is not None else {},
+            key,
+            optional=("poses", "format", "images", "model", "scale"),
+        )
+        if ("poses" in cam) == ("images" in cam):
+            raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
+        scale = c.choice(cam.get("scale", "known"), f"{key}.scale", SCALES)
+        cameras[name] = RigCameraSpec(
+            name=name,
+            poses=c.path(cam["poses"], f"{key}.poses") if "poses" in cam else None,
+            format=c.choice(cam.get("format", "auto"), f"{key}.format", TRAJECTORY_FORMATS),
+            images=c.path(cam["images"], f"{key}.images") if "images" in cam else None,
+            model=c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS),
+            unknown_scale=scale == "unknown",
+        )
+    ref = c.mapping(top.get("reference", {}), "reference", optional=("camera", "frame"))
+    ref_cam = ref.get("camera", next(iter(cameras)))
+    if not isinstance(ref_cam, str) or ref_cam not in cameras:
+        raise c.fail("reference.camera", f"must name one of the cameras ({', '.join(cameras)})")
+    ref_frame = c.integer(ref.get("frame", 0), "reference.frame", 0)
+    joints_doc = c.mapping(top["joints"], "joints", optional=tuple(map(str, top["joints"])))
+    joints: dict[str, RigJointSpec] = {}
+    raw: list[tuple[str, list[str], str]] = []
+    for name, j in joints_doc.items():
+        key = f"joints.{name}"
+        j = c.mapping(
+            j, key, required=("between", "type"), optional=("position_in", "position_std")
+        )
+        between = j["between"]
+        if not isinstance(between, list) or not all(isinstance(b, str) for b in between):
+            raise c.fail(f"{key}.between", "must be a list of two camera names")
+        jtype = c.choice(j["type"], f"{key}.type", JOINT_TYPES)
+        raw.append((name, between, jtype))
+        pos: dict[str, np.ndarray] = {}
+        if j.get("position_in") is not None:
+            pm = c.mapping(j["position_in"], f"{key}.position_in", optional=tuple(between))
+            for cam_name, v in pm.items():
+                arr = np.asarray(v, dtype=float) if isinstance(v, list) else np.zeros(0)
+                if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+                    raise c.fail(f"{key}.position_in.{cam_name}", "must be three numbers (m)")
+                pos[cam_name] = arr
+        std = None
+        if j.get("position_std") is not None:
+            std = c.positive(j["position_std"], f"{key}.position_std")
+        if jtype == "rigid" and pos:
+            raise c.fail(f"{key}.position_in", "a rigid joint has no position")
+        joints[name] = RigJointSpec(name, (str(between[0]), str(between[-1])), jtype, pos, std)
+    try:
+        topo = rig_topology(list(cameras), raw, ref_cam)
+    except InputError as exc:
+        raise InputError(exc.message, path=path) from None
+    board = None
+    if top.get("board") is not None:
+        b = c.mapping(top["board"], "board", required=("cols", "rows", "square"))
+        board = (
+            c.integer(b["cols"], "board.cols", 2),
+            c.integer(b["rows"], "board.rows", 2),
+            c.positive(b["square"], "board.square"),
+        )
+    image_cams = [n for n, s in cameras.items() if s.images is not None]
+    if image_cams and board is None:
+        raise c.fail("board", f"missing (camera {image_cams[0]} has images)")
+    max_dt = None
+    if top.get("max_dt") is not None:
+        max_dt = c.positive(top["max_dt"], "max_dt")
+    workers = None
+    if top.get("workers") is not None:
+        workers = c.integer(top["workers"], "workers", 1)
+    return RigRunConfig(
+        path=path,
+        output=output,
+        reference_camera=ref_cam,
+        reference_frame=ref_frame,
+        cameras=cameras,
+        joints=joints,
+        topology=topo,
+        board=board,
+        pair_by=c.choice(top.get("pair_by", "auto"), "pair_by", PAIR_BY),
+        max_dt=max_dt,
+        workers=workers,
+    )
+
+
+# --------------------------------------------------------------------------- stage
+
+
+@dataclass(frozen=True)
+class RigRun:
+    """What :func:`run_rig` did."""
+
+    estimate: RigEstimate
+    artifact: RigArtifact
+    output: Path
+    warnings: list[str]
+
+
+def tracks_on_timeline(
+    config: RigRunConfig, trajectories: dict[str, Trajectory]
+) -> tuple[dict[str, CameraTrack], np.ndarray, list[str]]:
+    """Every camera's poses on one timeline; checks that neighbours share instants.
+
+    Returns the tracks, the timeline (seconds or frame numbers) and warnings.
+
+    Raises
+    ------
+    InputError
+        Two cameras joined by a joint with no instant in common (naming the joint's key).
+    """
+    by_time = config.pair_by == "timestamp" or (
+        config.pair_by == "auto" and all(t.has_timestamps for t in trajectories.values())
+    )
+    if by_time:
+        for name, t in trajectories.items():
+            if not t.has_timestamps:
+                raise InputError(
+                    f"cameras.{name}: the trajectory has no timestamps ({t.format}); set "
+                    "pair_by: index",
+                    path=t.source,
+                )
+        slots, index = common_timeline(
+            {n: t.timestamps for n, t in trajectories.items()}, config.max_dt
+        )
+    else:
+        m = max(len(t) for t in trajectories.values())
+        slots = np.arange(m, dtype=float)
+        index = {
+            n: np.where(np.arange(m) < len(t), np.arange(m), -1) for n, t in trajectories.items()
+        }
+    warnings: list[str] = []
+    for j in config.topology.joints:
+        p, q = j.between
+        common = int(np.sum((index[p] >= 0) & (index[q] >= 0)))
+        if common == 0:
+            tp, tq = trajectories[p].timestamps, trajectories[q].timestamps
+            raise InputError(
+                f"joints.{j.name}: cameras {p} ({tp[0]:.6f}..{tp[-1]:.6f}) and {q} "
+                f"({tq[0]:.6f}..{tq[-1]:.6f}) have no instant in common; are they on the same "
+                "clock?",
+                path=config.path,
+            )
+    tracks: dict[str, CameraTrack] = {}
+    for name, t in trajectories.items():
+        idx = index[name]
+        valid = idx >= 0
+        T = np.broadcast_to(np.eye(4), (slots.size, 4, 4)).copy()
+        T[valid] = t.T_world_cam[idx[valid]]
+        left = len(t) - int(valid.sum())
+        if left:
+            warnings.append(f"camera {name}: {left} of {len(t)} poses share no instant")
+        tracks[name] = CameraTrack(T, valid, config.cameras[name].unknown_scale)
+    return tracks, slots, warnings
+
+
+def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
+    out = {}
+    for name, j in config.joints.items():
+        if j.position_in:
+            cov = None if j.position_std is None else np.eye(3) * j.position_std**2
+            out[name] = EdgePrior(
+                position_in=dict(j.position_in),
+                covariance_in={c: cov for c in j.position_in} if cov is not None else {},
+            )
+    return out
+
+
+def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> RigArtifact:
+    """The ``rig.yaml`` content of an estimate."""
+    cams = {
+        c: RigCameraResult(
+            name=c,
+            T_cam_ref=e.T_cam_ref,
+            rotation_std_deg=e.rotation_std_deg,
+            translation_std=e.translation_std,
+            unknown_scale=e.scale_std is not None,
+            scale=e.scale,
+            scale_std=e.scale_std,
+        )
+        for c, e in est.cameras.items()
+    }
+    joints = {}
+    for name, e in est.edges.items():
+        joints[name] = RigJointResult(
+            name=name,
+            type=e.joint.type,
+            between=e.joint.between,
+            position_in=dict(e.position_in),
+            position_std_in={
+                c: np.sqrt(np.maximum(np.diag(C), 0.0)) for c, C in e.position_cov_in.items()
+            },
+            axis_in=dict(e.axis_in),
+            axis_std_deg_in=dict(e.axis_std_deg_in),
+            residual_rms=e.residual_rms,
+            frames_used=e.frames_used,
+            frames_rejected=e.frames_rejected,
+        )
+    return RigArtifact(
+        reference_camera=est.topology.reference,
+        reference_frame=est.reference_frame,
+        length_unit=length_unit,
+        cameras=cams,
+        joints=joints,
+        warnings=list(warnings),
+    )
+
+
+def run_rig(
+    config: RigRunConfig, poses: dict[str, Path] | None = None, output: Path | None = None
+) -> RigRun:
+    """Read every camera's trajectory, solve the rig, write ``rig.yaml`` atomically.
+
+    Parameters
+    ----------
+    config : RigRunConfig
+    poses : dict of str to Path, optional
+        Trajectory files of cameras configured with ``images`` (written by the poses stage).
+    output : Path, optional
+        Where to write (default ``config.output / "rig.yaml"``).
+    """
+    poses = dict(poses or {})
+    files: dict[str, tuple[Path, str]] = {}
+    for name, spec in config.cameras.items():
+        if spec.poses is not None:
+            files[name] = (spec.poses, spec.format)
+        elif name in poses:
+            files[name] = (poses[name], "npz")
+        else:
+            raise InputError(f"cameras.{name}: no poses (run its poses stage first)")
+    trajectories = {n: read_trajectory(p, fmt) for n, (p, fmt) in files.items()}
+    tracks, slots, warnings = tracks_on_timeline(config, trajectories)
+    est = estimate_rig(
+        config.topology,
+        tracks,
+        reference_frame=config.reference_frame,
+        priors=_priors(config),
+    )
+    for name, e in est.edges.items():
+        if e.frames_rejected:
+            warnings.append(
+                f"joint {name}: {e.frames_rejected} of {e.frames_used + e.frames_rejected} "
+                "frames rejected as outliers"
+            )
+    ref_unknown = config.cameras[config.reference_camera].unknown_scale
+    unit = f"{config.reference_camera} units" if ref_unknown else "m"
+    art = rig_artifact(est, unit, warnings)
+    out = output if output is not None else config.output / RIG_FILE
+    header = make_header(
+        "rig",
+        {f"poses_{n}": p for n, (p, _) in files.items()} | {"config": config.path},
+        "one maximum-likelihood solve over every joint (acs_cli.core.rig_solve.estimate_rig): "
+        "ball, hinge and rigid constraints on each camera's trajectory, per-camera "
+        "world-to-reference similarities, noise levels per joint, outliers rejected",
+        {
+            "length": unit,
+            "angles": "deg",
+            "scale": f"{unit} per camera trajectory unit",
+        },
+        {
+            "T_cam_ref": f"maps {config.reference_camera}'s frame at reference frame "
+            f"{est.reference_frame} (t = {slots[est.reference_frame]:.9f}) into the camera's",
+            "position_in": "the joint in each camera's frame",
+            "axis_in": "hinge axis (unit) in each camera's frame",
+        },
+    )
+    art = art.save(out, header)
+    return RigRun(est, art, out, warnings)
