@@ -2,7 +2,8 @@
 
 Without ``--scenario`` it writes the sample set (one rig: ``fixed_joint``, ``overlap``,
 ``general``, ``general_scaled``, ``fixed_joint_scaled``); with it, one scenario into
-``OUT_DIR``.
+``OUT_DIR``. With ``--rig`` it writes the five-camera rig (``cam0.tum`` .. ``cam4.tum``,
+``truth.yaml``, ``config.yaml``) into ``OUT_DIR``.
 """
 
 from __future__ import annotations
@@ -11,7 +12,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from sample_data_gen.writer import SCENARIOS, write_sample_set, write_scenario
+from sample_data_gen.writer import (
+    RIG_NOISE,
+    SCENARIOS,
+    write_rig_recording,
+    write_sample_set,
+    write_scenario,
+)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -25,21 +32,34 @@ def _parser() -> argparse.ArgumentParser:
         choices=SCENARIOS,
         help="write one scenario into OUT_DIR (default: the whole sample set in sub-folders)",
     )
+    p.add_argument(
+        "--rig",
+        action="store_true",
+        help="write the five-camera rig (cam0-cam4: rigid, ball, hinge, rigid joints; cam4 of "
+        "unknown scale) with its truth.yaml and a run config config.yaml into OUT_DIR",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--frames", type=int, default=30, help="poses per camera (default 30)")
+    p.add_argument(
+        "--frames",
+        type=int,
+        default=None,
+        help="poses per camera (default 30; 100 with --rig)",
+    )
     p.add_argument(
         "--rot-noise",
         type=float,
         default=None,
         metavar="DEG",
-        help="rotation noise per axis, degrees (default 0 for a scenario, 0.6 for the set)",
+        help="rotation noise per axis, degrees (default 0 for a scenario, 0.6 for the set, "
+        f"{RIG_NOISE[0]} for the rig)",
     )
     p.add_argument(
         "--trans-noise",
         type=float,
         default=None,
         metavar="M",
-        help="translation noise per axis, metres (default 0 for a scenario, 0.025 for the set)",
+        help="translation noise per axis, metres (default 0 for a scenario, 0.025 for the set, "
+        f"{RIG_NOISE[1]} for the rig)",
     )
     p.add_argument("--mu-a", type=float, default=None, help="scale of A's translations")
     p.add_argument("--mu-b", type=float, default=None, help="scale of B's translations")
@@ -50,7 +70,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
-    if args.frames < 1:
+    if args.frames is not None and args.frames < 1:
         parser.error("--frames must be at least 1")
     for name in ("rot_noise", "trans_noise"):
         value = getattr(args, name)
@@ -60,6 +80,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         value = getattr(args, name)
         if value is not None and not value > 0:
             parser.error(f"--{name.replace('_', '-')} must be positive")
+    if args.rig:
+        if args.scenario is not None:
+            parser.error("--rig and --scenario exclude each other")
+        if args.mu_a is not None or args.mu_b is not None or args.hinge:
+            parser.error("--mu-a, --mu-b and --hinge need --scenario (not --rig)")
+        write_rig_recording(
+            args.out_dir,
+            seed=args.seed,
+            frames=100 if args.frames is None else args.frames,
+            rot_noise_deg=RIG_NOISE[0] if args.rot_noise is None else args.rot_noise,
+            trans_noise=RIG_NOISE[1] if args.trans_noise is None else args.trans_noise,
+        )
+        print(f"rig: {args.out_dir}")
+        return 0
+    frames = 30 if args.frames is None else args.frames
     if args.scenario is None:
         if args.mu_a is not None or args.mu_b is not None or args.hinge:
             parser.error("--mu-a, --mu-b and --hinge need --scenario")
@@ -68,7 +103,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             kwargs["rot_noise_deg"] = args.rot_noise
         if args.trans_noise is not None:
             kwargs["trans_noise"] = args.trans_noise
-        written = write_sample_set(args.out_dir, seed=args.seed, frames=args.frames, **kwargs)
+        written = write_sample_set(args.out_dir, seed=args.seed, frames=frames, **kwargs)
         for name, path in written.items():
             print(f"{name}: {path}")
         return 0
@@ -76,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.out_dir,
         args.scenario,
         seed=args.seed,
-        frames=args.frames,
+        frames=frames,
         rot_noise_deg=0.0 if args.rot_noise is None else args.rot_noise,
         trans_noise=0.0 if args.trans_noise is None else args.trans_noise,
         mu_a=1.0 if args.mu_a is None else args.mu_a,

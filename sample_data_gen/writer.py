@@ -13,6 +13,11 @@ from ``default_rng([seed, 0])`` and a scenario's motion and noise from
 three scenarios written for one seed share a rig (a joint calibrated on ``fixed_joint``
 feeds ``relpose`` on ``general``), and a scaled scenario is its unscaled twin's noisy poses
 with the translations scaled.
+
+:func:`write_rig_recording` writes a rig of many cameras instead
+(:mod:`sample_data_gen.rig_sim`, randomness from ``default_rng([seed, 2])``): one TUM file
+per camera, its ``truth.yaml`` (``acscal/rig_truth``) and a run config ``config.yaml``
+(version 2) naming the cameras and joints.
 """
 
 from __future__ import annotations
@@ -21,9 +26,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from acs_cli.core import se3
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
+from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.trajectory import write_tum
 from sample_data_gen.acs_sim import (
     Sequence,
@@ -34,13 +41,18 @@ from sample_data_gen.acs_sim import (
     make_rig,
     scale_translations,
 )
+from sample_data_gen.rig_sim import RigRecording, rig_recording
 
 __all__ = [
+    "RIG_NOISE",
+    "RIG_UNKNOWN_SCALE",
     "SAMPLE_MU_A",
     "SAMPLE_MU_B",
     "SCENARIOS",
     "make_sequence",
     "rig_for_seed",
+    "rig_truth_body",
+    "write_rig_recording",
     "write_sample_set",
     "write_scenario",
 ]
@@ -52,6 +64,11 @@ SAMPLE_MU_A = 0.8
 SAMPLE_MU_B = 3.2
 
 _TRUTH_KIND = "truth"
+_RIG_TRUTH_KIND = "rig_truth"
+#: Pose noise of the sample rig: per axis, degrees and metres.
+RIG_NOISE = (0.3, 0.01)
+#: Cameras of the sample rig whose trajectory has an unknown scale.
+RIG_UNKNOWN_SCALE = ("cam4",)
 
 
 def rig_for_seed(seed: int, hinge: bool = False) -> SyntheticRig:
@@ -277,3 +294,162 @@ def write_sample_set(
             out / name, scenario, mu_a=SAMPLE_MU_A, mu_b=SAMPLE_MU_B, **common
         )
     return written
+
+
+def rig_truth_body(
+    rec: RigRecording, *, seed: int, rot_noise_deg: float, trans_noise: float
+) -> dict[str, Any]:
+    """The body of a rig's ``truth.yaml`` (see :func:`write_rig_recording`)."""
+    topo = rec.topology
+    T_cam_ref = rec.T_cam_ref(0)
+    scale = rec.scale()
+    cameras = {
+        c: {
+            "poses": f"{c}.tum",
+            "T_cam_ref": T_cam_ref[c],
+            "unknown_scale": bool(rec.unknown_scale[c]),
+            "mu": float(rec.mu[c]),
+            "scale": float(scale[c]),
+        }
+        for c in topo.cameras
+    }
+    joints: dict[str, Any] = {}
+    for j in topo.joints:
+        e = rec.edges[j.name]
+        p, q = e.between
+        d: dict[str, Any] = {"type": e.type, "between": [p, q]}
+        if e.type != "rigid":
+            d["position_in"] = {p: e.o_p, q: e.o_q}
+        if e.type == "hinge":
+            d["axis_in"] = {p: e.axis_p, q: e.axis_q}
+        d["T_q_p"] = T_cam_ref[q] @ se3.invert_transforms(T_cam_ref[p])
+        joints[j.name] = d
+    return {
+        "scenario": "rig",
+        "seed": int(seed),
+        "n_frames": len(rec.timestamps),
+        "reference": {"camera": topo.reference, "frame": 0},
+        "length_unit": "m",
+        "cameras": cameras,
+        "joints": joints,
+        "noise": {
+            "sigma_rot_deg": float(rot_noise_deg),
+            "sigma_trans": float(trans_noise),
+            "model": "T_world_cam = [R Exp(n_r), t + n_t] on every pose, n_r ~ N(0, sigma_rot^2 I) "
+            "(per axis, body frame), n_t ~ N(0, sigma_trans^2 I) in metres, added before the "
+            "translations are scaled by mu",
+        },
+    }
+
+
+def _rig_config_text(rec: RigRecording) -> str:
+    """``config.yaml``: the run config (version 2) of the written rig, paths relative."""
+    topo = rec.topology
+    cameras: dict[str, Any] = {}
+    for c in topo.cameras:
+        cameras[c] = {"poses": f"{c}.tum"}
+        if rec.unknown_scale[c]:
+            cameras[c]["scale"] = "unknown"
+    doc = {
+        "schema": "acscal/run-config",
+        "schema_version": 2,
+        "output": "out/",
+        "reference": {"camera": topo.reference, "frame": 0},
+        "cameras": cameras,
+        "joints": {j.name: {"between": list(j.between), "type": j.type} for j in topo.joints},
+    }
+    head = (
+        "# acscal run config.yaml: the synthetic rig written by `python -m sample_data_gen OUT "
+        "--rig`\n"
+        "# (truth in truth.yaml); see configs/rig.yaml for every key.\n"
+    )
+    return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+
+
+def write_rig_recording(
+    out_dir: str | Path,
+    *,
+    seed: int = 0,
+    frames: int = 100,
+    rot_noise_deg: float = RIG_NOISE[0],
+    trans_noise: float = RIG_NOISE[1],
+    unknown_scale: tuple[str, ...] = RIG_UNKNOWN_SCALE,
+) -> RigRecording:
+    """Write the sample rig of five cameras (:data:`sample_data_gen.rig_sim.SAMPLE_JOINTS`).
+
+    ``cam0 -(rigid r01)- cam1``, ``cam0 -(ball j02)- cam2 -(hinge j23)- cam3 -(rigid r34)-
+    cam4``, general motion; the reference camera is ``cam0`` at frame 0. ``out_dir`` gets:
+
+    - ``cam0.tum`` .. ``cam4.tum``: each camera's ``T_world_cam`` in its own world,
+      timestamps ``frame / 30`` s, noisy; translations in ``mu`` x metres (``mu`` in
+      [0.3, 3] for a camera in ``unknown_scale``, else 1).
+    - ``truth.yaml`` (``acscal/rig_truth``), metres: ``reference`` (``camera``,
+      ``frame``), ``length_unit`` (``m``), ``cameras.<c>`` (``poses`` file, ``T_cam_ref``
+      4x4 at frame 0 (maps the reference camera's frame into ``c``'s), ``unknown_scale``,
+      ``mu`` (trajectory units per metre), ``scale`` (reference units per trajectory unit:
+      ``mu_ref / mu_c``, as ``rig.yaml``'s)), ``joints.<j>`` (``type``, ``between: [p,
+      q]``, ``position_in: {p, q}`` (ball centre or hinge point, in each camera's frame),
+      ``axis_in: {p, q}`` (hinge, unit), ``T_q_p`` at frame 0), ``noise``, ``seed``,
+      ``n_frames``. Keys are laid out as in ``rig.yaml``, so the two compare key by key.
+    - ``config.yaml``: the run config (``schema_version: 2``) of these files (relative
+      paths, output ``out/``).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Folder (created).
+    seed : int
+        Fixes the rig, the motion and the noise (``default_rng([seed, 2])``).
+    frames : int
+        Poses per camera.
+    rot_noise_deg, trans_noise : float
+        Pose noise per axis (degrees; metres, before scaling), on every pose.
+    unknown_scale : tuple of str
+        Cameras whose trajectory has an unknown scale.
+
+    Returns
+    -------
+    RigRecording
+        The recording written (truth and trajectories).
+
+    Raises
+    ------
+    ValueError
+        Fewer than one frame, negative noise.
+    """
+    if frames < 1:
+        raise ValueError(f"frames must be at least 1, got {frames}")
+    if rot_noise_deg < 0 or trans_noise < 0:
+        raise ValueError("noise levels must not be negative")
+    rng = np.random.default_rng([seed, 2])
+    rec = rig_recording(
+        rng,
+        frames,
+        unknown_scale=unknown_scale,
+        sigma_rot_deg=rot_noise_deg,
+        sigma_trans=trans_noise,
+    )
+    out = Path(out_dir)
+    for c in rec.topology.cameras:
+        write_tum(out / f"{c}.tum", rec.timestamps, rec.T_wc_c[c])
+    units: dict[str, Any] = {"length": "metres", "angles": "deg"}
+    units.update({f"{c}.tum": "mu x metres" if rec.unknown_scale[c] else "metres" for c in rec.mu})
+    header = make_header(
+        _RIG_TRUTH_KIND,
+        inputs={},
+        method=(
+            f"synthetic rig (sample_data_gen.rig_sim): {len(rec.mu)} cameras, seed {seed}, "
+            f"{frames} frames, general motion"
+        ),
+        units=units,
+        frames={
+            "cameras.<c>.T_cam_ref": "maps the reference camera's frame (frame 0) into c's",
+            "joints.<j>.position_in.<c>": "c",
+            "joints.<j>.axis_in.<c>": "c",
+            "joints.<j>.T_q_p": "maps p's frame into q's at frame 0",
+        },
+    )
+    body = rig_truth_body(rec, seed=seed, rot_noise_deg=rot_noise_deg, trans_noise=trans_noise)
+    write_yaml_artifact(out / "truth.yaml", header, body)
+    atomic_write_text(out / "config.yaml", _rig_config_text(rec))
+    return rec

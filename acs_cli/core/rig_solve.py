@@ -923,6 +923,9 @@ def _assemble(
                     sl = slice(6 + 3 * side, 9 + 3 * side)
                     axis[c] = g[sl]
                     astd[c] = float(np.degrees(np.sqrt(max(np.trace(Cg[sl, sl]), 0.0))))
+        if axis and axis[p][int(np.argmax(np.abs(axis[p])))] < 0:
+            # one convention for the axis's sign: its largest component (in p) is positive
+            axis = {c: -u for c, u in axis.items()}
         T_q_p = cams[q].T_cam_ref @ se3.invert_transforms(cams[p].T_cam_ref)
         b = _edge_blocks(st, x, j, G)
         m = st.mask[j.name]

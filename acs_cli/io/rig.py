@@ -17,7 +17,7 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         between: [p, q]
         position_in: {p: [3], q: [3]}   # ball centre, or the hinge point (nearest p's centre)
         position_std_in: {p: [3], q: [3]}
-        axis_in: {p: [3], q: [3]}       # hinge only: unit vectors
+        axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, largest component in p > 0
         axis_std_deg_in: {p: float, q: float}
         residual_rms: float             # of the joint constraint over the frames used
         frames_used: int

@@ -1,0 +1,147 @@
+"""``acscal run`` over a rig config (version 2): the real CLI on real files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from cli_runner import acscal
+
+from acs_cli.core import se3
+from acs_cli.io.rig import RigArtifact
+from acs_cli.io.trajectory import read_tum, write_tum
+from sample_data_gen.writer import write_rig_recording
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("rig")
+    write_rig_recording(root, seed=3, frames=80)
+    return root
+
+
+def test_run_calibrates_the_rig_beside_its_truth(recording: Path) -> None:
+    res = acscal("run", recording / "config.yaml")
+    assert res.returncode == 0, res.stderr
+    assert "rig: ran" in res.stdout
+    rig = RigArtifact.load(recording / "out" / "rig.yaml")
+    truth = yaml.safe_load((recording / "truth.yaml").read_text())
+    assert rig.reference_camera == "cam0" and rig.length_unit == "m"
+    for name, cam in rig.cameras.items():
+        T_true = np.asarray(truth["cameras"][name]["T_cam_ref"], dtype=float)
+        # 0.3 deg / 1 cm pose noise: the reference instant's poses limit T_cam_ref
+        assert np.linalg.norm(cam.T_cam_ref[:3, 3] - T_true[:3, 3]) < 5 * max(
+            float(np.linalg.norm(cam.translation_std)), 1e-9
+        )
+    s_true = float(truth["cameras"]["cam4"]["scale"])
+    assert rig.cameras["cam4"].unknown_scale
+    assert rig.cameras["cam4"].scale == pytest.approx(s_true, rel=0.01)
+    assert rig.cameras["cam0"].scale_std is None  # fixed, not estimated
+    j23 = rig.joints["j23"]
+    a_true = np.asarray(truth["joints"]["j23"]["axis_in"]["cam2"], dtype=float)
+    assert np.degrees(np.arccos(abs(float(j23.axis_in["cam2"] @ a_true)))) < 1.0
+    assert set(rig.joints["r01"].position_in) == set()  # a rigid edge has no point
+    # unchanged inputs: the stage is skipped
+    again = acscal("run", recording / "config.yaml")
+    assert again.returncode == 0 and "rig: skipped" in again.stdout
+
+
+def _config(tmp: Path, recording: Path, joints: str, cams: str | None = None) -> Path:
+    cams = cams or "".join(f"  cam{i}: {{poses: {recording / f'cam{i}.tum'}}}\n" for i in range(5))
+    cfg = tmp / "bad.yaml"
+    cfg.write_text(
+        f"schema_version: 2\noutput: {tmp / 'out'}\ncameras:\n{cams}joints:\n{joints}",
+        encoding="utf-8",
+    )
+    return cfg
+
+
+CHAIN = (
+    "  r01: {between: [cam0, cam1], type: rigid}\n"
+    "  j02: {between: [cam0, cam2], type: ball}\n"
+    "  j23: {between: [cam2, cam3], type: hinge}\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("joints", "key"),
+    [
+        (CHAIN + "  r34: {between: [cam3, cam4], type: rigid}\n"
+         "  x14: {between: [cam1, cam4], type: ball}\n", "joints.x14.between"),
+        (CHAIN + "  r34: {between: [cam3, cam9], type: rigid}\n", "joints.r34.between"),
+        (CHAIN + "  r34: {between: [cam3, cam4], type: rigid}\n"
+         "  again: {between: [cam2, cam3], type: ball}\n", "joints.again.between"),
+        (CHAIN, "cameras.cam4"),
+        (CHAIN + "  r34: {between: [cam3, cam4], type: slider}\n", "joints.r34.type"),
+    ],
+    ids=["cycle", "unknown camera", "two joints one pair", "camera in no joint", "bad type"],
+)  # fmt: skip
+def test_bad_rig_exits_2_naming_the_key(
+    tmp_path: Path, recording: Path, joints: str, key: str
+) -> None:
+    res = acscal("run", _config(tmp_path, recording, joints))
+    assert res.returncode == 2, res.stdout + res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0], res.stderr
+    assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_neighbours_that_never_overlap_in_time_exit_2(tmp_path: Path, recording: Path) -> None:
+    late = read_tum(recording / "cam4.tum")
+    write_tum(tmp_path / "cam4_late.tum", late.timestamps + 1000.0, late.T_world_cam)
+    cams = "".join(f"  cam{i}: {{poses: {recording / f'cam{i}.tum'}}}\n" for i in range(4))
+    cams += f"  cam4: {{poses: {tmp_path / 'cam4_late.tum'}, scale: unknown}}\n"
+    cfg = _config(
+        tmp_path, recording, CHAIN + "  r34: {between: [cam3, cam4], type: rigid}\n", cams
+    )
+    res = acscal("run", cfg)
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "joints.r34" in res.stderr and "no instant in common" in res.stderr
+    assert not (tmp_path / "out" / "rig.yaml").exists()
+
+
+def test_a_planar_hinge_exits_3_naming_the_joint(tmp_path: Path) -> None:
+    from sample_data_gen.rig_sim import EdgeTruth, make_edges, rig_recording
+
+    rng = np.random.default_rng(1)
+    joints = (("hitch", ("truck", "trailer"), "hinge"),)
+    edges = make_edges(rng, joints)
+    z = np.array([0.0, 0.0, 1.0])
+    e = edges["hitch"]
+    edges["hitch"] = EdgeTruth(
+        "hitch", e.between, "hinge", se3.matrix_from_rotvec(0.3 * z), e.o_p - (e.o_p @ z) * z,
+        e.o_q, z,
+    )  # fmt: skip
+    rec = rig_recording(
+        rng, 60, joints=joints, reference="truck", edges=edges, planar=True,
+        sigma_rot_deg=0.2, sigma_trans=0.005,
+    )  # fmt: skip
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
+    cfg = tmp_path / "truck.yaml"
+    cfg.write_text(
+        "schema_version: 2\noutput: out\ncameras:\n  truck: {poses: truck.tum}\n"
+        "  trailer: {poses: trailer.tum}\njoints:\n"
+        "  hitch: {between: [truck, trailer], type: hinge}\n",
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg)
+    assert res.returncode == 3, res.stdout + res.stderr
+    assert "joint hitch (truck-trailer)" in res.stderr
+    assert "along the hinge axis" in res.stderr and "position_in.trailer" in res.stderr
+    assert not (tmp_path / "out" / "rig.yaml").exists()
+    # the offset from the config (a tape measure): the run goes through
+    o_q = rec.edges["hitch"].o_q
+    cfg.write_text(
+        cfg.read_text(encoding="utf-8").replace(
+            "type: hinge}",
+            f"type: hinge, position_in: {{trailer: [{o_q[0]}, {o_q[1]}, {o_q[2]}]}}, "
+            "position_std: 0.005}",
+        ),
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "out" / "rig.yaml").is_file()
