@@ -101,6 +101,9 @@ class CameraEstimate:
     covariance: FloatArray
     scale: float = 1.0
     scale_std: float | None = None
+    #: the camera's trajectory in the reference world and units: ``(n, 4, 4)`` ``G_c[i]``
+    #: (identity rows where the camera has no pose), with the reference instant corrected
+    poses_in_reference_world: FloatArray = field(default_factory=lambda: np.zeros((0, 4, 4)))
 
     @property
     def rotation_std_deg(self) -> FloatArray:
@@ -900,7 +903,14 @@ def _assemble(
         if c in L.logs:
             scale = float(np.exp(x[L.logs[c]]))
             scale_std = float(scale * np.sqrt(max(cov[L.logs[c], L.logs[c]], 0.0)))
-        cams[c] = CameraEstimate(T0 if c != ref else np.eye(4), C6, scale, scale_std)
+        R, t = _poses(st, x, c)
+        cams[c] = CameraEstimate(
+            T0 if c != ref else np.eye(4),
+            C6 if c != ref else np.zeros((6, 6)),
+            scale,
+            scale_std,
+            se3.transforms_from_rt(R, t),
+        )
     edges: dict[str, EdgeEstimate] = {}
     G = {c: _poses(st, x, c) for c in topo.cameras}
     for j in topo.joints:

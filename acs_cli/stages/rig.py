@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from acs_cli.core import se3
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
 from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
@@ -35,7 +36,7 @@ from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
-from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
 
 RIG_CONFIG_VERSION = 2
 SCALES = ("known", "unknown")
@@ -391,4 +392,42 @@ def run_rig(
         },
     )
     art = art.save(out, header)
+    write_rig_trajectories(est, tracks, slots, out.parent / TRAJECTORY_DIR)
     return RigRun(est, art, out, warnings)
+
+
+#: Folder (beside rig.yaml) of every camera's and joint's trajectory in one frame.
+TRAJECTORY_DIR = "trajectories"
+
+
+def write_rig_trajectories(
+    est: RigEstimate, tracks: dict[str, CameraTrack], times: np.ndarray, folder: Path
+) -> list[Path]:
+    """Write ``<camera>.tum`` and ``<joint>.tum`` into ``folder``: the whole rig over time.
+
+    Every pose is ``T_ref_x``: in the reference camera's frame at the reference instant
+    (reference units), as ``T_world_cam`` TUM rows whose "world" is that frame. A joint's
+    file holds its centre (ball) or hinge point with the orientation of the edge's first
+    camera; frames where a camera has no pose are left out.
+    """
+    ref = est.topology.reference
+    G_ref_k = est.cameras[ref].poses_in_reference_world[est.reference_frame]
+    T_ref_w = se3.invert_transforms(G_ref_k)
+    written: list[Path] = []
+    for c, e in est.cameras.items():
+        ok = tracks[c].valid
+        path = folder / f"{c}.tum"
+        write_tum(path, times[ok], T_ref_w @ e.poses_in_reference_world[ok])
+        written.append(path)
+    for name, edge in est.edges.items():
+        if not edge.position_in:
+            continue
+        p, q = edge.joint.between
+        ok = tracks[p].valid & tracks[q].valid
+        G = est.cameras[p].poses_in_reference_world[ok]
+        T = G.copy()
+        T[:, :3, 3] = se3.transform_points(G, edge.position_in[p])
+        path = folder / f"{name}.tum"
+        write_tum(path, times[ok], T_ref_w @ T)
+        written.append(path)
+    return written

@@ -670,7 +670,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
     from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
     from acs_cli.stages.poses import PosesConfig, run_poses
-    from acs_cli.stages.rig import RIG_FILE, run_rig
+    from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, run_rig
 
     out = config.output
     stages: list[_Stage] = []
@@ -730,13 +730,17 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     def do_rig() -> list[str]:
         return run_rig(config, poses, rig_out).warnings
 
+    traj = out / TRAJECTORY_DIR
+    traj_files = [traj / f"{c}.tum" for c in config.cameras]
+    traj_files += [traj / f"{n}.tum" for n, j in config.joints.items() if j.type != "rigid"]
+
     stages.append(
         _Stage(
             "rig",
             "rig",
             inputs | {"config": config.path},
             {"reference": [config.reference_camera, config.reference_frame]},
-            [rig_out],
+            [rig_out, *traj_files],
             do_rig,
         )
     )

@@ -43,6 +43,15 @@ def test_run_calibrates_the_rig_beside_its_truth(recording: Path) -> None:
     a_true = np.asarray(truth["joints"]["j23"]["axis_in"]["cam2"], dtype=float)
     assert np.degrees(np.arccos(abs(float(j23.axis_in["cam2"] @ a_true)))) < 1.0
     assert set(rig.joints["r01"].position_in) == set()  # a rigid edge has no point
+    # the whole rig over time, in cam0's frame at the reference instant
+    traj = recording / "out" / "trajectories"
+    assert sorted(f.name for f in traj.iterdir()) == [
+        "cam0.tum", "cam1.tum", "cam2.tum", "cam3.tum", "cam4.tum", "j02.tum", "j23.tum"
+    ]  # fmt: skip
+    first = {c: read_tum(traj / f"{c}.tum").T_world_cam[0] for c in rig.cameras}
+    np.testing.assert_allclose(first["cam0"], np.eye(4), atol=1e-9)
+    for c, cam in rig.cameras.items():
+        np.testing.assert_allclose(first[c], se3.invert_transforms(cam.T_cam_ref), atol=1e-9)
     # unchanged inputs: the stage is skipped
     again = acscal("run", recording / "config.yaml")
     assert again.returncode == 0 and "rig: skipped" in again.stdout
