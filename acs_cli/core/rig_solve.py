@@ -84,12 +84,24 @@ class CameraTrack:
 
 @dataclass(frozen=True)
 class EdgePrior:
-    """A joint known beforehand: ``position_in[camera]`` ``(3,)`` in reference units, with
-    ``covariance_in[camera]`` ``(3, 3)`` (a fixed-joint session's result, or a measurement).
-    A hinge may also give ``axis_in[camera]``."""
+    """A joint known beforehand (a fixed-joint session's result, or a measurement), in
+    reference units and each camera's frame.
+
+    Attributes
+    ----------
+    position_in, covariance_in : dict of camera to ndarray (3,) and (3, 3)
+        The joint's point (a ball's centre; a hinge's point nearest the edge's first camera).
+    line_in : dict of camera to (point (3,), direction (3,), std)
+        A hinge's axis line in a camera (from a fixed-joint recording of the hinge): the
+        joint's point lies on it, ``std`` (reference units) across it.
+    axis_in : dict of camera to (direction (3,), std_rad)
+        A hinge's axis direction (either sign).
+    """
 
     position_in: dict[str, FloatArray] = field(default_factory=dict)
     covariance_in: dict[str, FloatArray] = field(default_factory=dict)
+    line_in: dict[str, tuple[FloatArray, FloatArray, float]] = field(default_factory=dict)
+    axis_in: dict[str, tuple[FloatArray, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -208,7 +220,8 @@ class _State:
     w_rot: dict[str, float]  # per edge: 1 / sigma of axis or rigid-rotation rows
     w_trans: dict[str, float]  # per edge: 1 / sigma of rigid-translation rows
     w_delta: dict[str, FloatArray]  # per camera: (6,) 1 / sigma of reference-pose priors
-    priors: list[tuple[str, int, FloatArray, FloatArray]]  # (joint, side, value, whitening)
+    # prior rows W (g[at:at+3] - value) on a joint's geometry g = (o_p, o_q, u_p, u_q)
+    priors: list[tuple[str, int, FloatArray, FloatArray]]  # (joint, at, value, W (k, 3))
     length: float = 1.0  # the rig's length scale (reference units), for noise floors
     frames_cur: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
@@ -300,10 +313,10 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
             parts.append((b["trans"] * st.w_trans[j.name] * m).ravel())
     for c in st.topo.cameras:
         parts.append(x[st.L.delta[c]] * st.w_delta[c])
-    for name, side, value, Wh in st.priors:
-        point = joint_geometry(st, x, st.topo.joint(name))[side]
-        assert point is not None  # sides 0 and 1 are the joint's points
-        parts.append(Wh @ (point - value))
+    for name, at, value, W in st.priors:
+        g = joint_geometry(st, x, st.topo.joint(name))[at // 3]
+        assert g is not None  # a prior is only given where the joint has this part
+        parts.append(W @ (g - value))
     return np.concatenate(parts)
 
 
@@ -501,11 +514,17 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown
         put(D.reshape(2, 3, 6), list(range(L.delta[c].start, L.delta[c].stop)), row0)
         row0 += 6
-    for name, side, value, Wh in st.priors:
+    for name, at, _value, W in st.priors:
         j = st.topo.joint(name)
         Dg = _geometry_jacobian(st, x, j)
-        put((Wh @ Dg[3 * side : 3 * side + 3])[None], L.edge_columns(name), row0)
-        row0 += value.size
+        block = W @ Dg[at : at + 3]
+        rows = block.shape[0]
+        r = row0 + np.arange(rows)
+        cols = L.edge_columns(name)
+        rows_i.append(np.repeat(r, len(cols)))
+        cols_i.append(np.tile(np.asarray(cols), rows))
+        vals.append(block.reshape(-1))
+        row0 += rows
     r = np.concatenate(rows_i)
     cidx = np.concatenate(cols_i)
     v = np.concatenate(vals)
@@ -769,6 +788,19 @@ def estimate_rig(
         j = topology.joint(name)
         if j.type == "rigid":
             raise InputError(f"joints.{name}: a rigid joint has no position to give")
+        if (pr.line_in or pr.axis_in) and j.type != "hinge":
+            raise InputError(f"joints.{name}: an axis is given but the joint is a {j.type}")
+        for c in [*pr.line_in, *pr.axis_in]:
+            if c not in j.between:
+                raise InputError(f"joints.{name}: {c} is not on this joint")
+        for c, (point, direction, std) in pr.line_in.items():
+            B = tangent_basis(_unit(np.asarray(direction, float)))
+            side = j.between.index(c)
+            prior_rows.append((name, 3 * side, np.asarray(point, float), B.T / std))
+        for c, (direction, std_rad) in pr.axis_in.items():
+            given = _unit(np.asarray(direction, float))
+            side = j.between.index(c)
+            prior_rows.append((name, 6 + 3 * side, given, tangent_basis(given).T / std_rad))
         for c, pos in pr.position_in.items():
             if c not in j.between:
                 raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
@@ -782,7 +814,7 @@ def estimate_rig(
                     f"joints.{name}: the covariance given for {c} is not positive definite"
                 ) from None
             side = j.between.index(c)
-            prior_rows.append((name, side, np.asarray(pos, float), Wh))
+            prior_rows.append((name, 3 * side, np.asarray(pos, float), Wh))
             if j.type == "ball":
                 x0[L.edge[name]][3 * side : 3 * side + 3] = pos
     st = _State(

@@ -65,6 +65,7 @@ class RigJointSpec:
     type: str
     position_in: dict[str, np.ndarray] = field(default_factory=dict)
     position_std: float | None = None
+    fixed_joint: dict[str, Path] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,10 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
     for name, j in joints_doc.items():
         key = f"joints.{name}"
         j = c.mapping(
-            j, key, required=("between", "type"), optional=("position_in", "position_std")
+            j,
+            key,
+            required=("between", "type"),
+            optional=("position_in", "position_std", "fixed_joint"),
         )
         between = j["between"]
         if not isinstance(between, list) or not all(isinstance(b, str) for b in between):
@@ -174,7 +178,15 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
             std = c.positive(j["position_std"], f"{key}.position_std")
         if jtype == "rigid" and pos:
             raise c.fail(f"{key}.position_in", "a rigid joint has no position")
-        joints[name] = RigJointSpec(name, (str(between[0]), str(between[-1])), jtype, pos, std)
+        fixed: dict[str, Path] = {}
+        if j.get("fixed_joint") is not None:
+            if jtype == "rigid":
+                raise c.fail(f"{key}.fixed_joint", "a rigid joint has no fixed-joint session")
+            fm = c.mapping(j["fixed_joint"], f"{key}.fixed_joint", optional=tuple(between))
+            fixed = {n: c.path(v, f"{key}.fixed_joint.{n}") for n, v in fm.items()}
+        joints[name] = RigJointSpec(
+            name, (str(between[0]), str(between[-1])), jtype, pos, std, fixed
+        )
     try:
         topo = rig_topology(list(cameras), raw, ref_cam)
     except InputError as exc:
@@ -282,13 +294,46 @@ def tracks_on_timeline(
 
 
 def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
+    """Joint priors: positions given in the config, and fixed-joint sessions (a ball's
+    centre by :func:`~acs_cli.core.joint.estimate_pivot`, a hinge's axis and line by
+    :func:`~acs_cli.core.joint.estimate_hinge_fixed`)."""
+    from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
+
     out = {}
     for name, j in config.joints.items():
-        if j.position_in:
-            cov = None if j.position_std is None else np.eye(3) * j.position_std**2
+        cov = None if j.position_std is None else np.eye(3) * j.position_std**2
+        position = dict(j.position_in)
+        covariance = {c: cov for c in j.position_in} if cov is not None else {}
+        line: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
+        axis: dict[str, tuple[np.ndarray, float]] = {}
+        for cam, path in j.fixed_joint.items():
+            key = f"joints.{name}.fixed_joint.{cam}"
+            if (
+                config.cameras[cam].unknown_scale
+                or config.cameras[config.reference_camera].unknown_scale
+            ):
+                raise InputError(
+                    f"{key}: a fixed-joint session gives metres; it needs {cam} and the "
+                    "reference camera to be metric (scale: known)",
+                    path=config.path,
+                )
+            T = read_trajectory(path).T_world_cam
+            if j.type == "ball":
+                pv = estimate_pivot(T, "refined", f"{key} (camera {cam})")
+                position.setdefault(cam, pv.position_in_cam)
+                covariance.setdefault(cam, pv.covariance)
+                continue
+            h = estimate_hinge_fixed(T, f"{key} (camera {cam})")
+            axis[cam] = (h.axis_in_cam, max(float(np.radians(h.axis_std_deg)), 1e-6))
+            if cam == j.between[0]:  # the rig's hinge point is the one nearest this camera
+                position.setdefault(cam, h.point_in_cam)
+                covariance.setdefault(cam, h.covariance_point + np.eye(3) * 1e-12)
+            else:  # only the line: the rig's point is nearest the other camera
+                std = float(np.sqrt(max(np.linalg.eigvalsh(h.covariance_point)[-1], 1e-18)))
+                line[cam] = (h.point_in_cam, h.axis_in_cam, std)
+        if position or line or axis:
             out[name] = EdgePrior(
-                position_in=dict(j.position_in),
-                covariance_in={c: cov for c in j.position_in} if cov is not None else {},
+                position_in=position, covariance_in=covariance, line_in=line, axis_in=axis
             )
     return out
 
@@ -355,13 +400,11 @@ def run_rig(
             files[name] = (poses[name], "npz")
         else:
             raise InputError(f"cameras.{name}: no poses (run its poses stage first)")
+    priors = _priors(config)
     trajectories = {n: read_trajectory(p, fmt) for n, (p, fmt) in files.items()}
     tracks, slots, warnings = tracks_on_timeline(config, trajectories)
     est = estimate_rig(
-        config.topology,
-        tracks,
-        reference_frame=config.reference_frame,
-        priors=_priors(config),
+        config.topology, tracks, reference_frame=config.reference_frame, priors=priors
     )
     for name, e in est.edges.items():
         if e.frames_rejected:
@@ -373,9 +416,14 @@ def run_rig(
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     art = rig_artifact(est, unit, warnings)
     out = output if output is not None else config.output / RIG_FILE
+    fixed = {
+        f"fixed_joint_{jn}_{c}": p
+        for jn, j in config.joints.items()
+        for c, p in j.fixed_joint.items()
+    }
     header = make_header(
         "rig",
-        {f"poses_{n}": p for n, (p, _) in files.items()} | {"config": config.path},
+        {f"poses_{n}": p for n, (p, _) in files.items()} | fixed | {"config": config.path},
         "one maximum-likelihood solve over every joint (acs_cli.core.rig_solve.estimate_rig): "
         "ball, hinge and rigid constraints on each camera's trajectory, per-camera "
         "world-to-reference similarities, noise levels per joint, outliers rejected",

@@ -726,6 +726,8 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     rig_out = out / RIG_FILE
     inputs = {f"poses_{n}": c.poses for n, c in config.cameras.items() if c.poses is not None}
     inputs |= {f"poses_{n}": p for n, p in poses.items()}
+    for jname, js in config.joints.items():
+        inputs |= {f"fixed_joint_{jname}_{c}": p for c, p in js.fixed_joint.items()}
 
     def do_rig() -> list[str]:
         return run_rig(config, poses, rig_out).warnings

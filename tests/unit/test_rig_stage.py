@@ -1,0 +1,90 @@
+"""The rig stage: a config with fixed-joint sessions of a hinge and a ball as priors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acs_cli.core import se3
+from acs_cli.errors import InputError
+from acs_cli.io.rig import RigArtifact
+from acs_cli.io.trajectory import write_tum
+from acs_cli.stages.rig import parse_rig_config, run_rig
+from sample_data_gen.acs_sim import add_pose_noise, random_rotations, random_transform
+from sample_data_gen.rig_sim import rig_recording
+
+JOINTS = (("j01", ("cam0", "cam1"), "ball"), ("h12", ("cam1", "cam2"), "hinge"))
+
+
+def _fixed_joint(
+    rng: np.random.Generator, o: np.ndarray, axis: np.ndarray | None, n: int = 40
+) -> np.ndarray:
+    """A camera turning about a world-fixed joint at ``o`` (camera frame): about every axis
+    for a ball, about ``axis`` (camera frame) for a hinge; 0.2 deg / 2 mm noise."""
+    if axis is None:
+        R = random_rotations(rng, n, 60.0)
+    else:
+        ang = np.radians(rng.uniform(-50, 50, n))
+        R = se3.matrix_from_rotvec(ang[:, None] * axis)  # R_w_c with the world = camera 0
+    p_w = rng.uniform(-1, 1, 3)
+    T = se3.transforms_from_rt(R, p_w - np.einsum("nij,j->ni", R, o))
+    return add_pose_noise(rng, random_transform(rng) @ T, 0.2, 0.002)
+
+
+def test_fixed_joint_sessions_become_priors(tmp_path: Path, rng: np.random.Generator) -> None:
+    rec = rig_recording(rng, 60, joints=JOINTS, sigma_rot_deg=0.5, sigma_trans=0.02)
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
+    e01, h12 = rec.edges["j01"], rec.edges["h12"]
+    assert h12.axis_p is not None and h12.axis_q is not None
+    sessions = {
+        "fj01_cam0": _fixed_joint(rng, e01.o_p, None),
+        "fj12_cam1": _fixed_joint(rng, h12.o_p, h12.axis_p),
+        "fj12_cam2": _fixed_joint(rng, h12.o_q, h12.axis_q),
+    }
+    for name, T in sessions.items():
+        write_tum(tmp_path / f"{name}.tum", np.arange(T.shape[0]) * 0.1, T)
+    text = (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
+        "joints:\n"
+        "  j01: {between: [cam0, cam1], type: ball, fixed_joint: {cam0: fj01_cam0.tum}}\n"
+        "  h12: {between: [cam1, cam2], type: hinge,\n"
+        "        fixed_joint: {cam1: fj12_cam1.tum, cam2: fj12_cam2.tum}}\n"
+    )
+    (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+    cfg = parse_rig_config(__import__("yaml").safe_load(text), tmp_path / "rig.yaml")
+    with_priors = run_rig(cfg)
+    assert "fixed_joint_h12_cam2" in with_priors.artifact.header["inputs"]
+    plain = run_rig(parse_rig_config(
+        __import__("yaml").safe_load(text.replace(", fixed_joint: {cam0: fj01_cam0.tum}", "")
+                                     .replace(",\n        fixed_joint: {cam1: fj12_cam1.tum, "
+                                              "cam2: fj12_cam2.tum}", "")),
+        tmp_path / "rig.yaml",
+    ), output=tmp_path / "plain.yaml")  # fmt: skip
+    art = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+
+    def axis_err(a: RigArtifact) -> float:
+        u = a.joints["h12"].axis_in["cam1"]
+        return float(np.degrees(np.arccos(min(1.0, abs(float(u @ h12.axis_p))))))
+
+    # the sessions' priors sharpen the joint: the ball's centre and the hinge's axis
+    err_prior = np.linalg.norm(art.joints["j01"].position_in["cam0"] - e01.o_p)
+    err_plain = np.linalg.norm(plain.artifact.joints["j01"].position_in["cam0"] - e01.o_p)
+    assert err_prior < 0.01 and err_prior < err_plain
+    assert axis_err(art) < 0.3 and axis_err(art) <= axis_err(plain.artifact) + 0.05
+    std_prior = art.joints["h12"].axis_std_deg_in["cam1"]
+    assert std_prior < plain.artifact.joints["h12"].axis_std_deg_in["cam1"]
+
+
+def test_fixed_joint_of_a_camera_with_unknown_scale_is_refused(tmp_path: Path) -> None:
+    text = (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum, scale: unknown}\n"
+        "joints:\n  j01: {between: [cam0, cam1], type: ball, fixed_joint: {cam1: f.tum}}\n"
+    )
+    cfg = parse_rig_config(__import__("yaml").safe_load(text), tmp_path / "rig.yaml")
+    with pytest.raises(InputError, match=r"joints\.j01\.fixed_joint\.cam1: .*metric"):
+        run_rig(cfg, output=tmp_path / "x.yaml")
