@@ -33,6 +33,7 @@ from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
 from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
+from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
@@ -303,7 +304,9 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
     for name, j in config.joints.items():
         cov = None if j.position_std is None else np.eye(3) * j.position_std**2
         position = dict(j.position_in)
-        covariance = {c: cov for c in j.position_in} if cov is not None else {}
+        covariance: dict[str, FloatArray] = (
+            {c: cov for c in j.position_in} if cov is not None else {}
+        )
         line: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
         axis: dict[str, tuple[np.ndarray, float]] = {}
         for cam, path in j.fixed_joint.items():
