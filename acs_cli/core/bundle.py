@@ -15,13 +15,13 @@ cannot use. The camera model is OpenCV's pinhole with radial-tangential distorti
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import sparse
 
-from acs_cli.core import se3
+from acs_cli.core import lsq, se3
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 
@@ -123,60 +123,49 @@ def camera_matrix(intrinsics: FloatArray) -> FloatArray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
-@dataclass(frozen=True)
-class _Solution:
-    x: FloatArray
-    fun: FloatArray
-    jac: FloatArray
-    success: bool
+class _SparseRows:
+    """A sparse Jacobian ``(m, p)`` assembled from per-observation blocks.
 
-
-def _levenberg_marquardt(
-    residuals: Callable[[FloatArray], FloatArray],
-    jacobian: Callable[[FloatArray], FloatArray],
-    x0: FloatArray,
-    max_iter: int = 100,
-    tol: float = 1e-12,
-) -> _Solution:
-    """Levenberg-Marquardt on the normal equations, for bundles of a few hundred unknowns.
-
-    ``J^T J`` is small (unknowns squared) while ``J`` is tall, so each step costs one
-    product instead of the SVD or QR of ``J`` that a general solver does.
+    Observation ``k`` owns the two pixel rows ``row0 + 2 k`` and ``row0 + 2 k + 1``; a
+    block gives their derivatives ``(k, 2, c)`` with respect to the columns ``(k, c)`` (or
+    ``(c,)`` for all observations alike). Only the non-zeros are stored, so a bundle of
+    ``n`` frames costs ``O(n)`` memory instead of the dense ``O(n^2)``.
     """
-    x = np.asarray(x0, dtype=float).copy()
-    r = residuals(x)
-    cost = float(r @ r)
-    lam = 1e-3
-    J = jacobian(x)
-    converged = False
-    for _ in range(max_iter):
-        H = J.T @ J
-        g = J.T @ r
-        d = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
-        while True:
-            try:
-                step = -np.linalg.solve(H + lam * np.diag(d), g)
-            except np.linalg.LinAlgError:
-                step = np.full_like(x, np.nan)
-            x_new = x + step
-            r_new = residuals(x_new) if np.all(np.isfinite(step)) else r * np.nan
-            cost_new = float(r_new @ r_new)
-            if np.isfinite(cost_new) and cost_new <= cost:
-                break
-            lam *= 10.0
-            if lam > 1e12:
-                return _Solution(x, r, J, converged)
-        small_step = np.linalg.norm(step) <= tol * (np.linalg.norm(x) + tol)
-        # a small gain means convergence only for a near Gauss-Newton step, not a step
-        # shortened by heavy damping far from the minimum
-        small_gain = cost - cost_new <= tol * max(cost, 1e-300) and lam <= 1e-2
-        x, r, cost = x_new, r_new, cost_new
-        J = jacobian(x)
-        lam = max(lam / 10.0, 1e-12)
-        if small_step or small_gain:
-            converged = True
-            break
-    return _Solution(x, r, J, converged)
+
+    def __init__(self, shape: tuple[int, int]) -> None:
+        self.shape = shape
+        self.rows: list[np.ndarray] = []
+        self.cols: list[np.ndarray] = []
+        self.vals: list[np.ndarray] = []
+
+    def add(self, row0: int, values: FloatArray, cols: np.ndarray) -> None:
+        k, two, c = values.shape
+        rows = row0 + two * np.arange(k)[:, None, None] + np.arange(two)[None, :, None]
+        cols = np.broadcast_to(np.asarray(cols).reshape(-1, 1, c), (k, two, c))
+        self.rows.append(np.broadcast_to(rows, (k, two, c)).ravel())
+        self.cols.append(cols.ravel())
+        self.vals.append(np.asarray(values, dtype=float).ravel())
+
+    def add_dense(self, row0: int, col0: int, block: FloatArray) -> None:
+        """A dense block (e.g. prior rows) at ``(row0, col0)``."""
+        r, c = block.shape
+        rr, cc = np.meshgrid(np.arange(r) + row0, np.arange(c) + col0, indexing="ij")
+        self.rows.append(rr.ravel())
+        self.cols.append(cc.ravel())
+        self.vals.append(np.asarray(block, dtype=float).ravel())
+
+    def tocsr(self) -> sparse.csr_array:
+        if not self.rows:
+            return sparse.csr_array(self.shape)
+        data = np.concatenate(self.vals)
+        rc = (np.concatenate(self.rows), np.concatenate(self.cols))
+        return sparse.csr_array(sparse.coo_array((data, rc), shape=self.shape))
+
+
+def _information(J: Any) -> FloatArray:
+    """``J^T J`` ``(p, p)`` as a dense array, from a sparse or dense Jacobian ``(m, p)``."""
+    H = J.T @ J
+    return np.asarray(H.toarray() if sparse.issparse(H) else H)
 
 
 @dataclass(frozen=True)
@@ -295,28 +284,26 @@ def bundle_adjust_fixed_joint(
     n_shared = ni + 6
     n_obs = obs.shape[0]
 
-    def jacobian(p: FloatArray) -> FloatArray:
+    def jacobian(p: FloatArray) -> sparse.csr_array:
         intr, o, pw, R = unpack(p)
         v = np.einsum("kji,kj->ki", R[frame_idx], rel - pw)  # R_i^T (X - p_w)
         Di, Dp = projection_jacobians(v + o, intr)
         Jr = right_jacobians(p[ni + 6 :].reshape(n, 3))[frame_idx]
-        Jac = np.zeros((n_obs, 2, n_shared + 3 * n))
-        Jac[:, :, :ni] = Di[:, :, free_intr]
-        Jac[:, :, ni : ni + 3] = Dp  # d x_cam / d o = I
-        Jac[:, :, ni + 3 : ni + 6] = -np.matmul(Dp, np.swapaxes(R[frame_idx], 1, 2))
+        Jac = _SparseRows((2 * n_obs, n_shared + 3 * n))
+        Jac.add(0, Di[:, :, free_intr], np.arange(ni))
+        Jac.add(0, Dp, ni + np.arange(3))  # d x_cam / d o = I
+        Jac.add(0, -np.matmul(Dp, np.swapaxes(R[frame_idx], 1, 2)), ni + 3 + np.arange(3))
         # x_cam = Exp(-dtheta) R^T (X - p_w) + o: d/d dtheta = [v]x, then the right Jacobian
         Jrot = np.matmul(np.matmul(Dp, se3.skew(v)), Jr)
-        cols = n_shared + 3 * frame_idx[:, None] + np.arange(3)
-        Jac[np.arange(n_obs)[:, None, None], np.arange(2)[None, :, None], cols[:, None, :]] = Jrot
-        return Jac.reshape(2 * n_obs, -1)
+        Jac.add(0, Jrot, n_shared + 3 * frame_idx[:, None] + np.arange(3))
+        return Jac.tocsr()
 
-    sol = _levenberg_marquardt(residuals, jacobian, p0)
+    sol = lsq.solve(residuals, p0, jac=jacobian, method="normal")
     intr, o, pw, R = unpack(sol.x)
     r = sol.fun.reshape(-1, 2)
     dof = max(r.size - sol.x.size, 1)
     sigma2 = float(np.sum(r**2) / dof)
-    J = sol.jac
-    cov_full = sigma2 * np.linalg.pinv(J.T @ J, hermitian=True)
+    cov_full = sigma2 * np.linalg.pinv(_information(sol.jac), hermitian=True)
     cov = np.zeros((15, 15))
     idx = [*free_intr, *range(9, 15)]
     cov[np.ix_(idx, idx)] = cov_full[:n_shared, :n_shared]
@@ -571,24 +558,22 @@ def bundle_adjust_articulated(
     n_par = L.n_shared + 9 * n
     ni, k_oa = L.ni, 2 * L.ni
 
-    def jacobian(p: FloatArray) -> FloatArray:
+    def jacobian(p: FloatArray) -> sparse.csr_array:
         s = L.split(p)
         m = model(p)
-        J = np.zeros((n_px + 3 * len(priors), n_par))
-        JA = J[: 2 * n_obs_a].reshape(n_obs_a, 2, n_par)
-        JB = J[2 * n_obs_a : n_px].reshape(n_obs_b, 2, n_par)
+        J = _SparseRows((n_px + 3 * len(priors), n_par))
         R, Rab = m["R"], m["Rab"]
         # camera A: x_a = R_i^T (X - t_i), R_i = R0_i Exp(r_i)
         xa = np.einsum("kji,kj->ki", R[fa], Xa[ka] - m["t"][fa])
         Di, Dp = projection_jacobians(xa, m["ia"])
-        JA[:, :, :ni] = Di[:, :, L.free]
+        J.add(0, Di[:, :, L.free], np.arange(ni))
         col = L.n_shared + 9 * fa[:, None] + np.arange(3)
         Jr_r = right_jacobians(s["r"])
-        rows, comp = np.arange(n_obs_a)[:, None, None], np.arange(2)[None, :, None]
-        JA[rows, comp, col[:, None, :]] = np.matmul(np.matmul(Dp, se3.skew(xa)), Jr_r[fa])
-        JA[rows, comp, col[:, None, :] + 3] = -np.matmul(Dp, np.swapaxes(R[fa], 1, 2))
+        J.add(0, np.matmul(np.matmul(Dp, se3.skew(xa)), Jr_r[fa]), col)
+        J.add(0, -np.matmul(Dp, np.swapaxes(R[fa], 1, 2)), col + 3)
         # camera B: y = Rw^T (Y - tw) in world A, u = R_i^T (y - t_i) in A,
         # x_b = Rab_i^T (u - o_a) + o_b  (the joint, eq. (2))
+        b0 = 2 * n_obs_a
         Rw, tw = m["Rw"], m["tw"]
         y = (Xb[kb] - tw) @ Rw
         u = np.einsum("kji,kj->ki", R[fb], y - m["t"][fb])
@@ -596,30 +581,27 @@ def bundle_adjust_articulated(
         xb = np.einsum("kij,kj->ki", RabT, u - m["oa"]) + m["ob"]
         Di, Dp = projection_jacobians(xb, m["ib"])
         DpR = np.matmul(Dp, RabT)  # d pixels / d u
-        JB[:, :, ni : 2 * ni] = Di[:, :, L.free]
-        JB[:, :, k_oa : k_oa + 3] = -DpR
-        JB[:, :, k_oa + 3 : k_oa + 6] = Dp
-        rows = np.arange(n_obs_b)[:, None, None]
+        J.add(b0, Di[:, :, L.free], ni + np.arange(ni))
+        J.add(b0, -DpR, k_oa + np.arange(3))
+        J.add(b0, Dp, k_oa + 3 + np.arange(3))
         col = L.n_shared + 9 * fb[:, None] + np.arange(3)
-        JB[rows, comp, col[:, None, :]] = np.matmul(np.matmul(DpR, se3.skew(u)), Jr_r[fb])
+        J.add(b0, np.matmul(np.matmul(DpR, se3.skew(u)), Jr_r[fb]), col)
         DpRR = np.matmul(DpR, np.swapaxes(R[fb], 1, 2))  # d pixels / d y
-        JB[rows, comp, col[:, None, :] + 3] = -DpRR
+        J.add(b0, -DpRR, col + 3)
         Jr_q = right_jacobians(s["q"])
-        JB[rows, comp, col[:, None, :] + 6] = np.matmul(
-            np.matmul(Dp, se3.skew(xb - m["ob"])), Jr_q[fb]
-        )
+        J.add(b0, np.matmul(np.matmul(Dp, se3.skew(xb - m["ob"])), Jr_q[fb]), col + 6)
         if not shared:
             Jr_w = right_jacobians(s["w"][None, :3])[0]
             k_w = k_oa + 6
-            JB[:, :, k_w : k_w + 3] = np.matmul(np.matmul(DpRR, se3.skew(y)), Jr_w)
-            JB[:, :, k_w + 3 : k_w + 6] = -np.matmul(DpRR, Rw.T)
+            J.add(b0, np.matmul(np.matmul(DpRR, se3.skew(y)), Jr_w), k_w + np.arange(3))
+            J.add(b0, -np.matmul(DpRR, Rw.T), k_w + 3 + np.arange(3))
         for j, (key, _mean, Wp) in enumerate(priors):
             c0 = k_oa + (0 if key == "oa" else 3)
-            J[n_px + 3 * j : n_px + 3 * j + 3, c0 : c0 + 3] = prior_scale[0] * Wp
-        return J
+            J.add_dense(n_px + 3 * j, c0, prior_scale[0] * Wp)
+        return J.tocsr()
 
-    def solve(p_start: FloatArray) -> _Solution:
-        return _levenberg_marquardt(residuals, jacobian, p_start)
+    def solve(p_start: FloatArray) -> lsq.Solution:
+        return lsq.solve(residuals, p_start, jac=jacobian, method="normal")
 
     sol = solve(p0)
     dof = max(n_px - n_par, 1)
@@ -629,9 +611,8 @@ def bundle_adjust_articulated(
         prior_scale[0] = float(np.sqrt(sigma2))
         sol = solve(sol.x)
         sigma2 = float(np.sum(sol.fun[:n_px] ** 2) / dof)
-    J = np.asarray(sol.jac)
     # information: pixels over their variance, plus the priors' own
-    info = J[:n_px].T @ J[:n_px] / max(sigma2, 1e-300)
+    info = _information(sol.jac[:n_px]) / max(sigma2, 1e-300)
     for key, _mean, Wp in priors:
         c0 = k_oa + (0 if key == "oa" else 3)
         info[c0 : c0 + 3, c0 : c0 + 3] += Wp.T @ Wp

@@ -8,8 +8,11 @@ covariance is modelled with two unknown variance components
 ``theta_t`` for translation noise and ``theta_r`` for rotation noise seen through a lever
 arm, e.g. ``L_i = R_i [o]x [o]x^T R_i^T`` for a joint at ``o``. Frames are weighted by
 ``Sigma_i^{-1}``; the variance components are estimated from the residuals by maximum
-likelihood. The solver is Levenberg-Marquardt over a small parameter vector with analytic
-Jacobians ``(n, 3, p)``; all per-frame work is batched (no Python loop over frames).
+likelihood. The two alternate: with the weights held, the whitened residuals
+``chol(W_i)^T r_i`` (and prior rows ``chol(W_p)^T r_p``) are minimised by the project's
+least-squares engine (:func:`acs_cli.core.lsq.solve`, Levenberg-Marquardt with analytic
+Jacobians ``(n, 3, p)``), then the noise levels are re-fitted. All per-frame work is
+batched (no Python loop over frames).
 
 Gross outliers are rejected: after convergence, frames whose Mahalanobis distance
 ``r_i^T Sigma_i^{-1} r_i`` exceeds the chi-square(3) quantile with tail probability
@@ -20,12 +23,13 @@ probability about ``OUTLIER_ALPHA``) are dropped and the fit repeated, at most
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
+from acs_cli.core import lsq
 from acs_cli.core.se3 import FloatArray
 
 NDArrayBool = np.ndarray
@@ -207,15 +211,6 @@ def _rows(a: FloatArray, mask: NDArrayBool) -> FloatArray:
     return a if mask.all() else a[mask]
 
 
-def _cost(problem: LeastSquaresProblem, x: FloatArray, mask: NDArrayBool, W: FloatArray) -> float:
-    r, _ = problem.residuals(x, False)
-    c = float(np.sum(_rows(mahalanobis_sq(r, W), mask)))
-    if problem.priors is not None:
-        rp, _, Wp = problem.priors(x)
-        c += float(rp @ Wp @ rp)
-    return c
-
-
 def outlier_threshold(n: int) -> float:
     """Squared Mahalanobis distance above which one of ``n`` frames is an outlier."""
     from scipy.stats import chi2  # lazily: importing scipy.stats costs ~0.6 s a command
@@ -231,20 +226,67 @@ def _with_jacobian(problem: LeastSquaresProblem, x: FloatArray) -> tuple[FloatAr
     return r, J
 
 
+#: Points whose residuals :func:`_memoised` remembers (the engine revisits its best point).
+_MEMO_SIZE = 4
+
+
 def _memoised(problem: LeastSquaresProblem) -> LeastSquaresProblem:
-    """The problem with its residuals at the last ``x`` remembered (they are asked for
-    several times at one point: cost, weights, Jacobian)."""
+    """The problem with its residuals at the last few ``x`` remembered (they are asked for
+    several times at one point: residuals, Jacobian, weights)."""
     raw = problem.residuals
-    memo: dict[str, Any] = {}
+    memo: OrderedDict[bytes, tuple[FloatArray, FloatArray | None]] = OrderedDict()
 
     def cached(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
         key = x.tobytes()
-        if memo.get("key") != key or (jac and memo.get("J") is None):
-            r, J = raw(x, jac)
-            memo.update(key=key, r=r, J=J)
-        return memo["r"], (memo["J"] if jac else None)
+        hit = memo.get(key)
+        if hit is None or (jac and hit[1] is None):
+            hit = raw(x, jac)
+            memo[key] = hit
+            if len(memo) > _MEMO_SIZE:
+                memo.popitem(last=False)
+        else:
+            memo.move_to_end(key)
+        return hit[0], (hit[1] if jac else None)
 
     return LeastSquaresProblem(cached, problem.noise_shapes, problem.priors, problem.retract)
+
+
+def whitener(W: FloatArray) -> FloatArray:
+    """``U_i = chol(W_i)^T`` ``(n, 3, 3)`` for information matrices ``W_i`` ``(n, 3, 3)``:
+    ``|U_i r_i|^2 = r_i^T W_i r_i`` (one batched Cholesky, no loop over frames)."""
+    return np.swapaxes(np.linalg.cholesky(W), -1, -2)
+
+
+def _whiten_prior(Wp: FloatArray, a: FloatArray) -> FloatArray:
+    """``chol(W_p)^T a`` for prior rows ``a`` ``(m,)`` or ``(m, p)``; ``W_p`` ``(m, m)``."""
+    return np.asarray(np.linalg.cholesky(Wp).T @ a)
+
+
+def _whitened(
+    problem: LeastSquaresProblem, mask: NDArrayBool, W: FloatArray
+) -> tuple[Callable[[FloatArray], FloatArray], Callable[[FloatArray], FloatArray]]:
+    """Residuals ``(3 k + m,)`` and Jacobian ``(3 k + m, p)`` for the engine, with the
+    weights held: the ``k`` kept frames' ``chol(W_i)^T r_i`` and the prior rows
+    ``chol(W_p)^T r_p``."""
+    U = whitener(_rows(W, mask))
+
+    def fun(x: FloatArray) -> FloatArray:
+        r, _ = problem.residuals(x, False)
+        out = np.einsum("nij,nj->ni", U, _rows(r, mask)).reshape(-1)
+        if problem.priors is not None:
+            rp, _, Wp = problem.priors(x)
+            out = np.concatenate([out, _whiten_prior(Wp, rp)])
+        return out
+
+    def jac(x: FloatArray) -> FloatArray:
+        _, J = _with_jacobian(problem, x)
+        out = np.matmul(U, _rows(J, mask)).reshape(-1, J.shape[2])
+        if problem.priors is not None:
+            _, Jp, Wp = problem.priors(x)
+            out = np.concatenate([out, _whiten_prior(Wp, Jp)])
+        return out
+
+    return fun, jac
 
 
 @dataclass
@@ -258,6 +300,13 @@ class _Fit:
     iterations: int
 
 
+#: Residual evaluations allowed to one weighted solve (weights held) of :func:`_fit`.
+_INNER_MAX_NFEV = 50
+#: Relative tolerances of that solve (cost decrease, step): near machine precision, so that
+#: fits started from different points end at the same place.
+_INNER_TOL = 1e-14
+
+
 def _fit(
     problem: LeastSquaresProblem,
     x0: FloatArray,
@@ -266,8 +315,8 @@ def _fit(
     fixed_theta: bool,
     max_outer: int,
 ) -> _Fit:
-    """Alternate LM on the parameters (weights held) and ML on the noise levels."""
-    retract = problem.retract or (lambda x, dx: x + dx)
+    """Alternate the weighted least-squares solve (weights held, :func:`lsq.solve`) and
+    the ML noise levels (:func:`fit_variance_components`) until both settle."""
     problem = _memoised(problem)
     x = np.asarray(x0, dtype=float).copy()
     p = x.size
@@ -286,36 +335,25 @@ def _fit(
     it = 0
     for _outer in range(max_outer):
         it += 1
-        lam = 1e-6  # new weights, new problem: no damping carried over
-        cost = _cost(problem, x, mask, W)
         x_start = x.copy()
-        for _inner in range(10):
-            r, J = _with_jacobian(problem, x)
-            H, g = normal_equations(_rows(r, mask), _rows(J, mask), _rows(W, mask))
-            if problem.priors is not None:
-                rp, Jp, Wp = problem.priors(x)
-                H = H + Jp.T @ Wp @ Jp
-                g = g + Jp.T @ Wp @ rp
-            accepted = False
-            dx = np.zeros_like(x)
-            for _try in range(20):
-                A = H + lam * np.diag(np.diag(H) + 1e-12)
-                try:
-                    dx = -np.linalg.solve(A, g)
-                except np.linalg.LinAlgError:
-                    dx = -np.linalg.lstsq(A, g, rcond=None)[0]
-                if -float(g @ dx) < 1e-13 * cost:
-                    break  # converged: the model predicts no measurable decrease
-                if np.all(np.isfinite(dx)):
-                    x_new = retract(x, dx)
-                    cost_new = _cost(problem, x_new, mask, W)
-                    if np.isfinite(cost_new) and cost_new <= cost:
-                        x, cost, accepted = x_new, cost_new, True
-                        lam = max(lam / 10.0, 1e-12)
-                        break
-                lam = min(lam * 10.0, 1e12)
-            if not accepted or np.linalg.norm(dx) < 1e-10 * (1.0 + np.linalg.norm(x)):
-                break
+        fun, jac = _whitened(problem, mask, W)
+        # each outer iteration starts at the current point: the retraction is re-centred
+        # there, so one engine round suffices
+        sol = lsq.solve(
+            fun,
+            x,
+            jac=jac,
+            retract=problem.retract,
+            method="lm",
+            ftol=_INNER_TOL,
+            xtol=_INNER_TOL,
+            gtol=_INNER_TOL,
+            max_nfev=_INNER_MAX_NFEV,
+            max_rounds=1,
+            final_jac=False,
+        )
+        if np.all(np.isfinite(sol.x)):
+            x = sol.x
         th_old = th
         th, W = weights(x, th)
         moved = float(np.linalg.norm(x - x_start)) / (1.0 + float(np.linalg.norm(x)))

@@ -28,9 +28,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from acs_cli.core import estimation, se3
+from acs_cli.core import estimation, lsq, se3
+from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.joint import (
     METHODS,
     MIN_ROTATION_SPREAD,
@@ -211,6 +211,29 @@ def _check_spread(j_a: FloatArray, what: str = "joint trajectory") -> None:
         )
 
 
+def rpy_right_jacobian(rpy_rad: FloatArray) -> FloatArray:
+    """``E`` ``(3, 3)`` with ``R(rpy + d) = R(rpy) Exp(E d + O(d^2))``.
+
+    ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`se3.matrix_from_rpy_deg`, here in radians):
+    a change of roll turns ``R`` about its own x axis, of pitch about ``Rx^T e_y``, of yaw
+    about ``(Ry Rx)^T e_z`` (body frame). Singular at pitch = +-90 deg (gimbal lock).
+
+    Parameters
+    ----------
+    rpy_rad : ndarray, shape (3,)
+        Roll, pitch, yaw (radians).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Columns: the body-frame rotation axes of roll, pitch and yaw.
+    """
+    roll, pitch, _yaw = np.asarray(rpy_rad, dtype=float)
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    # Rx^T e_y = (0, cr, -sr); (Ry Rx)^T e_z = Rx^T (-sp, 0, cp) = (-sp, sr cp, cr cp)
+    return np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+
+
 # ----------------------------------------------------------------------------- paper
 
 
@@ -248,18 +271,10 @@ def _paper(
 
     def jac(p: FloatArray) -> FloatArray:
         R, _T, O, phi = unpack(p)
-        eps = 1e-7
         ja = (RAf @ O).reshape(-1, 3) + TA
-        cols = []
-        for k in range(3):  # three Euler angles, not frames
-            dp = np.zeros(3)
-            dp[k] = eps
-            dR = (
-                se3.matrix_from_rpy_deg(np.degrees(p[:3] + dp))
-                - se3.matrix_from_rpy_deg(np.degrees(p[:3] - dp))
-            ) / (2 * eps)
-            cols.append(phi * ((RBf @ (dR @ O)).reshape(-1, 3) - ja @ dR.T))
-        Jr = np.stack(cols, axis=2)
+        # d R / d rpy_k = R [e_k]x with e_k the columns of rpy_right_jacobian
+        dR = np.matmul(R, se3.skew(rpy_right_jacobian(p[:3]).T))  # (3, 3, 3): k, i, j
+        Jr = phi * (np.einsum("nij,kjl,l->nik", RB, dR, O) - np.einsum("nj,kij->nik", ja, dR))
         JT = RB - np.eye(3)
         JO = phi * ((RBf @ R).reshape(-1, 3, 3) - np.matmul(R, RA))
         blocks = [Jr, JT, JO]
@@ -268,7 +283,7 @@ def _paper(
         return np.concatenate(blocks, axis=2).reshape(3 * n, -1)
 
     p0 = np.concatenate([rpy0, x[9:], o_a] + ([[phi0]] if unknown_scale else []))
-    sol = least_squares(res, p0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    sol = lsq.solve(res, p0, jac=jac, method="lm")
     R, T, O, phi = unpack(sol.x)
     r = sol.fun.reshape(-1, 3)
     Jm = sol.jac
@@ -481,14 +496,9 @@ def _estimate_paper(
     R, T, O, phi, r, cov = _paper(Ta, Tb, o_a_in, reference, unknown_scale)
     _check_spread(se3.transform_points(Ta, O))
     T_b_a = se3.transforms_from_rt(R, T)
-    # covariance of (R perturbation, T): rpy -> right perturbation by finite differences
+    # covariance of (R perturbation, T): rpy -> right perturbation
     G = np.zeros((6, cov.shape[0]))
-    eps = 1e-7
-    rpy = np.radians(se3.rpy_deg_from_matrix(R))
-    for k in range(3):  # Euler angles
-        dp = np.zeros(3)
-        dp[k] = eps
-        G[:3, k] = se3.rotvec_from_matrix(R.T @ se3.matrix_from_rpy_deg(np.degrees(rpy + dp))) / eps
+    G[:3, :3] = rpy_right_jacobian(np.radians(se3.rpy_deg_from_matrix(R)))
     G[3:, 3:6] = np.eye(3)
     cov6 = G @ cov @ G.T
     O_b = phi * R @ O + T
@@ -742,63 +752,126 @@ def _reference_pose(
     split evenly between the cameras). Returns ``T_b_a``, the Jacobian ``(6, 12)`` of
     ``T_b_a`` with respect to ``delta`` and the posterior covariance ``(12, 12)`` of ``delta``.
     """
-    Ra, ta, Rb, tb = Ta_ref[:3, :3], Ta_ref[:3, 3], Tb_ref[:3, :3], Tb_ref[:3, 3]
-    c = Rb @ o_b + tb - phi * R_X @ (Ra @ o_a + ta) - t_X
-    A = np.concatenate(
-        [phi * R_X @ Ra @ se3.skew(o_a), -phi * R_X, -Rb @ se3.skew(o_b), np.eye(3)], axis=1
-    )
-    var_ta = theta_t / (2.0 * phi**2)
-    var_tb = theta_t / 2.0
-    P = np.diag([theta_r] * 3 + [var_ta] * 3 + [theta_r] * 3 + [var_tb] * 3)
-    S = A @ P @ A.T
-    K = P @ A.T @ np.linalg.inv(S)
-    delta = -K @ c
-    P_post = P - K @ A @ P
-
-    def compose(d: FloatArray) -> FloatArray:
-        Ra_ = Ra @ se3.matrix_from_rotvec(d[0:3])
-        Rb_ = Rb @ se3.matrix_from_rotvec(d[6:9])
-        R_ba = Rb_.T @ R_X @ Ra_
-        t_ba = Rb_.T @ (phi * R_X @ (ta + d[3:6]) + t_X - (tb + d[9:12]))
-        return se3.transforms_from_rt(R_ba, t_ba)
-
-    T0 = compose(delta)
+    ref = _ReferenceCorrection(Ta_ref, Tb_ref, R_X, t_X, phi, o_a, o_b, theta_t, theta_r)
     if not jacobian:
-        return T0, np.zeros((6, 12)), P_post
-    Jd = np.zeros((6, 12))
-    eps = 1e-7
-    for k in range(12):  # 12 pose-correction coordinates
-        dd = delta.copy()
-        dd[k] += eps
-        Tk = compose(dd)
-        Jd[:3, k] = se3.rotvec_from_matrix(T0[:3, :3].T @ Tk[:3, :3]) / eps
-        Jd[3:, k] = (Tk[:3, 3] - T0[:3, 3]) / eps
-    return T0, Jd, P_post
+        return ref.T_b_a, np.zeros((6, 12)), ref.P_post
+    return ref.T_b_a, ref.jacobian_delta(), ref.P_post
+
+
+class _ReferenceCorrection:
+    """The constraint-corrected reference poses of :func:`_reference_pose` and the
+    derivatives of the resulting ``T_b_a`` (rotation perturbed on the right, translation).
+
+    ``T_b_a = [Rb_^T R_X Ra_, Rb_^T (phi R_X (ta + d_ta) + t_X - tb - d_tb)]`` with
+    ``Ra_ = Ra Exp(d_ra)``, ``Rb_ = Rb Exp(d_rb)`` and ``delta = -K c``,
+    ``K = P A^T (A P A^T)^-1``.
+    """
+
+    def __init__(
+        self,
+        Ta_ref: FloatArray,
+        Tb_ref: FloatArray,
+        R_X: FloatArray,
+        t_X: FloatArray,
+        phi: float,
+        o_a: FloatArray,
+        o_b: FloatArray,
+        theta_t: float,
+        theta_r: float,
+    ) -> None:
+        self.Ra, self.ta = Ta_ref[:3, :3], Ta_ref[:3, 3]
+        self.Rb, self.tb = Tb_ref[:3, :3], Tb_ref[:3, 3]
+        self.R_X, self.t_X, self.phi = R_X, t_X, phi
+        self.o_a, self.o_b = o_a, o_b
+        Ra, Rb = self.Ra, self.Rb
+        self.ja = Ra @ o_a + self.ta
+        self.c = Rb @ o_b + self.tb - phi * R_X @ self.ja - t_X
+        self.A = np.concatenate(
+            [phi * R_X @ Ra @ se3.skew(o_a), -phi * R_X, -Rb @ se3.skew(o_b), np.eye(3)], axis=1
+        )
+        var_ta = theta_t / (2.0 * phi**2)
+        self.p = np.array([theta_r] * 3 + [var_ta] * 3 + [theta_r] * 3 + [theta_t / 2.0] * 3)
+        PAt = self.p[:, None] * self.A.T
+        self.Si = np.linalg.inv(self.A @ PAt)
+        self.K = PAt @ self.Si
+        self.delta = -self.K @ self.c
+        self.P_post = np.diag(self.p) - self.K @ self.A * self.p[None, :]
+        d = self.delta
+        self.Ra_ = Ra @ se3.matrix_from_rotvec(d[0:3])
+        self.Rb_ = Rb @ se3.matrix_from_rotvec(d[6:9])
+        self.v = phi * R_X @ (self.ta + d[3:6]) + t_X - (self.tb + d[9:12])
+        R_ba = self.Rb_.T @ R_X @ self.Ra_
+        self.T_b_a = se3.transforms_from_rt(R_ba, self.Rb_.T @ self.v)
+
+    def jacobian_delta(self) -> FloatArray:
+        """``(6, 12)`` derivative of ``T_b_a`` with respect to ``delta``."""
+        d = self.delta
+        Jr = right_jacobians(np.stack([d[0:3], d[6:9]]))  # Exp(d + e) = Exp(d) Exp(Jr e)
+        R_ba, t_ba = self.T_b_a[:3, :3], self.T_b_a[:3, 3]
+        Jd = np.zeros((6, 12))
+        Jd[:3, 0:3] = Jr[0]
+        Jd[:3, 6:9] = -R_ba.T @ Jr[1]
+        Jd[3:, 3:6] = self.phi * self.Rb_.T @ self.R_X
+        Jd[3:, 6:9] = se3.skew(t_ba) @ Jr[1]
+        Jd[3:, 9:12] = -self.Rb_.T
+        return Jd
+
+    def jacobian_params(self) -> FloatArray:
+        """``(6, 13)`` derivative of ``T_b_a`` with respect to ``(R_X`` perturbed on the
+        right, ``t_X, o_a, o_b, log phi)``, ``delta`` following its definition."""
+        R_X, phi, Ra, Rb = self.R_X, self.phi, self.Ra, self.Rb
+        e = np.eye(3)
+        # derivatives of c (13, 3), A (13, 3, 12) and the diagonal of P (13, 12)
+        dc = np.zeros((13, 3))
+        dA = np.zeros((13, 3, 12))
+        dp = np.zeros((13, 12))
+        Sk = se3.skew(e)  # [e_k]x, (3, 3, 3)
+        dc[0:3] = (phi * R_X @ se3.skew(self.ja)).T
+        dA[0:3, :, 0:3] = phi * np.matmul(R_X @ Sk, Ra @ se3.skew(self.o_a))
+        dA[0:3, :, 3:6] = -phi * np.matmul(R_X, Sk)
+        dc[3:6] = -e
+        dc[6:9] = (-phi * R_X @ Ra).T
+        dA[6:9, :, 0:3] = phi * np.matmul(R_X @ Ra, Sk)
+        dc[9:12] = Rb.T
+        dA[9:12, :, 6:9] = -np.matmul(Rb, Sk)
+        dc[12] = -phi * R_X @ self.ja
+        dA[12, :, 0:6] = self.A[:, 0:6]
+        dp[12, 3:6] = -2.0 * self.p[3:6]
+        # delta = -K c, K = P A^T S^-1, S = A P A^T
+        A, P, K, Si = self.A, self.p, self.K, self.Si
+        dAt = np.swapaxes(dA, 1, 2)  # (13, 12, 3)
+        PAt = P[:, None] * A.T
+        dS = np.matmul(dA, PAt) + np.matmul(PAt.T, dAt) + np.matmul(A * dp[:, None, :], A.T)
+        dK = (
+            np.matmul(dp[:, :, None] * A.T, Si)
+            + np.matmul(P[None, :, None] * dAt, Si)
+            - np.matmul(np.matmul(K, dS), Si)
+        )
+        ddelta = -(dK @ self.c) - dc @ K.T  # (13, 12)
+        # direct dependence of T_b_a on the parameters, delta held
+        G = np.zeros((6, 13))
+        G[:3, 0:3] = self.Ra_.T
+        G[3:, 0:3] = -phi * self.Rb_.T @ R_X @ se3.skew(self.ta + self.delta[3:6])
+        G[3:, 3:6] = self.Rb_.T
+        G[3:, 12] = self.Rb_.T @ (phi * R_X @ (self.ta + self.delta[3:6]))
+        return G + self.jacobian_delta() @ ddelta.T
 
 
 def _relpose_covariance(Ta_ref, Tb_ref, sol, L, J_ref, P_post, unpack):
     """Covariance ``(6, 6)`` of ``T_b_a``: the similarity's uncertainty and the reference poses'."""
-    R_X, _t_X, _o_a, _o_b, _phi, _ = unpack(sol.x)
+    R_X, t_X, o_a, o_b, phi, _ = unpack(sol.x)
     theta_t, theta_r = sol.theta
-
-    def tba(x: FloatArray) -> FloatArray:
-        Rx, tx, oa, ob, ph, _ = unpack(x)
-        T, _, _ = _reference_pose(Ta_ref, Tb_ref, Rx, tx, ph, oa, ob, theta_t, theta_r, False)
-        return T
-
-    T0 = tba(sol.x)
+    ref = _ReferenceCorrection(Ta_ref, Tb_ref, R_X, t_X, phi, o_a, o_b, theta_t, theta_r)
+    G13 = ref.jacobian_params()
     G = np.zeros((6, L.size))
-    eps = 1e-7
-    for k in range(L.size):  # parameters, not frames
-        dx = np.zeros(L.size)
-        dx[k] = eps
-        x1 = sol.x + dx
-        if k < 3:
-            x1 = sol.x.copy()
-            x1[L.rot] = se3.rotvec_from_matrix(R_X @ se3.matrix_from_rotvec(dx[L.rot]))
-        Tk = tba(x1)
-        G[:3, k] = se3.rotvec_from_matrix(T0[:3, :3].T @ Tk[:3, :3]) / eps
-        G[3:, k] = (Tk[:3, 3] - T0[:3, 3]) / eps
+    G[:, L.rot], G[:, L.t], G[:, L.oa], G[:, L.ob] = (
+        G13[:, 0:3],
+        G13[:, 3:6],
+        G13[:, 6:9],
+        G13[:, 9:12],
+    )
+    if L.logphi is not None:
+        G[:, L.logphi] = G13[:, 12]
     return G @ sol.covariance @ G.T + J_ref @ P_post @ J_ref.T
 
 
@@ -819,19 +892,15 @@ def paper_pose_std(T_b_a: FloatArray, covariance: FloatArray) -> tuple[FloatArra
         Of ``t_a_b = -R_b_a^T t_b_a``.
     """
 
-    def quantities(d: FloatArray) -> FloatArray:
-        R = T_b_a[:3, :3] @ se3.matrix_from_rotvec(d[:3])
-        t = T_b_a[:3, 3] + d[3:]
-        return np.concatenate([se3.rpy_deg_from_matrix(R.T), -R.T @ t])
-
-    q0 = quantities(np.zeros(6))
+    R0, t0 = T_b_a[:3, :3], T_b_a[:3, 3]
+    R_ab = R0.T
+    t_ab = -R_ab @ t0
+    # R = R0 Exp(d) gives R_ab = Exp(-d) R0^T = R_ab Exp(-R0 d): a right perturbation of
+    # R_ab, whose roll, pitch, yaw move by E^-1 of it (E: rpy_right_jacobian)
+    E = rpy_right_jacobian(np.radians(se3.rpy_deg_from_matrix(R_ab)))
     G = np.zeros((6, 6))
-    eps = 1e-7
-    for k in range(6):  # six pose coordinates
-        d = np.zeros(6)
-        d[k] = eps
-        diff = quantities(d) - q0
-        diff[:3] = (diff[:3] + 180.0) % 360.0 - 180.0
-        G[:, k] = diff / eps
+    G[:3, :3] = -np.degrees(np.linalg.solve(E, R0))
+    G[3:, :3] = se3.skew(t_ab)  # t_ab = -Exp(-d) R0^T t: moves by [t_ab]x d
+    G[3:, 3:] = -R_ab
     std = np.sqrt(np.maximum(np.diag(G @ covariance @ G.T), 0.0))
     return std[:3], std[3:]
