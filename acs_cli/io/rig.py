@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -41,7 +41,8 @@ from acs_cli.core import se3
 from acs_cli.core.rig import JOINT_TYPES
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import read_yaml_artifact, write_yaml_artifact
+from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector
 
 KIND = "rig"
 
@@ -77,33 +78,9 @@ class RigJointResult:
     frames_rejected: int = 0
 
 
-def _array(value: Any, shape: tuple[int, ...], key: str, path: Path) -> FloatArray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be numbers of shape {shape}", path=path) from None
-    if arr.shape != shape or not np.all(np.isfinite(arr)):
-        raise InputError(
-            f"'{key}' must be finite numbers of shape {shape}, got shape {arr.shape}", path=path
-        )
-    return arr
-
-
-def _number(value: Any, key: str, path: Path) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(f"'{key}' must be a finite number, got {type(value).__name__}", path=path)
-    return float(value)
-
-
-def _mapping(value: Any, key: str, path: Path) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise InputError(f"'{key}' must be a mapping", path=path)
-    return value
-
-
 @dataclass(frozen=True)
-class RigArtifact:
-    """A calibrated rig: load, save, validate, summarise.
+class RigArtifact(YamlArtifact):
+    """A calibrated rig: load, save, validate, summarise (see :class:`~acs_cli.io.base.Artifact`).
 
     Attributes
     ----------
@@ -124,6 +101,10 @@ class RigArtifact:
     joints: dict[str, RigJointResult]
     warnings: list[str] = field(default_factory=list)
     header: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
+
+    KIND: ClassVar[str] = KIND
+    REQUIRED: ClassVar[tuple[str, ...]] = ("reference.camera", "cameras", "joints")
 
     # ------------------------------------------------------------------ queries
 
@@ -200,52 +181,57 @@ class RigArtifact:
             "warnings": list(self.warnings),
         }
 
-    def save(self, path: str | Path, header: dict[str, Any]) -> RigArtifact:
-        """Write ``rig.yaml`` atomically with ``header`` (from ``make_header("rig", ...)``)."""
-        write_yaml_artifact(path, header, self.body())
-        return RigArtifact(**{**self.__dict__, "header": dict(header)})
+    def validate(self) -> None:
+        """Every camera a rigid ``T_cam_ref``; joints between known cameras."""
+        for c in self.cameras.values():
+            try:
+                se3.check_transforms(c.T_cam_ref, name=f"cameras.{c.name}.T_cam_ref")
+            except InputError as exc:
+                raise InputError(exc.message, path=self.source) from None
+        for j in self.joints.values():
+            if any(b not in self.cameras for b in j.between):
+                raise InputError(
+                    f"'joints.{j.name}.between' names an unknown camera", path=self.source
+                )
 
     @classmethod
-    def load(cls, path: str | Path) -> RigArtifact:
-        """Read and validate a ``rig.yaml``; errors name the file and the key."""
-        p = Path(path)
-        doc = read_yaml_artifact(p, KIND, ["reference.camera", "cameras", "joints"])
-        ref = _mapping(doc["reference"], "reference", p)
+    def from_doc(cls, doc: dict[str, Any], path: Path) -> RigArtifact:
+        """The typed rig from a parsed ``rig.yaml``; errors name the file and the key."""
+        p = path
+        ref = as_mapping(doc["reference"], "reference", p)
         frame = ref.get("frame", 0)
         if isinstance(frame, bool) or not isinstance(frame, int):
             raise InputError("'reference.frame' must be an integer", path=p)
-        cams_doc = _mapping(doc["cameras"], "cameras", p)
+        cams_doc = as_mapping(doc["cameras"], "cameras", p)
         cameras: dict[str, RigCameraResult] = {}
         for name, c in cams_doc.items():
             k = f"cameras.{name}"
-            c = _mapping(c, k, p)
-            T = _array(c.get("T_cam_ref"), (4, 4), f"{k}.T_cam_ref", p)
-            try:
-                se3.check_transforms(T, name=f"{k}.T_cam_ref")
-            except InputError as exc:
-                raise InputError(exc.message, path=p) from None
-            std = _mapping(c.get("T_cam_ref_std", {}), f"{k}.T_cam_ref_std", p)
+            c = as_mapping(c, k, p)
+            T = as_matrix(c.get("T_cam_ref"), (4, 4), f"{k}.T_cam_ref", p)
+            std = as_mapping(c.get("T_cam_ref_std", {}), f"{k}.T_cam_ref_std", p)
             scale_std = c.get("scale_std", "fixed")
             cameras[str(name)] = RigCameraResult(
                 name=str(name),
                 T_cam_ref=T,
-                rotation_std_deg=_array(
-                    std.get("rotation_deg", [0, 0, 0]), (3,), f"{k}.T_cam_ref_std.rotation_deg", p
+                rotation_std_deg=as_vector(
+                    std.get("rotation_deg", [0, 0, 0]), f"{k}.T_cam_ref_std.rotation_deg", p
                 ),
-                translation_std=_array(
-                    std.get("translation", [0, 0, 0]), (3,), f"{k}.T_cam_ref_std.translation", p
+                translation_std=as_vector(
+                    std.get("translation", [0, 0, 0]), f"{k}.T_cam_ref_std.translation", p
                 ),
                 unknown_scale=bool(c.get("unknown_scale", False)),
-                scale=_number(c.get("scale", 1.0), f"{k}.scale", p),
-                scale_std=None if scale_std == "fixed" else _number(scale_std, f"{k}.scale_std", p),
+                scale=as_number(c.get("scale", 1.0), f"{k}.scale", p, positive=True),
+                scale_std=None
+                if scale_std == "fixed"
+                else as_number(scale_std, f"{k}.scale_std", p, non_negative=True),
             )
         reference = str(ref["camera"])
         if reference not in cameras:
             raise InputError(f"'reference.camera' {reference!r} is not one of the cameras", path=p)
         joints: dict[str, RigJointResult] = {}
-        for name, j in _mapping(doc["joints"], "joints", p).items():
+        for name, j in as_mapping(doc["joints"], "joints", p).items():
             k = f"joints.{name}"
-            j = _mapping(j, k, p)
+            j = as_mapping(j, k, p)
             jtype = j.get("type")
             if jtype not in JOINT_TYPES:
                 raise InputError(f"'{k}.type' must be one of {', '.join(JOINT_TYPES)}", path=p)
@@ -258,36 +244,34 @@ class RigArtifact:
                 raise InputError(f"'{k}.between' must name two of the rig's cameras", path=p)
             b = (str(between[0]), str(between[1]))
 
-            def per_cam(key: str, shape: tuple[int, ...], k: str = k, j: Any = j, b: Any = b):
-                d = _mapping(j.get(key, {}), f"{k}.{key}", p)
-                return {c: _array(d[c], shape, f"{k}.{key}.{c}", p) for c in b if c in d}
+            def per_cam(key: str, k: str = k, j: Any = j, b: Any = b) -> dict[str, FloatArray]:
+                d = as_mapping(j.get(key, {}), f"{k}.{key}", p)
+                return {c: as_vector(d[c], f"{k}.{key}.{c}", p) for c in b if c in d}
 
-            pos = per_cam("position_in", (3,)) if jtype != "rigid" else {}
+            pos = per_cam("position_in") if jtype != "rigid" else {}
             if jtype != "rigid" and len(pos) != 2:
                 raise InputError(f"'{k}.position_in' needs both {b[0]} and {b[1]}", path=p)
-            axis = per_cam("axis_in", (3,)) if jtype == "hinge" else {}
+            axis = per_cam("axis_in") if jtype == "hinge" else {}
             if jtype == "hinge" and len(axis) != 2:
                 raise InputError(f"'{k}.axis_in' needs both {b[0]} and {b[1]}", path=p)
-            ax_std = _mapping(j.get("axis_std_deg_in", {}), f"{k}.axis_std_deg_in", p)
+            ax_std = as_mapping(j.get("axis_std_deg_in", {}), f"{k}.axis_std_deg_in", p)
             joints[str(name)] = RigJointResult(
                 name=str(name),
                 type=str(jtype),
                 between=b,
                 position_in=pos,
-                position_std_in=per_cam("position_std_in", (3,)) if jtype != "rigid" else {},
+                position_std_in=per_cam("position_std_in") if jtype != "rigid" else {},
                 axis_in=axis,
                 axis_std_deg_in={
-                    str(c): _number(v, f"{k}.axis_std_deg_in.{c}", p) for c, v in ax_std.items()
+                    str(c): as_number(v, f"{k}.axis_std_deg_in.{c}", p) for c, v in ax_std.items()
                 },
-                residual_rms=_number(j.get("residual_rms", 0.0), f"{k}.residual_rms", p),
+                residual_rms=as_number(j.get("residual_rms", 0.0), f"{k}.residual_rms", p),
                 frames_used=int(j.get("frames_used", 0)),
                 frames_rejected=int(j.get("frames_rejected", 0)),
             )
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):
             raise InputError("'warnings' must be a list", path=p)
-        keys = ("schema", "schema_version", "tool", "created", "inputs", "method", "units")
-        header: dict[str, Any] = {k: doc[k] for k in (*keys, "frames") if k in doc}
         return cls(
             reference_camera=reference,
             reference_frame=frame,
@@ -295,5 +279,6 @@ class RigArtifact:
             cameras=cameras,
             joints=joints,
             warnings=[str(w) for w in warnings],
-            header=header,
+            header=header_of(doc),
+            source=str(p),
         )

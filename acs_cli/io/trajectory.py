@@ -547,28 +547,44 @@ def read_colmap(path: str | Path) -> Trajectory:
 # NPZ
 
 
-def _load_npz(path: Path) -> dict[str, np.ndarray]:
-    """All arrays of an NPZ archive; any failure is an InputError."""
+def _read_bytes_npz(path: Path) -> bytes:
+    """The bytes of an NPZ file; a missing file or a folder is an InputError."""
     if not path.exists():
         raise InputError("no such file", path=path)
     if path.is_dir():
         raise InputError("is a folder, expected an NPZ file", path=path)
     try:
-        # Open the file ourselves: np.load leaks its handle when the archive is corrupt.
-        with open(path, "rb") as fh:
-            z = np.load(fh, allow_pickle=False)
-            if not isinstance(z, np.lib.npyio.NpzFile):
-                raise InputError("is a single .npy array, not an NPZ archive", path=path)
-            with z:
-                return {str(k): np.asarray(z[k]) for k in z.files}
-    except InputError:
-        raise
+        return path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror or exc})", path=path) from exc
+
+
+def npz_arrays_from_bytes(data: bytes, path: Path) -> dict[str, np.ndarray]:
+    """All arrays of an NPZ archive held in memory; any failure is an InputError naming
+    ``path``."""
+    try:
+        z = np.load(io.BytesIO(data), allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise InputError("is a single .npy array, not an NPZ archive", path=path)
+        with z:
+            return {str(k): np.asarray(z[k]) for k in z.files}
+    except InputError:
+        raise
     except Exception as exc:  # corrupt archives raise many types (zipfile, zlib, ValueError)
         raise InputError(
             f"not a readable NPZ file (truncated or corrupt?): {type(exc).__name__}", path=path
         ) from exc
+
+
+def load_npz(path: Path) -> tuple[dict[str, np.ndarray], bytes]:
+    """All arrays of an NPZ file and the file's bytes (read once); failures are InputErrors."""
+    data = _read_bytes_npz(path)
+    return npz_arrays_from_bytes(data, path), data
+
+
+def _load_npz(path: Path) -> dict[str, np.ndarray]:
+    """All arrays of an NPZ archive; any failure is an InputError."""
+    return load_npz(path)[0]
 
 
 def _npz_scalar_str(arrays: Mapping[str, np.ndarray], key: str, path: Path) -> str:
@@ -631,7 +647,11 @@ def read_npz_poses(path: str | Path) -> Trajectory:
         rotation blocks not orthonormal within ``1e-4``.
     """
     p = Path(path)
-    arrays = _load_npz(p)
+    return parse_npz_poses(_load_npz(p), p)
+
+
+def parse_npz_poses(arrays: Mapping[str, np.ndarray], p: Path) -> Trajectory:
+    """The trajectory of an NPZ's arrays (see :func:`read_npz_poses`)."""
     _check_npz_schema(arrays, p)
     if "T_world_cam" not in arrays:
         raise InputError("has no 'T_world_cam' array of shape (n, 4, 4)", path=p)
@@ -679,7 +699,11 @@ def read_npz_poses(path: str | Path) -> Trajectory:
 def read_npz_header(path: str | Path) -> dict[str, Any]:
     """The artifact header (see ``artifacts.make_header``) stored in an NPZ, or ``{}``."""
     p = Path(path)
-    arrays = _load_npz(p)
+    return parse_npz_header(_load_npz(p), p)
+
+
+def parse_npz_header(arrays: Mapping[str, np.ndarray], p: Path) -> dict[str, Any]:
+    """The header stored in an NPZ's arrays (``header_json``), or ``{}``."""
     if "header_json" not in arrays:
         return {}
     try:
@@ -720,6 +744,13 @@ def read_npz_observations(path: str | Path) -> BoardObservations | None:
     """
     p = Path(path)
     arrays = _load_npz(p)
+    return parse_npz_observations(arrays, p, parse_npz_header(arrays, p))
+
+
+def parse_npz_observations(
+    arrays: Mapping[str, np.ndarray], p: Path, header: Mapping[str, Any]
+) -> BoardObservations | None:
+    """The corners of an NPZ's arrays (see :func:`read_npz_observations`)."""
     if "corners" not in arrays or "board_points" not in arrays:
         return None
     corners = _npz_numeric(arrays, "corners", p)
@@ -732,7 +763,6 @@ def read_npz_observations(path: str | Path) -> BoardObservations | None:
             "(expected (n, m, 2) and (m, 3))",
             path=p,
         )
-    header = read_npz_header(p)
     intr = header.get("intrinsics_file")
     return BoardObservations(corners, board, None if intr is None else str(intr))
 
@@ -747,7 +777,11 @@ def read_npz_quality(path: str | Path) -> tuple[np.ndarray, list[str]]:
         An unreadable NPZ or a non-numeric ``reprojection_rms``.
     """
     p = Path(path)
-    arrays = _load_npz(p)
+    return parse_npz_quality(_load_npz(p), p)
+
+
+def parse_npz_quality(arrays: Mapping[str, np.ndarray], p: Path) -> tuple[np.ndarray, list[str]]:
+    """Reprojection RMS and skipped images of an NPZ's arrays (see :func:`read_npz_quality`)."""
     rms = (
         _npz_numeric(arrays, "reprojection_rms", p).reshape(-1)
         if "reprojection_rms" in arrays

@@ -1,5 +1,7 @@
-"""The calibration report: figures (matplotlib, Agg) and the self-contained HTML page.
+"""The calibration report: a data model, its figures (matplotlib, Agg) and the HTML page.
 
-:mod:`acs_cli.report.figures` draws PNG figures from arrays; :mod:`acs_cli.report.html`
-assembles the page. Neither reads nor writes files: :mod:`acs_cli.stages.report` does.
+:mod:`acs_cli.report.model` holds the report as dataclasses (sections, estimates with std
+and unit, warnings, figure data); :mod:`acs_cli.report.render` draws it:
+:mod:`acs_cli.report.figures` makes PNG figures from arrays and :mod:`acs_cli.report.html`
+assembles the page. None of them reads or writes files: :mod:`acs_cli.stages.report` does.
 """

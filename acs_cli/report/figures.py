@@ -327,6 +327,76 @@ def rig_reference_figure(
     return _png(fig, dpi)
 
 
+def rig_of_many_figure(
+    T_ref_cam: dict[str, FloatArray],
+    joints: Sequence[tuple[str, str, str, str, FloatArray | None]],
+    paths: dict[str, FloatArray],
+    unit: str,
+    dpi: int = 100,
+) -> bytes:
+    """A rig of many cameras in 3-D: each camera (frustum and name) at the reference instant,
+    each joint as a link through its point (rigid edges dashed), each path over time.
+
+    Parameters
+    ----------
+    T_ref_cam : dict of str to ndarray, shape (4, 4)
+        Camera poses in the reference camera's frame at the reference instant.
+    joints : sequence of (name, type, p, q, point)
+        ``point`` ``(3,)`` in the same frame, or None for a rigid edge.
+    paths : dict of str to ndarray, shape (n, 3)
+        Paths over time (cameras and joints), same frame.
+    unit : str
+    dpi : int
+
+    Returns
+    -------
+    bytes
+        A PNG.
+    """
+    centres = {c: T[:3, 3] for c, T in T_ref_cam.items()}
+    pts = np.vstack([*centres.values(), *[j[4] for j in joints if j[4] is not None]])
+    extent = float(np.ptp(pts, axis=0).max()) if pts.shape[0] > 1 else 1.0
+    size = max(0.08 * extent, 1e-3)
+    fig = Figure(figsize=(11.0, 5.4))
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.14, top=0.9, wspace=0.12)
+    for panel, with_paths in ((1, False), (2, True)):
+        ax = fig.add_subplot(1, 2, panel, projection="3d")
+        segs_all = [_disp(pts)]
+        for i, (c, T) in enumerate(T_ref_cam.items()):
+            color = f"C{i % 10}"
+            segs = _frustum_segments(T[None], CameraView(), size)
+            segs_all.append(segs.reshape(-1, 3))
+            ax.add_collection3d(Line3DCollection(segs, colors=color, linewidths=0.9))
+            d = _disp(centres[c][None])[0]
+            ax.text(d[0], d[1], d[2], f" {c}", fontsize=8, color=color)
+            if with_paths and c in paths:
+                pp = _disp(paths[c])
+                ax.plot(pp[:, 0], pp[:, 1], pp[:, 2], ".", color=color, ms=1.5)
+                segs_all.append(pp)
+        for name, jtype, p, q, point in joints:
+            a, b = _disp(centres[p][None])[0], _disp(centres[q][None])[0]
+            if point is None:
+                ax.plot(*np.stack([a, b]).T, "--", color="#555555", lw=1.2)
+                continue
+            j = _disp(point[None])[0]
+            ax.plot(*np.stack([a, j, b]).T, "-", color=COLOR_JOINT, lw=1.6)
+            ax.plot([j[0]], [j[1]], [j[2]], "o", color=COLOR_JOINT, ms=5)
+            ax.text(j[0], j[1], j[2], f" {name} ({jtype})", fontsize=7, color="#145214")
+            if with_paths and name in paths:
+                pp = _disp(paths[name])
+                ax.plot(pp[:, 0], pp[:, 1], pp[:, 2], ".", color=COLOR_JOINT, ms=1.5, alpha=0.6)
+                segs_all.append(pp)
+        _equal_axes(ax, np.vstack(segs_all))
+        ax.view_init(elev=22.0, azim=-60.0)
+        ax.set_title(
+            "the rig over time (camera and joint paths)" if with_paths
+            else "the rig at the reference instant",
+            fontsize=9,
+        )  # fmt: skip
+    fig.suptitle(f"Cameras and joints in the reference camera's frame ({unit}; -y up)", fontsize=10)
+    return _png(fig, dpi)
+
+
 def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
     """One panel per residual series: the residual per frame, rejected frames marked.
 

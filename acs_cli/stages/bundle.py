@@ -26,9 +26,10 @@ from acs_cli.core.bundle import (
 )
 from acs_cli.core.joint import JointEstimate
 from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
+from acs_cli.io.intrinsics import IntrinsicsArtifact
+from acs_cli.io.joint import BundleSection
 from acs_cli.io.trajectory import read_npz_observations
 from acs_cli.stages.common import PairedTrajectories
-from acs_cli.stages.poses import read_intrinsics
 
 __all__ = [
     "MAX_BUNDLE_FRAMES",
@@ -106,7 +107,7 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
     path = None if obs.intrinsics_file is None else _resolve(obs.intrinsics_file, poses)
     if path is None:
         return None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
-    intr = read_intrinsics(path)
+    intr = IntrinsicsArtifact.load(path)
     if intr.model != "pinhole":
         return None, f"bundle adjustment supports the pinhole model, not {intr.model}"
     vec = intrinsics_vector(intr.camera_matrix, intr.distortion)
@@ -115,21 +116,21 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
 
 def _section(
     views: CornerViews, intr: np.ndarray, std: np.ndarray, rms: float, sigma: float, n: int
-) -> dict[str, Any]:
-    return {
-        "intrinsics_file": str(views.intrinsics_file),
-        "rms_px": rms,
-        "sigma_px": sigma,
-        "frames": n,
-        "camera_matrix": camera_matrix(intr).tolist(),
-        "distortion": intr[4:].tolist(),
-        "intrinsics_std": dict(zip(INTRINSIC_NAMES, std.tolist(), strict=True)),
-    }
+) -> BundleSection:
+    return BundleSection(
+        intrinsics_file=str(views.intrinsics_file),
+        rms_px=float(rms),
+        sigma_px=float(sigma),
+        frames=n,
+        camera_matrix=camera_matrix(intr),
+        distortion=np.asarray(intr[4:], dtype=float),
+        intrinsics_std=dict(zip(INTRINSIC_NAMES, std.tolist(), strict=True)),
+    )
 
 
 def bundle_fixed_joint(
     poses: Path, T_w_c: np.ndarray, est: JointEstimate, cam: str
-) -> tuple[JointEstimate, dict[str, Any] | None, list[str]]:
+) -> tuple[JointEstimate, BundleSection | None, list[str]]:
     """Refine camera ``cam``'s joint (and intrinsics) on its corners, when they are there."""
     views, warning = corner_views(poses, T_w_c.shape[0])
     o0 = est.position_in_a if cam == "a" else est.position_in_b
@@ -210,7 +211,7 @@ def _articulated(
     o_a: np.ndarray,
     o_b: np.ndarray,
     **kwargs: Any,
-) -> tuple[ArticulatedBundle | None, dict[str, Any] | None, list[str]]:
+) -> tuple[ArticulatedBundle | None, dict[str, BundleSection] | None, list[str]]:
     """The two-camera bundle over the paired inlier frames (``inliers`` is thinned in place
     to the frames adjusted): result, section, warnings."""
     keep = kwargs.pop("keep", None)
@@ -242,7 +243,7 @@ def bundle_overlap(
     pair: PairedTrajectories,
     est: JointEstimate,
     reverse_b: bool = False,
-) -> tuple[JointEstimate, dict[str, Any] | None, list[str]]:
+) -> tuple[JointEstimate, dict[str, BundleSection] | None, list[str]]:
     """Refine the overlap scenario's joint on both cameras' corners of the shared board.
 
     ``pair`` holds the paired poses of the two files (one world: the shared board);
@@ -278,7 +279,7 @@ def bundle_general(
     pair: PairedTrajectories,
     est: RelposeEstimate,
     prior: JointPrior | None,
-) -> tuple[RelposeEstimate, dict[str, Any] | None, list[str]]:
+) -> tuple[RelposeEstimate, dict[str, BundleSection] | None, list[str]]:
     """Refine the general scenario's relative pose and joint on both cameras' corners.
 
     Each camera sees its own board; the world-A-to-world-B transform is one more unknown.

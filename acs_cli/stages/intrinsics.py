@@ -26,7 +26,7 @@ from acs_cli.core.intrinsics import (
     calibrate_robust,
 )
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import make_header, write_yaml_artifact
+from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import (
     Detection,
@@ -37,6 +37,7 @@ from acs_cli.io.detections import (
 )
 from acs_cli.io.export import write_opencv_yaml
 from acs_cli.io.images import list_images, read_gray
+from acs_cli.io.intrinsics import BoardSpec, DroppedView, ImagesUsed, IntrinsicsArtifact
 
 __all__ = [
     "EXPORTS",
@@ -383,8 +384,7 @@ def run_intrinsics(
     names = [fd.images[i].name for i in with_board]
     used = [names[j] for j in calib.used]
     dropped = [
-        {"image": names[j], "rms_px": float(calib.first_pass_per_view_rms[j])}
-        for j in calib.dropped
+        DroppedView(names[j], float(calib.first_pass_per_view_rms[j])) for j in calib.dropped
     ]
     warnings: list[str] = []
     if skipped:
@@ -392,7 +392,7 @@ def run_intrinsics(
     if dropped:
         warnings.append(
             f"{len(dropped)} view(s) dropped as outliers: "
-            + ", ".join(f"{d['image']} ({d['rms_px']:.2f} px)" for d in dropped)
+            + ", ".join(f"{d.image} ({d.rms_px:.2f} px)" for d in dropped)
         )
 
     dist_names = DISTORTION_NAMES[config.model]
@@ -411,28 +411,30 @@ def run_intrinsics(
             "board": "origin at the first inner corner, x along a row, z into the board",
         },
     )
-    body: dict[str, Any] = {
-        "model": config.model,
-        "image_size": [int(fd.image_size[0]), int(fd.image_size[1])],
-        "camera_matrix": calib.camera_matrix,
-        "distortion": calib.distortion,
-        "distortion_names": list(dist_names),
-        "rms_px": calib.rms_px,
-        "per_view_rms_px": {n: float(e) for n, e in zip(used, calib.per_view_rms, strict=True)},
-        "std": std if std else None,
-        "board": {"cols": cols, "rows": rows, "square": config.square, "units": "m"},
-        "images": {
-            "total": len(fd.images),
-            "used": used,
-            "skipped_no_board": skipped,
-            "dropped_outliers": dropped,
-        },
-        "detector": DETECTOR_VERSION,
-        "detections_cache": fd.cache.name,
-        "exports": {k: v.name for k, v in exports.items()},
-        "warnings": warnings,
-    }
-    write_yaml_artifact(output, header, body)
+    art = IntrinsicsArtifact(
+        model=config.model,
+        image_size=(int(fd.image_size[0]), int(fd.image_size[1])),
+        camera_matrix=calib.camera_matrix,
+        distortion=calib.distortion,
+        distortion_names=list(dist_names),
+        rms_px=calib.rms_px,
+        per_view_rms_px={n: float(e) for n, e in zip(used, calib.per_view_rms, strict=True)},
+        std=std if std else None,
+        board=BoardSpec(cols, rows, config.square, "m"),
+        images=ImagesUsed(
+            total=len(fd.images),
+            used=used,
+            skipped_no_board=skipped,
+            dropped_outliers=dropped,
+        ),
+        detector=DETECTOR_VERSION,
+        detections_cache=fd.cache.name,
+        exports={k: v.name for k, v in exports.items()},
+        warnings=warnings,
+        header=header,
+        source=str(output),
+    )
+    art.save(output)
     camera_name = output.parent.name or output.stem
     if "ros" in exports:
         write_ros_camera_info(exports["ros"], calib, camera_name, config.model)
@@ -448,4 +450,4 @@ def run_intrinsics(
                 "rms_px": calib.rms_px,
             },
         )
-    return IntrinsicsRun(calib, header | body, output, exports, fd, warnings)
+    return IntrinsicsRun(calib, to_plain(art.to_doc()), output, exports, fd, warnings)

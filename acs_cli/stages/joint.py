@@ -4,23 +4,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
 from acs_cli.errors import DegenerateMotionError, InputError
-from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
+from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.joint import (
+    BundleSection,
+    FramesUsed,
+    JointArtifact,
+    JointQuality,
+    JointSection,
+    Pairing,
+    PoseNoise,
+    load_joint_section,
+)
 from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap, shared_board_flip
 from acs_cli.stages.common import (
     PairedTrajectories,
     StageRun,
-    frames_section,
     load_pair,
     load_trajectory,
     pairing_section,
-    vector_with_std,
 )
 
 SCENARIOS = ("fixed_joint", "overlap")
@@ -72,18 +79,11 @@ class JointConfig:
 JointRun = StageRun[JointEstimate]
 
 
-def joint_body(est: JointEstimate, length_unit: str) -> dict[str, Any]:
+def joint_section(est: JointEstimate, length_unit: str) -> JointSection:
     """The ``joint`` section of an artifact from an estimate."""
-    pa, sa = vector_with_std(est.position_in_a, est.covariance_a)
-    body: dict[str, Any] = {"position_in_a": pa, "position_in_a_std": sa}
-    if est.position_in_b is not None:
-        pb, sb = vector_with_std(est.position_in_b, est.covariance_b)
-        body |= {"position_in_b": pb, "position_in_b_std": sb}
-    body["covariance_a"] = est.covariance_a.tolist()
-    if est.covariance_b is not None:
-        body["covariance_b"] = est.covariance_b.tolist()
-    body["units"] = length_unit
-    return body
+    return JointSection.from_estimate(
+        est.position_in_a, est.covariance_a, est.position_in_b, est.covariance_b, units=length_unit
+    )
 
 
 def _overlap_in_one_board_order(
@@ -157,7 +157,10 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     check_distinct_output(output, inputs.values())
     check_writable(output)
     warnings: list[str] = []
-    quality: dict[str, Any] = {}
+    bundles: dict[str, BundleSection] = {}
+    pairing: Pairing | None = None
+    frames: dict[str, FramesUsed] = {}
+    in_world: dict[str, np.ndarray] = {}
     if config.scenario == "overlap":
         if poses_b is None:
             raise InputError("--overlap needs both --poses-a and --poses-b")
@@ -172,12 +175,11 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
                 "differ by more than 90 degrees); B's poses were turned to A's board frame"
             )
         if config.method == "refined" and config.bundle:
-            est, section, notes = bundle_overlap((poses_a, poses_b), pair, est, turned)
+            est, sections, notes = bundle_overlap((poses_a, poses_b), pair, est, turned)
             warnings += notes
-            if section is not None:
-                quality["bundle_adjustment"] = section
-        quality["pairing"] = pairing_section(pair.pairing, config.pair_by)
-        quality["frames"] = {"ab": frames_section(est.inliers["ab"], pair.a.timestamps)}
+            bundles = sections or {}
+        pairing = pairing_section(pair.pairing, config.pair_by)
+        frames["ab"] = FramesUsed.from_inliers(est.inliers["ab"], pair.a.timestamps)
     else:
         ta = load_trajectory(poses_a, config.format_a)
         tb = None if poses_b is None else load_trajectory(poses_b, config.format_b)
@@ -185,7 +187,6 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             ta.T_world_cam, None if tb is None else tb.T_world_cam, config.method
         )
         if config.method == "refined" and config.bundle:
-            bundles: dict[str, Any] = {}
             for cam, path, traj in (("a", poses_a, ta), ("b", poses_b, tb)):
                 if path is None or traj is None:
                     continue
@@ -193,21 +194,27 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
                 if section is not None:
                     bundles[cam] = section
                 warnings += notes
-            if bundles:
-                quality["bundle_adjustment"] = bundles
-        quality["frames"] = {"a": frames_section(est.inliers["a"], ta.timestamps)}
+        frames["a"] = FramesUsed.from_inliers(est.inliers["a"], ta.timestamps)
         if tb is not None:
-            quality["frames"]["b"] = frames_section(est.inliers["b"], tb.timestamps)
-        quality["joint_in_world"] = {k: v.tolist() for k, v in est.position_in_world.items()}
-    for key, fr in quality["frames"].items():
-        if fr["rejected"]:
+            frames["b"] = FramesUsed.from_inliers(est.inliers["b"], tb.timestamps)
+        in_world = {k: np.asarray(v, dtype=float) for k, v in est.position_in_world.items()}
+    for key, fr in frames.items():
+        if fr.rejected:
             warnings.append(
-                f"{len(fr['rejected'])} frame(s) of {key.upper()} rejected as outliers "
-                f"(timestamps {fr['rejected'][:10]})"
+                f"{len(fr.rejected)} frame(s) of {key.upper()} rejected as outliers "
+                f"(timestamps {fr.rejected[:10]})"
             )
-    quality["residual_rms"] = est.residual_rms
-    if est.noise:
-        quality["estimated_pose_noise"] = est.noise
+    quality = JointQuality(
+        frames=frames,
+        residual_rms=dict(est.residual_rms),
+        pairing=pairing,
+        joint_in_world=in_world,
+        estimated_pose_noise={
+            k: PoseNoise(float(v["sigma_trans"]), float(v["sigma_rot_deg"]))
+            for k, v in est.noise.items()
+        },
+        bundle_adjustment=bundles,
+    )
     header = make_header(
         "joint",
         inputs,
@@ -216,7 +223,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             "; then a bundle adjustment on the detected corners (intrinsics, joint and "
             "per-frame rotations; overlap: both cameras together) for the cameras listed in "
             "quality.bundle_adjustment"
-            if "bundle_adjustment" in quality
+            if bundles
             else ""
         ),
         units={"length": config.length_unit, "angles": "deg"},
@@ -226,25 +233,19 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             "joint_in_world": "each trajectory's own world frame (fixed joint only)",
         },
     )
-    body = {
-        "scenario": config.scenario,
-        "joint": joint_body(est, config.length_unit),
-        "quality": quality,
-        "warnings": warnings,
-    }
-    write_yaml_artifact(output, header, body)
-    return StageRun(est, header | body, output, warnings)
+    art = JointArtifact(
+        scenario=config.scenario,
+        joint=joint_section(est, config.length_unit),
+        quality=quality,
+        warnings=warnings,
+        header=header,
+        source=str(output),
+    )
+    art.save(output)
+    return StageRun(est, to_plain(art.to_doc()), output, warnings)
 
 
-def read_joint(path: Path) -> dict[str, Any]:
-    """Read a ``joint.yaml`` (or a ``relpose.yaml`` holding a joint): its ``joint`` section."""
-    try:
-        doc = read_yaml_artifact(path, "joint", ["joint.position_in_a"])
-    except InputError as exc:
-        if "acscal/relpose" not in exc.message:
-            raise
-        doc = read_yaml_artifact(path, "relpose", ["joint.position_in_a"])
-    joint = doc["joint"]
-    if not isinstance(joint, dict):
-        raise InputError("'joint' must be a mapping", path=path)
-    return joint
+def read_joint(path: Path) -> JointSection:
+    """The joint of a ``joint.yaml`` (or of a ``relpose.yaml``), checked
+    (:func:`acs_cli.io.joint.load_joint_section`)."""
+    return load_joint_section(path)

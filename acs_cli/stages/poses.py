@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS, board_points
+from acs_cli.core.intrinsics import board_points
 from acs_cli.core.pnp import (
     board_pose,
     camera_in_board,
@@ -22,11 +22,13 @@ from acs_cli.core.pnp import (
     reversed_order_transform,
 )
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import get_path, make_header, read_yaml_artifact
+from acs_cli.io.artifacts import make_header
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import cache_path_for
 from acs_cli.io.images import list_images, timestamp_from_name
-from acs_cli.io.trajectory import Trajectory, write_npz_poses, write_tum
+from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.trajectory import Trajectory, write_tum
 from acs_cli.stages.intrinsics import detect_folder, no_board_error
 
 __all__ = ["CameraIntrinsics", "PosesConfig", "PosesRun", "read_intrinsics", "run_poses"]
@@ -57,15 +59,8 @@ class PosesConfig:
     workers: int | None = None
 
 
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """A camera's intrinsics as read from an ``acscal/intrinsics`` artifact."""
-
-    model: str
-    camera_matrix: np.ndarray
-    distortion: np.ndarray
-    image_size: tuple[int, int]
-    board: dict[str, Any]
+#: Kept for callers of the former reader: the intrinsics artifact's class.
+CameraIntrinsics = IntrinsicsArtifact
 
 
 @dataclass(frozen=True)
@@ -80,38 +75,15 @@ class PosesRun:
     warnings: list[str] = field(default_factory=list)
 
 
-def read_intrinsics(path: Path) -> CameraIntrinsics:
-    """Read and check an ``acscal/intrinsics`` artifact.
+def read_intrinsics(path: Path) -> IntrinsicsArtifact:
+    """Read and check an ``acscal/intrinsics`` artifact (:meth:`IntrinsicsArtifact.load`).
 
     Raises
     ------
     InputError
         Not an intrinsics artifact, or a key of the wrong shape or value.
     """
-    doc = read_yaml_artifact(path, "intrinsics", ["camera_matrix", "distortion", "image_size"])
-    model = str(get_path(doc, "model", "pinhole"))
-    if model not in MODELS:
-        raise InputError(f"unknown camera model {model!r}", path=path)
-    try:
-        K = np.asarray(doc["camera_matrix"], dtype=float)
-        D = np.asarray(doc["distortion"], dtype=float).ravel()
-        size = np.asarray(doc["image_size"], dtype=float).ravel()
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            "camera_matrix, distortion and image_size must be numbers", path=path
-        ) from exc
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise InputError("'camera_matrix' must be a 3x3 matrix with positive fx, fy", path=path)
-    if D.size != len(DISTORTION_NAMES[model]) or not np.all(np.isfinite(D)):
-        raise InputError(
-            f"'distortion' must hold {len(DISTORTION_NAMES[model])} finite numbers for the "
-            f"{model} model, got {D.size}",
-            path=path,
-        )
-    if size.shape != (2,) or np.any(size <= 0) or np.any(size != np.round(size)):
-        raise InputError("'image_size' must be [width, height] in pixels", path=path)
-    board = doc.get("board") if isinstance(doc.get("board"), dict) else {}
-    return CameraIntrinsics(model, K, D, (int(size[0]), int(size[1])), dict(board or {}))
+    return IntrinsicsArtifact.load(path)
 
 
 def _timestamps(names: list[str], all_names: list[str]) -> tuple[np.ndarray, bool]:
@@ -151,9 +123,10 @@ def run_poses(
         intrinsics'.
     """
     cam = read_intrinsics(intrinsics)
-    cols = int(_board_option(config.cols, cam.board.get("cols"), "size", intrinsics))
-    rows = int(_board_option(config.rows, cam.board.get("rows"), "size", intrinsics))
-    square = float(_board_option(config.square, cam.board.get("square"), "square", intrinsics))
+    board = cam.board or BoardSpec()
+    cols = int(_board_option(config.cols, board.cols, "size", intrinsics))
+    rows = int(_board_option(config.rows, board.rows, "size", intrinsics))
+    square = float(_board_option(config.square, board.square, "square", intrinsics))
     if cols < 2 or rows < 2:
         raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
     if not (np.isfinite(square) and square > 0):
@@ -240,18 +213,15 @@ def run_poses(
     header["intrinsics_file"] = str(intrinsics)
     header["timestamps_from"] = "file names" if has_t else "image indices"
     rms_arr = np.array(rms, dtype=float)
-    write_npz_poses(
-        output,
-        traj,
-        {
-            "reprojection_rms": rms_arr,
-            "skipped_images": np.array(skipped, dtype=str) if skipped else np.zeros(0, "<U1"),
-            # the observations themselves, for a bundle adjustment downstream
-            "corners": np.stack(corners),
-            "board_points": np.asarray(obj, dtype=float).reshape(-1, 3),
-        },
+    PosesArtifact(
+        trajectory=traj,
+        reprojection_rms=rms_arr,
+        skipped_images=tuple(skipped),
+        # the observations themselves, for a bundle adjustment downstream
+        corners=np.stack(corners),
+        board_points=np.asarray(obj, dtype=float).reshape(-1, 3),
         header=header,
-    )
+    ).save(output)
     if config.tum is not None:
         write_tum(config.tum, t, T_wc)
     return PosesRun(traj, rms_arr, skipped, output, fd.cached, warnings)

@@ -6,21 +6,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import make_header, write_yaml_artifact
+from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.joint import FramesUsed, JointSection, PoseNoise
+from acs_cli.io.relpose import RelativePose, RelposeArtifact, RelposeQuality, Scale
 from acs_cli.stages.bundle import bundle_general
-from acs_cli.stages.common import (
-    StageRun,
-    finite_vec3,
-    frames_section,
-    load_pair,
-    pairing_section,
-    vector_with_std,
-)
+from acs_cli.stages.common import StageRun, load_pair, pairing_section
 from acs_cli.stages.joint import read_joint
 
 
@@ -63,35 +56,17 @@ class RelposeConfig:
 RelposeRun = StageRun[RelposeEstimate]
 
 
-def _cov3(joint: dict[str, Any], which: str, path: Path) -> np.ndarray | None:
-    cov = joint.get(f"covariance_{which}")
-    if cov is None:
-        std = _vec3(joint, f"position_in_{which}_std", path)
-        if std is None:
-            return None
-        cov = np.diag(np.square(std))
-    try:
-        arr = np.asarray(cov, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (3, 3) or not np.all(np.isfinite(arr)):
-        raise InputError(f"joint.covariance_{which} must be a finite 3x3 matrix", path=path)
-    return arr
-
-
-def _vec3(joint: dict[str, Any], key: str, path: Path) -> np.ndarray | None:
-    value = joint.get(key)
-    return None if value is None else finite_vec3(value, f"joint.{key}", path)
-
-
 def load_prior(path: Path, metric: bool) -> JointPrior:
-    """A :class:`JointPrior` from a ``joint.yaml``."""
+    """A :class:`JointPrior` from a ``joint.yaml`` (or a ``relpose.yaml``'s joint).
+
+    A position without a covariance takes the squares of its standard deviations.
+    """
     joint = read_joint(path)
     return JointPrior(
-        position_in_a=_vec3(joint, "position_in_a", path),
-        position_in_b=_vec3(joint, "position_in_b", path),
-        covariance_a=_cov3(joint, "a", path),
-        covariance_b=_cov3(joint, "b", path),
+        position_in_a=joint.position_in_a,
+        position_in_b=joint.position_in_b,
+        covariance_a=joint.covariance("a"),
+        covariance_b=joint.covariance("b"),
         metric=metric,
     )
 
@@ -155,58 +130,53 @@ def run_relpose(
         est, bundle_section, notes = bundle_general((poses_a, poses_b), pair, est, prior)
         warnings += notes
     rpy_std, t_std = paper_pose_std(est.T_b_a, est.covariance)
-    rel: dict[str, Any] = {
-        "T_b_a": est.T_b_a.tolist(),
-        "T_b_a_covariance": est.covariance.tolist(),
-        "rpy_deg": est.rpy_deg.tolist(),
-        "rpy_deg_std": rpy_std.tolist(),
-        "translation_b_in_a": est.translation_b_in_a.tolist(),
-        "translation_b_in_a_std": t_std.tolist(),
-        "reference": int(est.reference),
-        "reference_timestamp_a": float(pair.a.timestamps[est.reference]),
-        "reference_timestamp_b": float(pair.b.timestamps[est.reference]),
-        "T_wb_wa": est.T_wb_wa.tolist(),
-    }
-    pa, sa = vector_with_std(est.position_in_a, est.covariance_a)
-    pb, sb = vector_with_std(est.position_in_b, est.covariance_b)
-    body: dict[str, Any] = {
-        "scenario": "general",
-        "relative_pose": rel,
-        "joint": {
-            "position_in_a": pa,
-            "position_in_a_std": sa,
-            "position_in_b": pb,
-            "position_in_b_std": sb,
-            "covariance_a": est.covariance_a.tolist(),
-            "covariance_b": est.covariance_b.tolist(),
-            "source": "self-calibrated from this recording"
-            if est.self_calibrated
-            else "refined from the given joint and this recording"
-            if est.method == "refined"
-            else "the given joint, position_in_a refined by the paper's LM",
-        },
-    }
+    rel = RelativePose(
+        T_b_a=est.T_b_a,
+        T_b_a_covariance=est.covariance,
+        rpy_deg=est.rpy_deg,
+        rpy_deg_std=rpy_std,
+        translation_b_in_a=est.translation_b_in_a,
+        translation_b_in_a_std=t_std,
+        reference=int(est.reference),
+        reference_timestamp_a=float(pair.a.timestamps[est.reference]),
+        reference_timestamp_b=float(pair.b.timestamps[est.reference]),
+        T_wb_wa=est.T_wb_wa,
+    )
+    joint_sec = JointSection.from_estimate(
+        est.position_in_a,
+        est.covariance_a,
+        est.position_in_b,
+        est.covariance_b,
+        source="self-calibrated from this recording"
+        if est.self_calibrated
+        else "refined from the given joint and this recording"
+        if est.method == "refined"
+        else "the given joint, position_in_a refined by the paper's LM",
+    )
+    scale = None
     if config.unknown_scale:
-        body["scale"] = {
-            "phi_ba": est.phi_ba,
-            "phi_ba_std": est.phi_std,
-            "mu_a": est.mu_a,
-            "mu_a_std": est.mu_a_std,
-            "mu_b": est.mu_b,
-            "mu_b_std": est.mu_b_std,
-        }
-    frames = frames_section(est.inliers, pair.a.timestamps)
-    if frames["rejected"]:
-        warnings.append(f"{len(frames['rejected'])} frame(s) rejected as outliers")
-    body["quality"] = {
-        "residual_rms": est.residual_rms,
-        "frames": frames,
-        "pairing": pairing_section(pair.pairing, config.pair_by),
-        "estimated_pose_noise": est.noise or None,
-    }
-    if bundle_section is not None:
-        body["quality"]["bundle_adjustment"] = bundle_section
-    body["warnings"] = warnings
+        scale = Scale(
+            phi_ba=float(est.phi_ba),
+            phi_ba_std=_float_or_none(est.phi_std),
+            mu_a=_float_or_none(est.mu_a),
+            mu_a_std=_float_or_none(est.mu_a_std),
+            mu_b=_float_or_none(est.mu_b),
+            mu_b_std=_float_or_none(est.mu_b_std),
+        )
+    frames = FramesUsed.from_inliers(est.inliers, pair.a.timestamps)
+    if frames.rejected:
+        warnings.append(f"{len(frames.rejected)} frame(s) rejected as outliers")
+    quality = RelposeQuality(
+        residual_rms=float(est.residual_rms),
+        frames=frames,
+        pairing=pairing_section(pair.pairing, config.pair_by),
+        estimated_pose_noise=PoseNoise(
+            float(est.noise["sigma_trans"]), float(est.noise["sigma_rot_deg"])
+        )
+        if est.noise
+        else None,
+        bundle_adjustment=bundle_section or {},
+    )
     mode = (
         "self-calibration"
         if est.self_calibrated
@@ -240,5 +210,18 @@ def run_relpose(
             "T_wb_wa": "maps world A into world B (rotation and translation of the similarity)",
         },
     )
-    write_yaml_artifact(output, header, body)
-    return StageRun(est, header | body, output, warnings)
+    art = RelposeArtifact(
+        relative_pose=rel,
+        joint=joint_sec,
+        scale=scale,
+        quality=quality,
+        warnings=warnings,
+        header=header,
+        source=str(output),
+    )
+    art.save(output)
+    return StageRun(est, to_plain(art.to_doc()), output, warnings)
+
+
+def _float_or_none(x: Any) -> float | None:
+    return None if x is None else float(x)

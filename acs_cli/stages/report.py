@@ -1,10 +1,12 @@
 """The report stage: ``acscal report RUN_DIR`` (and the end of ``acscal run``).
 
 Reads what a run folder holds (``cam_<x>/intrinsics.yaml``, ``cam_<x>/*.npz`` poses,
-``joint.yaml``, ``relpose.yaml``), draws the figures (:mod:`acs_cli.report.figures`) and
-writes one self-contained HTML page (:mod:`acs_cli.report.html`) plus the same figures as
-PNG files in ``<name>_files/`` beside it. A section whose artifact is missing or unreadable
-is skipped with a note; a folder with no artifact at all is an :class:`InputError`.
+``joint.yaml``, ``relpose.yaml``) through the typed artifacts of :mod:`acs_cli.io`, each
+file once, into a :class:`~acs_cli.report.model.ReportModel` (:func:`build_report`); then
+:func:`~acs_cli.report.render.render_report` draws the figures and the self-contained HTML
+page, written with the same figures as PNG files in ``<name>_files/`` beside it. A section
+whose artifact is missing or unreadable is skipped with a note; a folder with no artifact at
+all is an :class:`InputError`.
 """
 
 from __future__ import annotations
@@ -13,11 +15,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 import acs_cli
+from acs_cli.core import se3
 from acs_cli.core.acs_trajectory import (
     fixed_joint_residuals,
     overlap_relative_pose,
@@ -25,30 +28,37 @@ from acs_cli.core.acs_trajectory import (
     recover_trajectory,
 )
 from acs_cli.errors import AcsError, InputError
-from acs_cli.io.artifacts import get_path, read_yaml_artifact, sha256_of
+from acs_cli.io.artifacts import sha256_of
 from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text, check_distinct_output
-from acs_cli.io.trajectory import (
-    read_npz_header,
-    read_npz_observations,
-    read_npz_poses,
-    read_npz_quality,
-)
+from acs_cli.io.intrinsics import IntrinsicsArtifact
+from acs_cli.io.joint import FramesUsed, JointArtifact
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.relpose import RelposeArtifact
+from acs_cli.io.rig import RigArtifact
+from acs_cli.io.trajectory import Trajectory, read_trajectory
 from acs_cli.report import figures as F
-from acs_cli.report.html import Page
-from acs_cli.stages.common import TIME_TOL, PairedTrajectories, load_pair, load_trajectory
+from acs_cli.report.model import (
+    ArtifactRow,
+    Estimate,
+    ReportModel,
+    RigOfManyView,
+    RigTrajectory,
+    display_unit,
+)
+from acs_cli.report.render import FIGURE_NAMES, render_report
+from acs_cli.stages.common import PairedTrajectories, pair_loaded
 from acs_cli.stages.trajectory import recover_from_relpose
 
-__all__ = ["FIGURE_NAMES", "ReportConfig", "ReportRun", "figures_dir_for", "run_report"]
+__all__ = [
+    "FIGURE_NAMES",
+    "ReportConfig",
+    "ReportRun",
+    "build_report",
+    "figures_dir_for",
+    "run_report",
+]
 
 CAMERAS = ("a", "b")
-#: The figures a report can hold, by key: file name in the figures folder.
-FIGURE_NAMES = {
-    "trajectory": "rig_trajectory.png",
-    "reference": "rig_reference.png",
-    "residuals": "joint_residuals.png",
-    "reprojection": "reprojection.png",
-    "coverage": "coverage.png",
-}
 
 
 @dataclass(frozen=True)
@@ -105,20 +115,53 @@ def figures_dir_for(output: Path) -> Path:
 
 @dataclass
 class _Found:
-    """The artifacts of a run folder (the readable ones) and the notes on the others."""
+    """The artifacts of a run folder (the readable ones, each file read once), the notes on
+    the others and the warnings met on the way."""
 
     run_dir: Path
-    intrinsics: dict[str, tuple[Path, dict[str, Any]]] = field(default_factory=dict)
+    intrinsics: dict[str, IntrinsicsArtifact] = field(default_factory=dict)
     poses: dict[str, list[Path]] = field(default_factory=dict)
-    joint: tuple[Path, dict[str, Any]] | None = None
-    relpose: tuple[Path, dict[str, Any]] | None = None
+    joint: JointArtifact | None = None
+    relpose: RelposeArtifact | None = None
+    rig: RigArtifact | None = None
     notes: list[str] = field(default_factory=list)
     warnings: list[tuple[str, str]] = field(default_factory=list)
     any_file: bool = False
+    #: Trajectory files read so far, by resolved path: a poses NPZ (read once, whole) or
+    #: a trajectory of another format; an exception for one that could not be read.
+    loaded: dict[Path, PosesArtifact | Trajectory | AcsError] = field(default_factory=dict)
 
     def warn(self, source: str, text: str) -> None:
         if (source, text) not in self.warnings:
             self.warnings.append((source, text))
+
+    def rel(self, path: Path | str | None) -> str:
+        return _rel(Path(str(path)), self.run_dir)
+
+    def load(self, path: Path) -> PosesArtifact | Trajectory:
+        """A trajectory file, read at most once (poses NPZs as :class:`PosesArtifact`)."""
+        key = path.resolve()
+        if key not in self.loaded:
+            try:
+                self.loaded[key] = (
+                    PosesArtifact.load(path) if _is_npz(path) else read_trajectory(path)
+                )
+            except AcsError as exc:
+                self.loaded[key] = exc
+        got = self.loaded[key]
+        if isinstance(got, AcsError):
+            raise got
+        return got
+
+    def trajectory(self, path: Path) -> Trajectory:
+        got = self.load(path)
+        return got.trajectory if isinstance(got, PosesArtifact) else got
+
+    def sha256(self, path: Path) -> str:
+        got = self.loaded.get(path.resolve())
+        if isinstance(got, PosesArtifact) and got.sha256 is not None:
+            return got.sha256
+        return sha256_of(path)
 
 
 def _rel(path: Path, base: Path) -> str:
@@ -128,43 +171,126 @@ def _rel(path: Path, base: Path) -> str:
         return str(path)
 
 
-def _read_artifact(found: _Found, path: Path, kind: str) -> dict[str, Any] | None:
-    if not path.is_file():
-        return None
-    found.any_file = True
-    try:
-        return read_yaml_artifact(path, kind)
-    except AcsError as exc:
-        found.notes.append(f"{_rel(path, found.run_dir)} could not be read: {exc.one_line()}")
-        return None
+def _is_npz(path: Path) -> bool:
+    return path.suffix.lower() == ".npz"
 
 
 def _is_poses_npz(path: Path) -> bool:
     return path.suffix == ".npz" and not path.name.endswith(".detections.npz")
 
 
+A = TypeVar("A", IntrinsicsArtifact, JointArtifact, RelposeArtifact, RigArtifact)
+
+
+def _read_artifact(found: _Found, path: Path, cls: type[A]) -> A | None:
+    if not path.is_file():
+        return None
+    found.any_file = True
+    try:
+        return cls.load(path)
+    except AcsError as exc:
+        found.notes.append(f"{_rel(path, found.run_dir)} could not be read: {exc.one_line()}")
+        return None
+
+
 def _gather(run_dir: Path) -> _Found:
     found = _Found(run_dir)
     for cam in CAMERAS:
         d = run_dir / f"cam_{cam}"
-        doc = _read_artifact(found, d / "intrinsics.yaml", "intrinsics")
-        if doc is not None:
-            found.intrinsics[cam] = (d / "intrinsics.yaml", doc)
+        intr = _read_artifact(found, d / "intrinsics.yaml", IntrinsicsArtifact)
+        if intr is not None:
+            found.intrinsics[cam] = intr
         if d.is_dir():
             npzs = sorted(p for p in d.iterdir() if p.is_file() and _is_poses_npz(p))
             if npzs:
                 found.any_file = True
                 found.poses[cam] = npzs
-    for name, kind in (("joint.yaml", "joint"), ("relpose.yaml", "relpose")):
-        doc = _read_artifact(found, run_dir / name, kind)
-        if doc is not None:
-            setattr(found, kind, (run_dir / name, doc))
+    found.joint = _read_artifact(found, run_dir / "joint.yaml", JointArtifact)
+    found.relpose = _read_artifact(found, run_dir / "relpose.yaml", RelposeArtifact)
+    found.rig = _read_artifact(found, run_dir / "rig.yaml", RigArtifact)
     return found
 
 
-def _resolve_input(found: _Found, artifact: Path, doc: dict[str, Any], role: str, cam: str) -> Path:
+def _rig_view(found: _Found) -> RigOfManyView:
+    """The rig of many cameras: its cameras and joints, and their paths when written."""
+    rig = found.rig
+    assert rig is not None
+    T_ref_cam = {c: se3.invert_transforms(r.T_cam_ref) for c, r in rig.cameras.items()}
+    joints = []
+    for name, j in rig.joints.items():
+        p = j.between[0]
+        point = None if j.type == "rigid" else se3.transform_points(T_ref_cam[p], j.position_in[p])
+        joints.append((name, j.type, j.between[0], j.between[1], point))
+    paths: dict[str, np.ndarray] = {}
+    folder = found.run_dir / "trajectories"
+    for name in [*rig.cameras, *rig.joints]:
+        f = folder / f"{name}.tum"
+        if f.is_file():
+            try:
+                paths[name] = read_trajectory(f).T_world_cam[:, :3, 3]
+            except AcsError as exc:
+                found.notes.append(f"{found.rel(f)} could not be read: {exc}")
+    return RigOfManyView(rig.length_unit, T_ref_cam, joints, paths)
+
+
+def _rig_estimates(found: _Found) -> list[Estimate]:
+    """Every camera's pose and scale and every joint of ``rig.yaml``, with their std."""
+    rig = found.rig
+    assert rig is not None
+    src = found.rel(rig.source)
+    u = rig.length_unit
+    rows: list[Estimate] = []
+    for c, r in rig.cameras.items():
+        if c == rig.reference_camera:
+            continue
+        for i, ax in enumerate("xyz"):
+            rows.append(
+                Estimate(f"{c} t_cam_ref {ax}", float(r.T_cam_ref[i, 3]),
+                         float(r.translation_std[i]), u, src)
+            )  # fmt: skip
+        rows.append(
+            Estimate(f"{c} rotation to {rig.reference_camera} (angle)",
+                     float(se3.rotation_angle_deg(r.T_cam_ref[:3, :3][None])[0]),
+                     float(np.linalg.norm(r.rotation_std_deg)), "deg", src)
+        )  # fmt: skip
+        if r.unknown_scale:
+            rows.append(Estimate(f"{c} scale", r.scale, r.scale_std, f"{u} per unit", src))
+    for name, j in rig.joints.items():
+        for c, pos in j.position_in.items():
+            std = j.position_std_in.get(c)
+            for i, ax in enumerate("xyz"):
+                rows.append(
+                    Estimate(f"{name} ({j.type}) in {c} {ax}", float(pos[i]),
+                             None if std is None else float(std[i]), u, src)
+                )  # fmt: skip
+        for c, axis in j.axis_in.items():
+            rows.append(
+                Estimate(f"{name} axis in {c} [" + " ".join(f"{v:+.4f}" for v in axis) + "]",
+                         None, j.axis_std_deg_in.get(c), "deg", src)
+            )  # fmt: skip
+        rows.append(Estimate(f"{name} residual RMS", j.residual_rms, None, u, src, 4))
+    return rows
+
+
+def _poses_of(found: _Found, cam: str) -> list[tuple[Path, PosesArtifact]]:
+    """The readable poses NPZs of camera ``cam`` (each read once; see :meth:`_Found.load`)."""
+    out = []
+    for p in found.poses.get(cam, []):
+        try:
+            got = found.load(p)
+        except AcsError:
+            continue
+        if isinstance(got, PosesArtifact):
+            out.append((p, got))
+    return out
+
+
+def _resolve_input(
+    found: _Found, art: JointArtifact | RelposeArtifact, role: str, cam: str
+) -> Path:
     """An input file an artifact records, found again (the run folder may have moved)."""
-    rec = get_path(doc, f"inputs.{role}", None)
+    artifact = Path(str(art.source))
+    rec = art.inputs.get(role)
     if not isinstance(rec, dict) or not isinstance(rec.get("path"), str):
         raise InputError(f"records no input '{role}'", path=artifact)
     recorded = Path(rec["path"])
@@ -177,7 +303,8 @@ def _resolve_input(found: _Found, artifact: Path, doc: dict[str, Any], role: str
     ]
     for c in candidates:
         if c.is_file():
-            if rec.get("sha256") and rec["sha256"] != sha256_of(c):
+            found.load(c)  # read once; its bytes give the SHA-256 of a poses NPZ
+            if rec.get("sha256") and rec["sha256"] != found.sha256(c):
                 found.warn(
                     "report",
                     f"{_rel(c, found.run_dir)} changed since {artifact.name} was made from it",
@@ -186,81 +313,35 @@ def _resolve_input(found: _Found, artifact: Path, doc: dict[str, Any], role: str
     raise InputError(f"cannot find its input {role} (recorded as {recorded})", path=artifact)
 
 
-def _pair_as_recorded(found: _Found, artifact: Path, doc: dict[str, Any]) -> PairedTrajectories:
-    pa = _resolve_input(found, artifact, doc, "poses_a", "a")
-    pb = _resolve_input(found, artifact, doc, "poses_b", "b")
-    rec = get_path(doc, "quality.pairing", {})
-    by = rec.get("requested", "auto") if isinstance(rec, dict) else "auto"
-    md = rec.get("max_dt_s") if isinstance(rec, dict) else None
-    max_dt = float(md) if isinstance(md, (int, float)) and not isinstance(md, bool) else None
-    return load_pair(
-        pa, pb, "auto", "auto", by if by in ("auto", "timestamp", "index") else "auto", max_dt
-    )
-
-
-def _mask(labels: np.ndarray, listed: Any) -> np.ndarray:
-    """Which of ``labels`` (timestamps) are in the list ``listed``."""
-    mask = np.zeros(labels.shape[0], dtype=bool)
-    if isinstance(listed, list):
-        vals = np.asarray([v for v in listed if isinstance(v, (int, float))], dtype=float)
-        if vals.size:
-            mask = np.any(np.abs(labels[:, None] - vals[None, :]) <= TIME_TOL, axis=1)
-    return mask
-
-
-def _vec(value: Any, n: int = 3) -> np.ndarray | None:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    return arr if arr.shape == (n,) and np.all(np.isfinite(arr)) else None
-
-
-def _display_unit(unit: str) -> tuple[float, str]:
-    """Lengths in metres are shown in millimetres."""
-    return (1000.0, "mm") if unit == "m" else (1.0, unit)
+def _pair_as_recorded(found: _Found, art: JointArtifact | RelposeArtifact) -> PairedTrajectories:
+    a = found.trajectory(_resolve_input(found, art, "poses_a", "a"))
+    b = found.trajectory(_resolve_input(found, art, "poses_b", "b"))
+    pairing = art.quality.pairing
+    by = "auto" if pairing is None else pairing.pair_by
+    max_dt = None if pairing is None else pairing.max_dt_s
+    return pair_loaded(a, b, by, max_dt)
 
 
 def _views(found: _Found) -> tuple[F.CameraView, F.CameraView]:
     out = []
     for cam in CAMERAS:
-        view = F.CameraView()
-        if cam in found.intrinsics:
-            doc = found.intrinsics[cam][1]
-            K = np.asarray(doc.get("camera_matrix", np.eye(3)), dtype=float)
-            size = doc.get("image_size")
-            if K.shape == (3, 3) and isinstance(size, list) and len(size) == 2:
-                view = F.CameraView((int(size[0]), int(size[1])), K)
-        out.append(view)
+        intr = found.intrinsics.get(cam)
+        out.append(
+            F.CameraView() if intr is None else F.CameraView(intr.image_size, intr.camera_matrix)
+        )
     return out[0], out[1]
 
 
 # --------------------------------------------------------------------------- sections
 
 
-@dataclass
-class _Trajectory:
-    title: str
-    unit: str
-    T_r_a: np.ndarray
-    T_r_b: np.ndarray
-    joint_a: np.ndarray
-    joint_b: np.ndarray
-    consistency: np.ndarray
-    x: np.ndarray
-    rejected: np.ndarray
-    reference: int
-    position_in_a: np.ndarray
-
-
-def _trajectory(found: _Found) -> _Trajectory:
+def _trajectory(found: _Found) -> RigTrajectory:
     """The rig's trajectory: from relpose.yaml, else from an overlap joint.yaml."""
     if found.relpose is not None:
-        path, doc = found.relpose
-        pair = _pair_as_recorded(found, path, doc)
-        rec = recover_from_relpose(doc, path, pair)
+        pair = _pair_as_recorded(found, found.relpose)
+        rec = recover_from_relpose(found.relpose, pair)
         t = rec.trajectory
-        return _Trajectory(
+        return RigTrajectory(
             "relpose.yaml: the joint from A and from B in camera A's reference frame",
             rec.length_unit,
             t.T_r_a,
@@ -273,26 +354,25 @@ def _trajectory(found: _Found) -> _Trajectory:
             t.reference,
             rec.position_in_a,
         )
-    if found.joint is not None and found.joint[1].get("scenario") == "overlap":
-        path, doc = found.joint
-        o_a = _vec(get_path(doc, "joint.position_in_a", None))
-        o_b = _vec(get_path(doc, "joint.position_in_b", None))
-        if o_a is None or o_b is None:
-            raise InputError("joint.position_in_a/b must be three numbers each", path=path)
-        pair = _pair_as_recorded(found, path, doc)
+    joint = found.joint
+    if joint is not None and joint.scenario == "overlap":
+        o_a, o_b = joint.joint.position_in_a, joint.joint.position_in_b
+        if o_b is None:
+            raise InputError("joint.position_in_a/b must be three numbers each", path=joint.source)
+        pair = _pair_as_recorded(found, joint)
         Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
         t = recover_trajectory(Ta, Tb, overlap_relative_pose(Ta, Tb, 0), o_a, o_b, 0)
-        unit = str(get_path(doc, "joint.units", "m"))
-        return _Trajectory(
+        frames = joint.quality.frames.get("ab")
+        return RigTrajectory(
             "joint.yaml (overlap): the joint from A and from B in camera A's frame at frame 0",
-            unit,
+            joint.joint.units or "m",
             t.T_r_a,
             t.T_r_b,
             t.joint_from_a,
             t.joint_from_b,
             t.consistency,
             pair.a.timestamps,
-            _mask(pair.a.timestamps, get_path(doc, "quality.frames.ab.rejected", [])),
+            _rejected(frames, pair.a.timestamps),
             0,
             o_a,
         )
@@ -302,44 +382,44 @@ def _trajectory(found: _Found) -> _Trajectory:
     )
 
 
-def _joint_series(found: _Found, path: Path, doc: dict[str, Any]) -> list[F.ResidualSeries]:
+def _rejected(frames: FramesUsed | None, labels: np.ndarray) -> np.ndarray:
+    return np.zeros(labels.shape[0], dtype=bool) if frames is None else frames.mask(labels)
+
+
+def _joint_series(found: _Found, joint: JointArtifact) -> list[F.ResidualSeries]:
     """Residuals of the joint stage: per camera (fixed joint) or per pair (overlap)."""
-    unit = str(get_path(doc, "joint.units", "m"))
-    scale, shown = _display_unit(unit)
+    scale, shown = display_unit(joint.joint.units or "m")
     series = []
-    if doc.get("scenario") == "overlap":
-        pair = _pair_as_recorded(found, path, doc)
-        o_a = _vec(get_path(doc, "joint.position_in_a", None))
-        o_b = _vec(get_path(doc, "joint.position_in_b", None))
-        if o_a is None or o_b is None:
-            raise InputError("joint.position_in_a/b must be three numbers each", path=path)
+    if joint.scenario == "overlap":
+        pair = _pair_as_recorded(found, joint)
+        o_a, o_b = joint.joint.position_in_a, joint.joint.position_in_b
+        if o_b is None:
+            raise InputError("joint.position_in_a/b must be three numbers each", path=joint.source)
         r = overlap_residuals(pair.a.T_world_cam, pair.b.T_world_cam, o_a, o_b)
-        rej = _mask(pair.a.timestamps, get_path(doc, "quality.frames.ab.rejected", []))
         series.append(
             F.ResidualSeries(
                 "joint.yaml (overlap, Algorithm I): |T_w_a o_a - T_w_b o_b| per paired frame",
                 pair.a.timestamps,
                 r * scale,
-                rej,
+                _rejected(joint.quality.frames.get("ab"), pair.a.timestamps),
                 shown,
             )
         )
         return series
     for cam in CAMERAS:
-        o = _vec(get_path(doc, f"joint.position_in_{cam}", None))
-        w = _vec(get_path(doc, f"quality.joint_in_world.{cam}", None))
+        o = joint.joint.position(cam)
+        w = joint.quality.joint_in_world.get(cam)
         if o is None or w is None:
             continue
-        traj = load_trajectory(_resolve_input(found, path, doc, f"poses_{cam}", cam))
+        traj = found.trajectory(_resolve_input(found, joint, f"poses_{cam}", cam))
         r = fixed_joint_residuals(traj.T_world_cam, o, w)
-        rej = _mask(traj.timestamps, get_path(doc, f"quality.frames.{cam}.rejected", []))
         series.append(
             F.ResidualSeries(
                 f"joint.yaml (fixed joint, Algorithm II), camera {cam.upper()}: "
                 f"|T_w_{cam} o_{cam} - joint in world| per frame",
                 traj.timestamps,
                 r * scale,
-                rej,
+                _rejected(joint.quality.frames.get(cam), traj.timestamps),
                 shown,
             )
         )
@@ -354,19 +434,13 @@ def _reprojection(found: _Found) -> list[F.ReprojectionData]:
         names: list[str] = []
         rms = np.zeros(0)
         overall = None
-        if cam in found.intrinsics:
-            doc = found.intrinsics[cam][1]
-            per_view = doc.get("per_view_rms_px")
-            if isinstance(per_view, dict):
-                names = [str(k) for k in per_view]
-                rms = np.asarray([float(v) for v in per_view.values()], dtype=float)
-            if isinstance(doc.get("rms_px"), (int, float)):
-                overall = float(doc["rms_px"])
-        poses = {}
-        for p in found.poses.get(cam, []):
-            r = read_npz_quality(p)[0]
-            if r.size:
-                poses[p.name] = r
+        intr = found.intrinsics.get(cam)
+        if intr is not None:
+            names = list(intr.per_view_rms_px)
+            rms = np.asarray(list(intr.per_view_rms_px.values()), dtype=float)
+            overall = intr.rms_px
+        poses = {p.name: art.reprojection_rms for p, art in _poses_of(found, cam)}
+        poses = {k: v for k, v in poses.items() if v.size}
         data.append(F.ReprojectionData(cam, names, rms, overall, poses))
     return data
 
@@ -374,20 +448,18 @@ def _reprojection(found: _Found) -> list[F.ReprojectionData]:
 def _coverage(found: _Found) -> list[F.CoverageData]:
     data = []
     for cam in CAMERAS:
-        chunks = []
-        for p in found.poses.get(cam, []):
-            obs = read_npz_observations(p)
-            if obs is not None:
-                chunks.append(obs.corners.reshape(-1, 2))
+        chunks = [
+            art.corners.reshape(-1, 2)
+            for _, art in _poses_of(found, cam)
+            if art.corners is not None
+        ]
         if not chunks:
             continue
         corners = np.vstack(chunks)
-        size: tuple[int, int] | None = None
-        if cam in found.intrinsics:
-            s = found.intrinsics[cam][1].get("image_size")
-            if isinstance(s, list) and len(s) == 2:
-                size = (int(s[0]), int(s[1]))
-        if size is None:
+        intr = found.intrinsics.get(cam)
+        if intr is not None:
+            size = intr.image_size
+        else:
             hi = np.ceil(corners.max(axis=0))
             size = (int(hi[0]) + 1, int(hi[1]) + 1)
         data.append(F.CoverageData(cam, corners, size))
@@ -397,233 +469,160 @@ def _coverage(found: _Found) -> list[F.CoverageData]:
 # --------------------------------------------------------------------------- tables
 
 
-def _g(x: Any, digits: int = 6) -> str:
-    if x is None:
-        return "—"
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return str(x)
-    return f"{v:.{digits}g}"
+def _vec_rows(
+    rows: list[Estimate],
+    label: str,
+    values: np.ndarray | None,
+    stds: np.ndarray | None,
+    unit: str,
+    source: str,
+    axes: Sequence[str],
+) -> None:
+    """One row per coordinate of ``values`` (named by ``axes``)."""
+    if values is None:
+        return
+    v = np.atleast_1d(np.asarray(values, dtype=float))
+    s = None if stds is None else np.atleast_1d(np.asarray(stds, dtype=float))
+    for i, name in enumerate(list(axes)[: v.size]):
+        std = None if s is None or i >= s.size else float(s[i])
+        rows.append(Estimate(f"{label} {name}", float(v[i]), std, unit, source))
 
 
-def _estimates(found: _Found) -> list[list[str]]:
-    """Rows ``quantity, value, std, unit, source`` of every estimated quantity."""
-    rows: list[list[str]] = []
-
-    def vec_rows(
-        label: str, values: Any, stds: Any, unit: str, source: str, axes: Sequence[str]
-    ) -> None:
-        v = np.atleast_1d(np.asarray(values if values is not None else [], dtype=float))
-        s = None if stds is None else np.atleast_1d(np.asarray(stds, dtype=float))
-        for i, name in enumerate(list(axes)[: v.size]):
-            std = "—" if s is None or i >= s.size else _g(s[i], 3)
-            rows.append([f"{label} {name}", _g(v[i]), std, unit, source])
-
+def _estimates(found: _Found) -> list[Estimate]:
+    """Every estimated quantity with its std and unit."""
+    rows: list[Estimate] = []
     for cam in CAMERAS:
-        if cam not in found.intrinsics:
+        intr = found.intrinsics.get(cam)
+        if intr is None:
             continue
-        path, doc = found.intrinsics[cam]
-        src = _rel(path, found.run_dir)
-        K = np.asarray(doc.get("camera_matrix", np.full((3, 3), np.nan)), dtype=float)
-        std: dict[str, Any] = doc["std"] if isinstance(doc.get("std"), dict) else {}
+        src = found.rel(intr.source)
+        K = intr.camera_matrix
+        std: dict[str, Any] = intr.std or {}
+        C = cam.upper()
         for key, val in (("fx", K[0, 0]), ("fy", K[1, 1]), ("cx", K[0, 2]), ("cy", K[1, 2])):
-            rows.append([f"camera {cam.upper()} {key}", _g(val), _g(std.get(key), 3), "px", src])
-        dist = doc.get("distortion") or []
-        dnames = doc.get("distortion_names") or [f"d{i}" for i in range(len(dist))]
+            rows.append(Estimate(f"camera {C} {key}", float(val), std.get(key), "px", src))
         dstd = std.get("distortion") or []
-        for i, (name, val) in enumerate(zip(dnames, dist, strict=False)):
-            rows.append(
-                [
-                    f"camera {cam.upper()} {name}",
-                    _g(val),
-                    _g(dstd[i], 3) if i < len(dstd) else "—",
-                    "",
-                    src,
-                ]
-            )
-        rows.append(
-            [f"camera {cam.upper()} reprojection RMS", _g(doc.get("rms_px"), 4), "—", "px", src]
-        )
+        names = intr.distortion_names or [f"d{i}" for i in range(intr.distortion.size)]
+        for i, (name, val) in enumerate(zip(names, intr.distortion, strict=False)):
+            s = float(dstd[i]) if i < len(dstd) else None
+            rows.append(Estimate(f"camera {C} {name}", float(val), s, "", src))
+        rows.append(Estimate(f"camera {C} reprojection RMS", intr.rms_px, None, "px", src, 4))
     if found.joint is not None:
-        path, doc = found.joint
-        src = _rel(path, found.run_dir)
-        j = doc.get("joint") or {}
-        unit = str(j.get("units", "m"))
+        art = found.joint
+        src = found.rel(art.source)
+        unit = art.joint.units or "m"
         for cam in CAMERAS:
-            if j.get(f"position_in_{cam}") is not None:
-                vec_rows(
-                    f"joint in {cam.upper()} (o_{cam})",
-                    j[f"position_in_{cam}"],
-                    j.get(f"position_in_{cam}_std"),
-                    unit,
-                    src,
-                    "xyz",
+            _vec_rows(
+                rows,
+                f"joint in {cam.upper()} (o_{cam})",
+                art.joint.position(cam),
+                art.joint.std(cam),
+                unit,
+                src,
+                "xyz",
+            )
+        for cam, sec in art.quality.bundle_adjustment.items():
+            for key, val in sec.values().items():
+                rows.append(
+                    Estimate(
+                        f"camera {cam.upper()} {key} (bundle adjustment)",
+                        val,
+                        sec.intrinsics_std.get(key),
+                        "px" if key in ("fx", "fy", "cx", "cy") else "",
+                        src,
+                    )
                 )
-        ba = get_path(doc, "quality.bundle_adjustment", {})
-        if isinstance(ba, dict):
-            for cam, sec in ba.items():
-                if not isinstance(sec, dict):
-                    continue
-                K = np.asarray(sec.get("camera_matrix", np.full((3, 3), np.nan)), dtype=float)
-                istd = sec.get("intrinsics_std") or {}
-                vals = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
-                for i, name in enumerate(("k1", "k2", "p1", "p2", "k3")):
-                    d = sec.get("distortion") or []
-                    if i < len(d):
-                        vals[name] = d[i]
-                for key, val in vals.items():
-                    rows.append(
-                        [
-                            f"camera {str(cam).upper()} {key} (bundle adjustment)",
-                            _g(val),
-                            _g(istd.get(key), 3),
-                            "px" if key in ("fx", "fy", "cx", "cy") else "",
-                            src,
-                        ]
-                    )
-        noise = get_path(doc, "quality.estimated_pose_noise", {})
-        if isinstance(noise, dict):
-            for key, sec in noise.items():
-                if isinstance(sec, dict):
-                    rows.append(
-                        [
-                            f"pose noise ({key}): translation",
-                            _g(sec.get("sigma_trans"), 3),
-                            "—",
-                            unit,
-                            src,
-                        ]
-                    )
-                    rows.append(
-                        [
-                            f"pose noise ({key}): rotation",
-                            _g(sec.get("sigma_rot_deg"), 3),
-                            "—",
-                            "deg",
-                            src,
-                        ]
-                    )
+        for key, noise in art.quality.estimated_pose_noise.items():
+            rows.append(
+                Estimate(f"pose noise ({key}): translation", noise.sigma_trans, None, unit, src, 3)
+            )
+            rows.append(
+                Estimate(f"pose noise ({key}): rotation", noise.sigma_rot_deg, None, "deg", src, 3)
+            )
     if found.relpose is not None:
-        path, doc = found.relpose
-        src = _rel(path, found.run_dir)
-        rel = doc.get("relative_pose") or {}
-        scaled = doc.get("scale") is not None
-        unit_b = "B units" if scaled else str(get_path(doc, "units.length", "m"))
-        unit_a = "A units" if scaled else unit_b
-        vec_rows(
-            "R_a_b",
-            rel.get("rpy_deg"),
-            rel.get("rpy_deg_std"),
-            "deg",
-            src,
-            ["roll", "pitch", "yaw"],
-        )
-        vec_rows(
+        rp = found.relpose
+        src = found.rel(rp.source)
+        rel = rp.relative_pose
+        unit_b = "B units" if rp.unknown_scale else rp.length_unit
+        unit_a = "A units" if rp.unknown_scale else unit_b
+        _vec_rows(rows, "R_a_b", rel.rpy_deg, rel.rpy_deg_std, "deg", src, ["roll", "pitch", "yaw"])
+        _vec_rows(
+            rows,
             "B's origin in A (t_a_b)",
-            rel.get("translation_b_in_a"),
-            rel.get("translation_b_in_a_std"),
+            rel.translation_b_in_a,
+            rel.translation_b_in_a_std,
             unit_b,
             src,
             "xyz",
         )
-        j = doc.get("joint") or {}
-        vec_rows(
-            "joint in A (o_a, relpose)",
-            j.get("position_in_a"),
-            j.get("position_in_a_std"),
-            unit_a,
-            src,
-            "xyz",
-        )
-        vec_rows(
-            "joint in B (o_b, relpose)",
-            j.get("position_in_b"),
-            j.get("position_in_b_std"),
-            unit_b,
-            src,
-            "xyz",
-        )
-        sc = doc.get("scale")
-        if isinstance(sc, dict):
+        if rp.joint is not None:
+            j = rp.joint
+            _vec_rows(
+                rows, "joint in A (o_a, relpose)", j.position_in_a, j.position_in_a_std,
+                unit_a, src, "xyz",
+            )  # fmt: skip
+            _vec_rows(
+                rows, "joint in B (o_b, relpose)", j.position_in_b, j.position_in_b_std,
+                unit_b, src, "xyz",
+            )  # fmt: skip
+        sc = rp.scale
+        if sc is not None:
             rows.append(
-                [
-                    "phi_ba = mu_b / mu_a",
-                    _g(sc.get("phi_ba")),
-                    _g(sc.get("phi_ba_std"), 3),
-                    "B units per A unit",
-                    src,
-                ]
+                Estimate(
+                    "phi_ba = mu_b / mu_a", sc.phi_ba, sc.phi_ba_std, "B units per A unit", src
+                )
             )
-            for key in ("mu_a", "mu_b"):
-                if sc.get(key) is not None:
-                    rows.append(
-                        [
-                            key,
-                            _g(sc.get(key)),
-                            _g(sc.get(f"{key}_std"), 3),
-                            f"{key[-1].upper()} units per metre",
-                            src,
-                        ]
-                    )
-        noise = get_path(doc, "quality.estimated_pose_noise", None)
-        if isinstance(noise, dict):
+            for key, val, s in (("mu_a", sc.mu_a, sc.mu_a_std), ("mu_b", sc.mu_b, sc.mu_b_std)):
+                if val is not None:
+                    rows.append(Estimate(key, val, s, f"{key[-1].upper()} units per metre", src))
+        rp_noise = rp.quality.estimated_pose_noise
+        if rp_noise is not None:
             rows.append(
-                ["pose noise: translation", _g(noise.get("sigma_trans"), 3), "—", unit_b, src]
+                Estimate("pose noise: translation", rp_noise.sigma_trans, None, unit_b, src, 3)
             )
             rows.append(
-                ["pose noise: rotation", _g(noise.get("sigma_rot_deg"), 3), "—", "deg", src]
+                Estimate("pose noise: rotation", rp_noise.sigma_rot_deg, None, "deg", src, 3)
             )
     return rows
 
 
 def _collect_warnings(found: _Found) -> None:
     for cam in CAMERAS:
-        if cam in found.intrinsics:
-            path, doc = found.intrinsics[cam]
-            src = _rel(path, found.run_dir)
-            for w in doc.get("warnings") or []:
-                found.warn(src, str(w))
-            dropped = get_path(doc, "images.dropped_outliers", [])
-            if isinstance(dropped, list) and dropped:
-                found.warn(
-                    src,
-                    f"{len(dropped)} view(s) dropped as outliers: {', '.join(map(str, dropped))}",
-                )
-        for p in found.poses.get(cam, []):
-            src = _rel(p, found.run_dir)
-            try:
-                header = read_npz_header(p)
-                n = len(read_npz_poses(p))
-                skipped = read_npz_quality(p)[1]
-            except AcsError as exc:
-                found.notes.append(f"{src} could not be read: {exc}")
-                continue
-            for w in header.get("warnings") or []:
-                found.warn(src, str(w))
+        intr = found.intrinsics.get(cam)
+        if intr is not None:
+            src = found.rel(intr.source)
+            for w in intr.warnings:
+                found.warn(src, w)
+            dropped = [] if intr.images is None else intr.images.dropped_outliers
+            if dropped:
+                shown = ", ".join(str({"image": d.image, "rms_px": d.rms_px}) for d in dropped)
+                found.warn(src, f"{len(dropped)} view(s) dropped as outliers: {shown}")
+        for p, art in _poses_of(found, cam):
+            src = found.rel(p)
+            for w in art.warnings:
+                found.warn(src, w)
+            skipped = art.skipped_images
             if skipped:
                 found.warn(
                     src,
-                    f"no board pose in {len(skipped)} image(s) (of {n + len(skipped)}): "
+                    f"no board pose in {len(skipped)} image(s) (of {len(art) + len(skipped)}): "
                     f"{', '.join(skipped)}",
                 )
-    for art in (found.joint, found.relpose):
-        if art is None:
+    if found.rig is not None:
+        for w in found.rig.warnings:
+            found.warn(found.rel(found.rig.source), w)
+    for a in (found.joint, found.relpose):
+        if a is None:
             continue
-        path, doc = art
-        src = _rel(path, found.run_dir)
-        for w in doc.get("warnings") or []:
-            found.warn(src, str(w))
-        pairing = get_path(doc, "quality.pairing", None)
+        src = found.rel(a.source)
+        for w in a.warnings:
+            found.warn(src, w)
+        pairing = a.quality.pairing
         said = any(src == s and "no partner" in t for s, t in found.warnings)
-        if (
-            isinstance(pairing, dict)
-            and (pairing.get("unpaired_a") or pairing.get("unpaired_b"))
-            and not said
-        ):
+        if pairing is not None and (pairing.unpaired_a or pairing.unpaired_b) and not said:
             text = (
-                f"unpaired samples: {pairing.get('unpaired_a')} of A, {pairing.get('unpaired_b')} "
-                f"of B ({pairing.get('pairs')} pairs, by {pairing.get('by')})"
+                f"unpaired samples: {pairing.unpaired_a} of A, {pairing.unpaired_b} "
+                f"of B ({pairing.pairs} pairs, by {pairing.by})"
             )
             found.warn(src, text)
 
@@ -631,40 +630,153 @@ def _collect_warnings(found: _Found) -> None:
 # --------------------------------------------------------------------------- the report
 
 
-def _artifact_rows(found: _Found) -> list[list[str]]:
+def _artifact_rows(found: _Found) -> list[ArtifactRow]:
     rows = []
-    items: list[tuple[Path, dict[str, Any]]] = [
+    items: list[IntrinsicsArtifact | JointArtifact | RelposeArtifact] = [
         found.intrinsics[c] for c in CAMERAS if c in found.intrinsics
     ]
     items += [a for a in (found.joint, found.relpose) if a is not None]
-    for path, doc in items:
+    if found.rig is not None:
+        h = found.rig.header
         rows.append(
-            [
-                _rel(path, found.run_dir),
-                str(doc.get("schema")),
-                str(doc.get("created")),
-                str(doc.get("method", "")),
-            ]
+            ArtifactRow(found.rel(found.rig.source), str(h.get("schema")),
+                        str(h.get("created")), str(h.get("method", "")))
+        )  # fmt: skip
+    for art in items:
+        h = art.header
+        rows.append(
+            ArtifactRow(
+                found.rel(art.source),
+                str(h.get("schema")),
+                str(h.get("created")),
+                str(h.get("method", "")),
+            )
         )
     for cam in CAMERAS:
         for p in found.poses.get(cam, []):
             try:
-                h = read_npz_header(p)
-            except AcsError:
-                h = {}
+                got = found.load(p)
+            except AcsError as exc:
+                found.notes.append(f"{found.rel(p)} could not be read: {exc}")
+                got = None
+            h = got.header if isinstance(got, PosesArtifact) else {}
             rows.append(
-                [
-                    _rel(p, found.run_dir),
+                ArtifactRow(
+                    found.rel(p),
                     str(h.get("schema", "acscal/poses")),
                     str(h.get("created", "")),
                     str(h.get("method", "")),
-                ]
+                )
             )
     return rows
 
 
+def build_report(run_dir: Path, extra_warnings: Sequence[str] = ()) -> ReportModel:
+    """Read a run folder into a :class:`ReportModel` (each file read once; nothing drawn).
+
+    Parameters
+    ----------
+    run_dir : Path
+        A run folder (``acscal run``'s output, or the same layout made by hand).
+    extra_warnings : sequence of str
+        Warnings to list besides the artifacts' own (source ``run``).
+
+    Returns
+    -------
+    ReportModel
+
+    Raises
+    ------
+    InputError
+        ``run_dir`` is not a folder or holds no acscal artifact.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise InputError("no such run folder", path=run_dir)
+    found = _gather(run_dir)
+    if not found.any_file:
+        raise InputError(
+            "holds no acscal artifact (expected cam_a/intrinsics.yaml, cam_a/poses.npz, "
+            "joint.yaml, relpose.yaml or rig.yaml, as `acscal run` writes)",
+            path=run_dir,
+        )
+    return _model(found, extra_warnings)
+
+
+def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
+    created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    run_dir = found.run_dir
+    model = ReportModel(
+        f"acscal calibration report: {run_dir.resolve().name}",
+        f"acscal {acs_cli.__version__}, {created}, run folder {run_dir}",
+        views=_views(found),
+    )
+    model.artifacts = _artifact_rows(found)
+    model.artifact_notes = list(found.notes)
+    model.notes = list(found.notes)
+
+    if found.rig is not None:
+        model.rig = _rig_view(found)
+    try:
+        model.trajectory = _trajectory(found)
+    except AcsError as exc:
+        if found.rig is None:
+            model.skip("trajectory", f"Trajectory skipped: {exc.one_line()}")
+
+    if found.joint is not None:
+        try:
+            model.residuals += _joint_series(found, found.joint)
+        except AcsError as exc:
+            model.skip("residuals", f"joint.yaml residuals skipped: {exc.one_line()}")
+    else:
+        model.skip("residuals", "No joint.yaml: no residuals of the joint stage.")
+    traj = model.trajectory
+    if traj is not None and found.relpose is not None:
+        scale, shown = display_unit(traj.unit)
+        model.residuals.append(
+            F.ResidualSeries(
+                "relpose.yaml (Algorithm III/IV): |joint from A - joint from B| in the "
+                "recovered trajectory",
+                traj.x,
+                traj.consistency * scale,
+                traj.rejected,
+                shown,
+            )
+        )
+    elif found.relpose is None:
+        model.skip("residuals", "No relpose.yaml: no residuals of the relative-pose stage.")
+
+    model.reprojection = _reprojection(found)
+    if not model.reprojection and not found.intrinsics and not found.poses:
+        model.skip("reprojection", "No intrinsics.yaml and no poses: no reprojection errors.")
+
+    model.coverage = _coverage(found)
+    if not model.coverage:
+        model.skip(
+            "coverage",
+            "No poses with corners (cam_<x>/*.npz from acscal poses): no coverage figure.",
+        )
+
+    model.estimates = _estimates(found)
+    if found.rig is not None:
+        model.estimates += _rig_estimates(found)
+    if not model.estimates:
+        model.skip("estimates", "No estimates: no intrinsics, joint or relpose artifact.")
+
+    for w in extra_warnings:
+        found.warn("run", w)
+    _collect_warnings(found)
+    model.warnings = [f"{src}: {text}" for src, text in found.warnings]
+    model.notes += [n for n in found.notes if n not in model.notes]
+    return model
+
+
 def run_report(run_dir: Path, output: Path, config: ReportConfig | None = None) -> ReportRun:
     """Write ``output`` (HTML) and its figures (``<name>_files/*.png``) for a run folder.
+
+    The report is built first as a :class:`~acs_cli.report.model.ReportModel`
+    (:func:`build_report`, every poses NPZ read once), then drawn
+    (:func:`acs_cli.report.render.render_report`) and written.
 
     Parameters
     ----------
@@ -686,192 +798,23 @@ def run_report(run_dir: Path, output: Path, config: ReportConfig | None = None) 
     cfg = config or ReportConfig()
     run_dir = Path(run_dir)
     output = Path(output)
-    if not run_dir.is_dir():
-        raise InputError("no such run folder", path=run_dir)
-    found = _gather(run_dir)
-    if not found.any_file:
-        raise InputError(
-            "holds no acscal artifact (expected cam_a/intrinsics.yaml, cam_a/poses.npz, "
-            "joint.yaml or relpose.yaml, as `acscal run` writes)",
-            path=run_dir,
-        )
-    inputs = [p for p, _ in found.intrinsics.values()]
-    inputs += [a[0] for a in (found.joint, found.relpose) if a is not None]
-    check_distinct_output(output, inputs)
+    model = build_report(run_dir, cfg.extra_warnings)
+    inputs = [run_dir / f"cam_{c}" / "intrinsics.yaml" for c in CAMERAS]
+    inputs += [run_dir / "joint.yaml", run_dir / "relpose.yaml"]
+    check_distinct_output(output, [p for p in inputs if p.is_file()])
+    rendered = render_report(model, cfg.dpi, cfg.max_frustums)
 
-    created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    page = Page(
-        f"acscal calibration report: {run_dir.resolve().name}",
-        f"acscal {acs_cli.__version__}, {created}, run folder {run_dir}",
-    )
-    pngs: dict[str, bytes] = {}
-    views = _views(found)
-
-    def skip(text: str) -> None:
-        found.notes.append(text)
-        page.note(text)
-
-    page.section("artifacts", "Artifacts")
-    page.table(["file", "schema", "created", "method"], _artifact_rows(found))
-    for n in found.notes:
-        page.note(n)
-
-    # --- the rig and its trajectory
-    page.section("trajectory", "The rig and its trajectory")
-    traj: _Trajectory | None = None
-    try:
-        traj = _trajectory(found)
-    except AcsError as exc:
-        skip(f"Trajectory skipped: {exc.one_line()}")
-    if traj is not None:
-        scale, shown = _display_unit(traj.unit)
-        pngs["trajectory"] = F.rig_trajectory_figure(
-            traj.T_r_a,
-            traj.T_r_b,
-            traj.joint_a,
-            traj.joint_b,
-            traj.reference,
-            traj.unit,
-            views,
-            cfg.max_frustums,
-            cfg.dpi,
-        )
-        page.figure(
-            pngs["trajectory"],
-            f"Both cameras (frustums: A blue, B orange) and the joint's path (green: as A "
-            f"sees it; crosses: as B sees it) over {traj.T_r_a.shape[0]} paired frames, in "
-            f"camera A's frame at the reference instant; grey lines link each camera to the "
-            f"joint. Source: {traj.title}.",
-            "3-D view of the rig's trajectory",
-        )
-        k = traj.reference  # T_r_a[k] is the identity: T_r_b[k] is T_a_b at the reference
-        pngs["reference"] = F.rig_reference_figure(
-            traj.T_r_b[k], traj.position_in_a, traj.joint_b[k], traj.unit, views, cfg.dpi
-        )
-        page.figure(
-            pngs["reference"],
-            "The rig at the reference instant, in camera A's frame: camera B's pose T_a_b and "
-            "the joint as each camera locates it.",
-            "The rig at the reference instant",
-        )
-        d = traj.consistency * scale
-        page.paragraph(
-            f"Joint consistency (distance between the joint as A and as B see it): RMS "
-            f"{np.sqrt(np.mean(d**2)):.4g} {shown}, max {d.max():.4g} {shown} over "
-            f"{d.size} frames."
-        )
-
-    # --- joint-constraint residuals
-    page.section("residuals", "Joint-constraint residuals per frame")
-    series: list[F.ResidualSeries] = []
-    if found.joint is not None:
-        try:
-            series += _joint_series(found, *found.joint)
-        except AcsError as exc:
-            skip(f"joint.yaml residuals skipped: {exc.one_line()}")
-    else:
-        skip("No joint.yaml: no residuals of the joint stage.")
-    if traj is not None and found.relpose is not None:
-        scale, shown = _display_unit(traj.unit)
-        series.append(
-            F.ResidualSeries(
-                "relpose.yaml (Algorithm III/IV): |joint from A - joint from B| in the "
-                "recovered trajectory",
-                traj.x,
-                traj.consistency * scale,
-                traj.rejected,
-                shown,
-            )
-        )
-    elif found.relpose is None:
-        skip("No relpose.yaml: no residuals of the relative-pose stage.")
-    if series:
-        pngs["residuals"] = F.residuals_figure(series, cfg.dpi)
-        n_rej = sum(int(s.rejected.sum()) for s in series)
-        page.figure(
-            pngs["residuals"],
-            f"Residual of the joint constraint per frame; frames the estimator rejected as "
-            f"outliers are red crosses ({n_rej} in all); dashed: RMS of the frames used.",
-            "Joint-constraint residuals per frame",
-        )
-
-    # --- reprojection
-    page.section("reprojection", "Reprojection errors")
-    try:
-        rep = _reprojection(found)
-    except (AcsError, TypeError, ValueError) as exc:
-        rep = []
-        text = exc.one_line() if isinstance(exc, AcsError) else f"unexpected value ({exc})"
-        skip(f"Reprojection errors skipped: {text}")
-    if rep:
-        pngs["reprojection"] = F.reprojection_figure(rep, cfg.dpi)
-        page.figure(
-            pngs["reprojection"],
-            "Left: RMS reprojection error of each view of the intrinsics calibration. Right: "
-            "RMS reprojection error of each image's board pose (PnP with the calibrated "
-            "intrinsics), per poses file.",
-            "Reprojection error per view and per camera",
-        )
-    elif not found.intrinsics and not found.poses:
-        skip("No intrinsics.yaml and no poses: no reprojection errors.")
-
-    # --- coverage
-    page.section("coverage", "Image coverage of the detected corners")
-    try:
-        cov = _coverage(found)
-    except AcsError as exc:
-        cov = []
-        skip(f"Coverage skipped: {exc.one_line()}")
-    if cov:
-        pngs["coverage"] = F.coverage_figure(cov, dpi=cfg.dpi)
-        page.figure(
-            pngs["coverage"],
-            "Where in each camera's image the board's corners were detected (every posed image "
-            "of the run): corners per cell of a 16x12 grid, each corner a white dot. Empty "
-            "borders mean the lens distortion there is extrapolated.",
-            "Image coverage of the detected corners",
-        )
-    else:
-        skip("No poses with corners (cam_<x>/*.npz from acscal poses): no coverage figure.")
-
-    # --- estimates
-    page.section("estimates", "Estimates and standard deviations")
-    try:
-        rows = _estimates(found)
-    except (TypeError, ValueError, IndexError, KeyError, AttributeError) as exc:
-        rows = []
-        skip(f"Estimates table skipped: an artifact holds an unexpected value ({exc}).")
-    if rows:
-        page.table(["quantity", "value", "std (1 sigma)", "unit", "source"], rows, numeric=(1, 2))
-    else:
-        skip("No estimates: no intrinsics, joint or relpose artifact.")
-
-    # --- warnings
-    page.section("warnings", "Warnings")
-    for w in cfg.extra_warnings:
-        found.warn("run", w)
-    _collect_warnings(found)
-    warnings = [f"{src}: {text}" for src, text in found.warnings]
-    if warnings:
-        page.items(warnings, "warn")
-    else:
-        page.paragraph("No warnings.")
-    if found.notes:
-        page.section("notes", "Sections skipped")
-        page.items(found.notes)
-
-    # --- write
     fig_dir = figures_dir_for(output)
     written = []
     for key, name in FIGURE_NAMES.items():
         target = fig_dir / name
-        if key in pngs:
-            atomic_write_bytes(target, pngs[key])
+        if key in rendered.pngs:
+            atomic_write_bytes(target, rendered.pngs[key])
             written.append(target)
         elif target.is_file():
             try:
                 target.unlink()  # a figure of an earlier report that this one does not have
             except OSError:
                 pass
-    atomic_write_text(output, page.render())
-    return ReportRun(output, fig_dir, written, list(found.notes), warnings)
+    atomic_write_text(output, rendered.html)
+    return ReportRun(output, fig_dir, written, list(model.notes), list(model.warnings))

@@ -22,6 +22,7 @@ camera's trajectory, puts all cameras on one timeline, solves the whole rig
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -442,7 +443,8 @@ def run_rig(
             "axis_in": "hinge axis (unit) in each camera's frame",
         },
     )
-    art = art.save(out, header)
+    art = dataclasses.replace(art, header=header)
+    art.save(out)
     write_rig_trajectories(est, tracks, slots, out.parent / TRAJECTORY_DIR)
     return RigRun(est, art, out, warnings)
 

@@ -18,23 +18,12 @@ import numpy as np
 
 from acs_cli.core.acs_trajectory import AcsTrajectory, recover_trajectory
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import (
-    get_path,
-    make_header,
-    read_yaml_artifact,
-    sha256_of,
-    write_yaml_artifact,
-)
+from acs_cli.io.artifacts import make_header, sha256_of, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.trajectory import write_tum
-from acs_cli.stages.common import (
-    TIME_TOL,
-    PairedTrajectories,
-    StageRun,
-    finite_vec3,
-    load_pair,
-    pairing_section,
-)
+from acs_cli.io.validate import TIME_TOL
+from acs_cli.stages.common import PairedTrajectories, StageRun, load_pair, pairing_section
 from acs_cli.stages.joint import read_joint
 
 __all__ = [
@@ -110,57 +99,26 @@ class RecoveredTrajectory:
 TrajectoryRun = StageRun[RecoveredTrajectory]
 
 
-#: Keys of ``relpose.yaml`` the trajectory needs.
-RELPOSE_KEYS = (
-    "relative_pose.T_b_a",
-    "relative_pose.reference",
-    "joint.position_in_a",
-    "joint.position_in_b",
-)
+def read_relpose(path: Path) -> RelposeArtifact:
+    """A ``relpose.yaml`` with the joint in both cameras (``InputError`` otherwise)."""
+    art = RelposeArtifact.load(path)
+    art.require_joint()
+    return art
 
 
-def read_relpose(path: Path) -> dict[str, Any]:
-    """A ``relpose.yaml`` with the keys the trajectory needs (``InputError`` otherwise)."""
-    return read_yaml_artifact(path, "relpose", RELPOSE_KEYS)
-
-
-def _number(value: Any, what: str, path: Path) -> float | None:
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{what} must be a number, got {value!r}", path=path)
-    return float(value)
-
-
-def _scale(doc: dict[str, Any], path: Path) -> tuple[float, float | None, float | None]:
-    """``phi_ba``, ``mu_a``, ``mu_b`` of a relpose artifact (1, None, None without scale)."""
-    scale = doc.get("scale")
-    if scale is None:
-        return 1.0, None, None
-    if not isinstance(scale, dict):
-        raise InputError("'scale' must be a mapping", path=path)
-    phi = _number(scale.get("phi_ba"), "scale.phi_ba", path)
-    if phi is None or not (np.isfinite(phi) and phi > 0):
-        raise InputError(f"scale.phi_ba must be a positive number, got {phi!r}", path=path)
-    mu_a = _number(scale.get("mu_a"), "scale.mu_a", path)
-    mu_b = _number(scale.get("mu_b"), "scale.mu_b", path)
-    return phi, mu_a, mu_b
-
-
-def _reference_index(rel: dict[str, Any], pair: PairedTrajectories, path: Path) -> int:
+def _reference_index(relpose: RelposeArtifact, pair: PairedTrajectories) -> int:
     """The paired frame at ``relpose.yaml``'s reference instant (by timestamps when known)."""
-    ta_ref = rel.get("reference_timestamp_a")
-    tb_ref = rel.get("reference_timestamp_b")
-    if ta_ref is None or tb_ref is None:
-        k = rel["reference"]
-        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(pair.a):
+    rel = relpose.relative_pose
+    path = relpose.source
+    ta, tb = rel.reference_timestamp_a, rel.reference_timestamp_b
+    if ta is None or tb is None:
+        k = rel.reference
+        if not 0 <= k < len(pair.a):
             raise InputError(
                 f"relative_pose.reference = {k!r} is not one of the {len(pair.a)} paired frames",
                 path=path,
             )
         return int(k)
-    ta = float(_number(ta_ref, "relative_pose.reference_timestamp_a", path) or 0.0)
-    tb = float(_number(tb_ref, "relative_pose.reference_timestamp_b", path) or 0.0)
     hit = np.flatnonzero(
         (np.abs(pair.a.timestamps - ta) <= TIME_TOL) & (np.abs(pair.b.timestamps - tb) <= TIME_TOL)
     )
@@ -174,21 +132,8 @@ def _reference_index(rel: dict[str, Any], pair: PairedTrajectories, path: Path) 
     return int(hit[0])
 
 
-def _rejected_mask(doc: dict[str, Any], pair: PairedTrajectories) -> np.ndarray:
-    """Frames listed in ``quality.frames.rejected`` (A's timestamps), as a mask."""
-    listed = get_path(doc, "quality.frames.rejected", [])
-    mask = np.zeros(len(pair.a), dtype=bool)
-    if not isinstance(listed, list):
-        return mask
-    values = np.asarray([v for v in listed if isinstance(v, (int, float))], dtype=float)
-    if values.size:
-        mask = np.any(np.abs(pair.a.timestamps[:, None] - values[None, :]) <= TIME_TOL, axis=1)
-    return mask
-
-
 def recover_from_relpose(
-    relpose_doc: dict[str, Any],
-    relpose_path: Path,
+    relpose: RelposeArtifact,
     pair: PairedTrajectories,
     joint_path: Path | None = None,
 ) -> RecoveredTrajectory:
@@ -196,10 +141,8 @@ def recover_from_relpose(
 
     Parameters
     ----------
-    relpose_doc : dict
-        From :func:`read_relpose`.
-    relpose_path : Path
-        Its file (for messages).
+    relpose : RelposeArtifact
+        From :func:`read_relpose` (its ``source`` is named in messages).
     pair : PairedTrajectories
         A's and B's paired samples (the trajectories relpose was estimated from).
     joint_path : Path, optional
@@ -212,60 +155,51 @@ def recover_from_relpose(
     InputError
         Malformed artifacts, or a reference instant not among the paired samples.
     """
-    for key in RELPOSE_KEYS:
-        get_path(relpose_doc, key, source=relpose_path)
-    rel = relpose_doc["relative_pose"]
-    if not isinstance(rel, dict):
-        raise InputError("'relative_pose' must be a mapping", path=relpose_path)
-    try:
-        T_b_a = np.asarray(rel["T_b_a"], dtype=float)
-    except (TypeError, ValueError):
-        T_b_a = np.zeros(0)
-    if T_b_a.shape != (4, 4) or not np.all(np.isfinite(T_b_a)):
-        raise InputError("relative_pose.T_b_a must be a finite 4x4 matrix", path=relpose_path)
-    phi, mu_a, mu_b = _scale(relpose_doc, relpose_path)
+    relpose_path = relpose.source
+    joint = relpose.require_joint()
+    scale = relpose.scale
+    mu_a = None if scale is None else scale.mu_a
+    mu_b = None if scale is None else scale.mu_b
     if joint_path is None:
-        joint = relpose_doc["joint"]
-        o_a = finite_vec3(joint.get("position_in_a"), "joint.position_in_a", relpose_path)
-        o_b = finite_vec3(joint.get("position_in_b"), "joint.position_in_b", relpose_path)
+        o_a, o_b = joint.position_in_a, joint.position_in_b
         source = f"{relpose_path} (joint estimated with the relative pose)"
     else:
-        joint = read_joint(joint_path)
-        o_a = finite_vec3(joint.get("position_in_a"), "joint.position_in_a", joint_path)
-        if joint.get("position_in_b") is None:
+        given = read_joint(joint_path)
+        if given.position_in_b is None:
             raise InputError(
                 "has no joint.position_in_b: the trajectory needs the joint in both cameras "
                 "(or leave out --joint to use relpose.yaml's joint)",
                 path=joint_path,
             )
-        o_b = finite_vec3(joint.get("position_in_b"), "joint.position_in_b", joint_path)
+        o_a, o_b = given.position_in_a, given.position_in_b
         source = str(joint_path)
         if mu_a is not None and mu_b is not None:
             o_a, o_b = o_a * mu_a, o_b * mu_b
             source += " (metric, scaled by mu_a and mu_b of relpose.yaml)"
-    k = _reference_index(rel, pair, relpose_path)
+    assert o_b is not None  # require_joint and the check above
+    k = _reference_index(relpose, pair)
     try:
         traj = recover_trajectory(
-            pair.a.T_world_cam, pair.b.T_world_cam, T_b_a, o_a, o_b, reference=k, phi_ba=phi
+            pair.a.T_world_cam,
+            pair.b.T_world_cam,
+            relpose.relative_pose.T_b_a,
+            o_a,
+            o_b,
+            reference=k,
+            phi_ba=relpose.phi_ba,
         )
     except InputError as exc:
         raise InputError(exc.message, path=relpose_path) from exc
-    unknown_scale = relpose_doc.get("scale") is not None
-    units = relpose_doc.get("units")
-    unit = units.get("length", "m") if isinstance(units, dict) else "m"
-    length_unit = "A units" if unknown_scale else str(unit)
-    rejected = _rejected_mask(relpose_doc, pair)
+    length_unit = "A units" if relpose.unknown_scale else relpose.length_unit
+    rejected = relpose.quality.frames.mask(pair.a.timestamps)
     return RecoveredTrajectory(traj, pair, rejected, source, o_a, o_b, length_unit, mu_a)
 
 
-def _check_inputs_match(doc: dict[str, Any], poses_a: Path, poses_b: Path) -> list[str]:
+def _check_inputs_match(relpose: RelposeArtifact, poses_a: Path, poses_b: Path) -> list[str]:
     """Warnings when the trajectories are not the ones ``relpose.yaml`` was made from."""
     warnings: list[str] = []
-    inputs = doc.get("inputs")
-    if not isinstance(inputs, dict):
-        return warnings
     for role, given in (("poses_a", poses_a), ("poses_b", poses_b)):
-        rec = inputs.get(role)
+        rec = relpose.inputs.get(role)
         if isinstance(rec, dict) and rec.get("sha256") and rec["sha256"] != sha256_of(given):
             warnings.append(
                 f"{given} differs from the {role} relpose.yaml was estimated from "
@@ -300,17 +234,14 @@ def run_trajectory(
     outputs = {key: out_dir / name for key, name in OUTPUT_NAMES.items()}
     for out in outputs.values():
         check_distinct_output(out, inputs.values())
-    doc = read_relpose(relpose)
+    art = read_relpose(relpose)
     pair_by, max_dt = cfg.pair_by, cfg.max_dt
-    recorded = get_path(doc, "quality.pairing", None)
-    if pair_by == "auto" and max_dt is None and isinstance(recorded, dict):
-        req = recorded.get("requested")
-        pair_by = req if req in ("auto", "timestamp", "index") else "auto"
-        md = recorded.get("max_dt_s")
-        max_dt = float(md) if isinstance(md, (int, float)) and not isinstance(md, bool) else None
+    recorded = art.quality.pairing
+    if pair_by == "auto" and max_dt is None and recorded is not None:
+        pair_by, max_dt = recorded.pair_by, recorded.max_dt_s
     pair = load_pair(poses_a, poses_b, cfg.format_a, cfg.format_b, pair_by, max_dt)
-    rec = recover_from_relpose(doc, relpose, pair, joint)
-    warnings = list(pair.warnings) + _check_inputs_match(doc, poses_a, poses_b)
+    rec = recover_from_relpose(art, pair, joint)
+    warnings = list(pair.warnings) + _check_inputs_match(art, poses_a, poses_b)
     traj = rec.trajectory
     n_rej = int(rec.rejected.sum())
     if n_rej:
@@ -332,7 +263,7 @@ def run_trajectory(
             "phi_ba": traj.phi_ba,
             "applied": "B's translations, T_b_a's translation and position_in_b divided by "
             "phi_ba (B units to A units)"
-            if doc.get("scale") is not None
+            if art.unknown_scale
             else "none (known scale)",
             "mu_a": rec.mu_a,
         },
@@ -353,7 +284,7 @@ def run_trajectory(
                 "rejected": rec.rejected.tolist(),
             },
         },
-        "quality": {"pairing": pairing_section(pair.pairing, pair_by)},
+        "quality": {"pairing": pairing_section(pair.pairing, pair_by).to_plain()},
         "warnings": warnings,
     }
     header = make_header(
@@ -364,10 +295,10 @@ def run_trajectory(
         "T_r_a[i] o_a (from A) and T_r_b[i] o_b (from B)",
         units={
             "length": "A units (camera A's trajectory units: mu_a x metres)"
-            if doc.get("scale") is not None
+            if art.unknown_scale
             else rec.length_unit,
             "timestamps": "s (or frame numbers for trajectories without timestamps)",
-            "position_in_b": "B units" if doc.get("scale") is not None else rec.length_unit,
+            "position_in_b": "B units" if art.unknown_scale else rec.length_unit,
         },
         frames={
             "world": "camera A's optical frame at the reference instant",

@@ -1,0 +1,556 @@
+"""The joint artifact: ``joint.yaml`` (``acscal/joint``), and the sections it shares with
+``relpose.yaml``.
+
+Keys (after the header): ``scenario`` (``fixed_joint`` or ``overlap``), ``joint``
+(:class:`JointSection`: ``position_in_a`` and ``_std``, ``position_in_b`` and ``_std``,
+``covariance_a``, ``covariance_b``, ``units``), ``quality`` (:class:`JointQuality`) and
+``warnings``; ``docs/formats.md`` has the meaning of each. :func:`load_joint_section` reads
+the joint of a ``joint.yaml`` or of a ``relpose.yaml`` (``relpose --joint`` takes either).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acs_cli.errors import InputError
+from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.validate import (
+    FloatArray,
+    as_int,
+    as_mapping,
+    as_matrix,
+    as_number,
+    as_str_list,
+    as_vector,
+    listed_mask,
+    optional_covariance3,
+    optional_number,
+    optional_vector,
+)
+
+__all__ = [
+    "BundleSection",
+    "FramesUsed",
+    "JointArtifact",
+    "JointQuality",
+    "JointSection",
+    "Pairing",
+    "PoseNoise",
+    "load_joint_section",
+]
+
+Source = Path | str | None
+
+
+def _fmt(v: FloatArray, std: FloatArray | None, digits: int = 4) -> str:
+    text = "[" + " ".join(f"{x:+.{digits}f}" for x in v) + "]"
+    if std is not None:
+        text += " +- [" + " ".join(f"{x:.2g}" for x in std) + "]"
+    return text
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+@dataclass(frozen=True)
+class FramesUsed:
+    """``quality.frames``: how many frames an estimator used and which it rejected.
+
+    Attributes
+    ----------
+    total, used : int or None
+    rejected : list of float
+        Timestamps (s, or frame numbers) of the frames rejected as outliers.
+    """
+
+    total: int | None = None
+    used: int | None = None
+    rejected: list[float] = field(default_factory=list)
+
+    @classmethod
+    def from_inliers(
+        cls, inliers: NDArray[np.bool_], labels: NDArray[Any] | None = None
+    ) -> FramesUsed:
+        """From a mask ``(n,)`` of the frames used; ``rejected`` by ``labels`` (timestamps)
+        or by index."""
+        rejected = np.flatnonzero(~inliers)
+        listed = rejected if labels is None else np.asarray(labels)[rejected]
+        return cls(int(inliers.size), int(inliers.sum()), [x.item() for x in listed])
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> FramesUsed:
+        d = as_mapping(value, key, path)
+        rej = d.get("rejected") or []
+        if not isinstance(rej, list):
+            raise InputError(f"'{key}.rejected' must be a list", path=path)
+        return cls(
+            None if d.get("total") is None else as_int(d["total"], f"{key}.total", path),
+            None if d.get("used") is None else as_int(d["used"], f"{key}.used", path),
+            [as_number(v, f"{key}.rejected[{i}]", path) for i, v in enumerate(rej)],
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        return {"total": self.total, "used": self.used, "rejected": list(self.rejected)}
+
+    def mask(self, labels: NDArray[Any]) -> NDArray[np.bool_]:
+        """Which of ``labels`` (timestamps, ``(n,)``) were rejected."""
+        return listed_mask(labels, self.rejected)
+
+
+PAIR_BY = ("auto", "timestamp", "index")
+
+
+@dataclass(frozen=True)
+class Pairing:
+    """``quality.pairing``: how A's and B's samples were paired.
+
+    Attributes
+    ----------
+    by : str
+        ``timestamp`` or ``index``, as done.
+    requested : str
+        ``--pair-by`` as given (``auto``, ``timestamp`` or ``index``).
+    pairs, unpaired_a, unpaired_b : int
+    max_dt_s : float or None
+        Largest timestamp difference of a pair, seconds (None when paired by index).
+    """
+
+    by: str = "timestamp"
+    requested: str = "auto"
+    pairs: int = 0
+    unpaired_a: int = 0
+    unpaired_b: int = 0
+    max_dt_s: float | None = None
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> Pairing:
+        d = as_mapping(value, key, path)
+        return cls(
+            str(d.get("by", "timestamp")),
+            str(d.get("requested", "auto")),
+            as_int(d.get("pairs", 0), f"{key}.pairs", path, minimum=0),
+            as_int(d.get("unpaired_a", 0), f"{key}.unpaired_a", path, minimum=0),
+            as_int(d.get("unpaired_b", 0), f"{key}.unpaired_b", path, minimum=0),
+            optional_number(d.get("max_dt_s"), f"{key}.max_dt_s", path, non_negative=True),
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        return {
+            "by": self.by,
+            "requested": self.requested,
+            "pairs": self.pairs,
+            "unpaired_a": self.unpaired_a,
+            "unpaired_b": self.unpaired_b,
+            "max_dt_s": self.max_dt_s,
+        }
+
+    @property
+    def pair_by(self) -> str:
+        """The ``--pair-by`` to repeat this pairing (``auto`` for an unknown value)."""
+        return self.requested if self.requested in PAIR_BY else "auto"
+
+
+@dataclass(frozen=True)
+class PoseNoise:
+    """Estimated pose noise: translation (length unit) and rotation (deg), per axis."""
+
+    sigma_trans: float
+    sigma_rot_deg: float
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> PoseNoise:
+        d = as_mapping(value, key, path)
+        return cls(
+            as_number(d.get("sigma_trans"), f"{key}.sigma_trans", path),
+            as_number(d.get("sigma_rot_deg"), f"{key}.sigma_rot_deg", path),
+        )
+
+    def to_plain(self) -> dict[str, float]:
+        return {"sigma_trans": self.sigma_trans, "sigma_rot_deg": self.sigma_rot_deg}
+
+
+#: The intrinsics a bundle adjustment refines, in its order.
+BUNDLE_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
+@dataclass(frozen=True)
+class BundleSection:
+    """``quality.bundle_adjustment.<cam>``: one camera's bundle adjustment on its corners.
+
+    Attributes
+    ----------
+    intrinsics_file : str
+        The initial intrinsics.
+    rms_px, sigma_px : float
+        Reprojection RMS and estimated corner noise, pixels.
+    frames : int
+        Frames adjusted.
+    camera_matrix : ndarray, shape (3, 3)
+        Refined ``K``, pixels.
+    distortion : ndarray, shape (5,)
+        Refined ``k1 k2 p1 p2 k3``.
+    intrinsics_std : dict of str to float
+        One sigma of ``fx fy cx cy k1 k2 p1 p2 k3``.
+    """
+
+    intrinsics_file: str
+    rms_px: float
+    sigma_px: float
+    frames: int
+    camera_matrix: FloatArray
+    distortion: FloatArray
+    intrinsics_std: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> BundleSection:
+        d = as_mapping(value, key, path)
+        dist = d.get("distortion") or []
+        if not isinstance(dist, list):
+            raise InputError(f"'{key}.distortion' must be a list of numbers", path=path)
+        dist_arr = as_matrix(dist, (len(dist),), f"{key}.distortion", path)
+        std = as_mapping(d.get("intrinsics_std") or {}, f"{key}.intrinsics_std", path)
+        return cls(
+            str(d.get("intrinsics_file", "")),
+            as_number(d.get("rms_px"), f"{key}.rms_px", path),
+            as_number(d.get("sigma_px"), f"{key}.sigma_px", path),
+            as_int(d.get("frames", 0), f"{key}.frames", path, minimum=0),
+            as_matrix(d.get("camera_matrix"), (3, 3), f"{key}.camera_matrix", path),
+            dist_arr,
+            {
+                k: as_number(v, f"{key}.intrinsics_std.{k}", path, allow_nan=True)
+                for k, v in std.items()
+            },
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        return {
+            "intrinsics_file": self.intrinsics_file,
+            "rms_px": self.rms_px,
+            "sigma_px": self.sigma_px,
+            "frames": self.frames,
+            "camera_matrix": self.camera_matrix,
+            "distortion": self.distortion,
+            "intrinsics_std": dict(self.intrinsics_std),
+        }
+
+    def values(self) -> dict[str, float]:
+        """``fx fy cx cy`` and the distortion coefficients by name."""
+        K = self.camera_matrix
+        vals = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
+        for name, v in zip(BUNDLE_INTRINSICS[4:], self.distortion, strict=False):
+            vals[name] = v
+        return {k: float(v) for k, v in vals.items()}
+
+
+def _bundles(value: Any, key: str, path: Source) -> dict[str, BundleSection]:
+    d = as_mapping(value or {}, key, path)
+    return {cam: BundleSection.parse(sec, f"{key}.{cam}", path) for cam, sec in d.items()}
+
+
+@dataclass(frozen=True)
+class JointSection:
+    """The ``joint`` section of ``joint.yaml`` and ``relpose.yaml``.
+
+    Attributes
+    ----------
+    position_in_a : ndarray, shape (3,)
+        The joint in camera A's frame (the paper's ``O_A``), length unit.
+    position_in_b : ndarray, shape (3,) or None
+        The joint in camera B's frame, when known.
+    position_in_a_std, position_in_b_std : ndarray, shape (3,) or None
+        One sigma of each coordinate.
+    covariance_a, covariance_b : ndarray, shape (3, 3) or None
+        Symmetric PSD covariances of the positions.
+    units : str or None
+        The length unit (``joint.yaml`` only).
+    source : str or None
+        Where the joint came from (``relpose.yaml`` only).
+    """
+
+    position_in_a: FloatArray
+    position_in_b: FloatArray | None = None
+    position_in_a_std: FloatArray | None = None
+    position_in_b_std: FloatArray | None = None
+    covariance_a: FloatArray | None = None
+    covariance_b: FloatArray | None = None
+    units: str | None = None
+    source: str | None = None
+
+    @classmethod
+    def from_estimate(
+        cls,
+        position_in_a: FloatArray,
+        covariance_a: FloatArray | None,
+        position_in_b: FloatArray | None = None,
+        covariance_b: FloatArray | None = None,
+        *,
+        units: str | None = None,
+        source: str | None = None,
+    ) -> JointSection:
+        """From positions and covariances; the stds are the covariances' diagonals' roots."""
+
+        def std(cov: FloatArray | None) -> FloatArray | None:
+            return None if cov is None else np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+        return cls(
+            np.asarray(position_in_a, dtype=float),
+            None if position_in_b is None else np.asarray(position_in_b, dtype=float),
+            std(covariance_a),
+            None if position_in_b is None else std(covariance_b),
+            None if covariance_a is None else np.asarray(covariance_a, dtype=float),
+            None if covariance_b is None else np.asarray(covariance_b, dtype=float),
+            units,
+            source,
+        )
+
+    @classmethod
+    def parse(cls, value: Any, path: Source, key: str = "joint") -> JointSection:
+        """Parse and validate a ``joint`` mapping (``position_in_a`` required)."""
+        d = as_mapping(value, key, path)
+        if d.get("position_in_a") is None:
+            raise InputError(f"missing key '{key}.position_in_a'", path=path)
+        return cls(
+            as_vector(d["position_in_a"], f"{key}.position_in_a", path),
+            optional_vector(d.get("position_in_b"), f"{key}.position_in_b", path),
+            optional_vector(d.get("position_in_a_std"), f"{key}.position_in_a_std", path),
+            optional_vector(d.get("position_in_b_std"), f"{key}.position_in_b_std", path),
+            optional_covariance3(d.get("covariance_a"), f"{key}.covariance_a", path),
+            optional_covariance3(d.get("covariance_b"), f"{key}.covariance_b", path),
+            None if d.get("units") is None else str(d["units"]),
+            None if d.get("source") is None else str(d["source"]),
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        """The mapping in file order: positions with stds, covariances, units or source."""
+        out: dict[str, Any] = {
+            "position_in_a": self.position_in_a,
+            "position_in_a_std": self.position_in_a_std,
+        }
+        if self.position_in_b is not None:
+            out["position_in_b"] = self.position_in_b
+            out["position_in_b_std"] = self.position_in_b_std
+        if self.covariance_a is not None:
+            out["covariance_a"] = self.covariance_a
+        if self.covariance_b is not None:
+            out["covariance_b"] = self.covariance_b
+        if self.units is not None:
+            out["units"] = self.units
+        if self.source is not None:
+            out["source"] = self.source
+        return out
+
+    def position(self, cam: str) -> FloatArray | None:
+        """``position_in_a`` or ``position_in_b`` (``cam`` is ``"a"`` or ``"b"``)."""
+        return self.position_in_a if cam == "a" else self.position_in_b
+
+    def std(self, cam: str) -> FloatArray | None:
+        """One sigma of :meth:`position`."""
+        return self.position_in_a_std if cam == "a" else self.position_in_b_std
+
+    def covariance(self, cam: str) -> FloatArray | None:
+        """The covariance of :meth:`position`, else the squares of its stds, else None."""
+        cov = self.covariance_a if cam == "a" else self.covariance_b
+        if cov is None:
+            std = self.std(cam)
+            cov = None if std is None else np.diag(np.square(std))
+        return cov
+
+    def validate(self, path: Source) -> None:
+        """Re-check shapes and finiteness (for an object built in memory)."""
+        as_vector(self.position_in_a, "joint.position_in_a", path)
+        for cam in ("a", "b"):
+            optional_vector(self.position(cam), f"joint.position_in_{cam}", path)
+            optional_vector(self.std(cam), f"joint.position_in_{cam}_std", path)
+            optional_covariance3(
+                self.covariance_a if cam == "a" else self.covariance_b,
+                f"joint.covariance_{cam}",
+                path,
+            )
+
+    def summary_lines(self, unit: str) -> list[str]:
+        lines = [f"  joint in A: {_fmt(self.position_in_a, self.position_in_a_std)} {unit}"]
+        if self.position_in_b is not None:
+            lines.append(f"  joint in B: {_fmt(self.position_in_b, self.position_in_b_std)} {unit}")
+        return lines
+
+
+@dataclass(frozen=True)
+class JointQuality:
+    """``joint.yaml``'s ``quality`` section.
+
+    Attributes
+    ----------
+    frames : dict of str to FramesUsed
+        ``a`` and ``b`` (fixed joint) or ``ab`` (overlap).
+    residual_rms : dict of str to float, or float
+        RMS of the joint-constraint residual per key (length unit).
+    pairing : Pairing or None
+        Overlap only.
+    joint_in_world : dict of str to ndarray (3,)
+        Fixed joint only: the joint in each trajectory's world.
+    estimated_pose_noise : dict of str to PoseNoise
+        Refined method only.
+    bundle_adjustment : dict of str to BundleSection
+        Per camera, when the corners were adjusted.
+    """
+
+    frames: dict[str, FramesUsed] = field(default_factory=dict)
+    residual_rms: dict[str, float] | float = field(default_factory=dict)
+    pairing: Pairing | None = None
+    joint_in_world: dict[str, FloatArray] = field(default_factory=dict)
+    estimated_pose_noise: dict[str, PoseNoise] = field(default_factory=dict)
+    bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, value: Any, path: Source) -> JointQuality:
+        d = as_mapping(value or {}, "quality", path)
+        frames = as_mapping(d.get("frames") or {}, "quality.frames", path)
+        world = as_mapping(d.get("joint_in_world") or {}, "quality.joint_in_world", path)
+        noise = as_mapping(
+            d.get("estimated_pose_noise") or {}, "quality.estimated_pose_noise", path
+        )
+        rms_raw = d.get("residual_rms")
+        rms: dict[str, float] | float
+        if isinstance(rms_raw, dict):
+            rms = {
+                str(k): as_number(v, f"quality.residual_rms.{k}", path) for k, v in rms_raw.items()
+            }
+        elif rms_raw is None:
+            rms = {}
+        else:
+            rms = as_number(rms_raw, "quality.residual_rms", path)
+        return cls(
+            {k: FramesUsed.parse(v, f"quality.frames.{k}", path) for k, v in frames.items()},
+            rms,
+            None
+            if d.get("pairing") is None
+            else Pairing.parse(d["pairing"], "quality.pairing", path),
+            {k: as_vector(v, f"quality.joint_in_world.{k}", path) for k, v in world.items()},
+            {
+                k: PoseNoise.parse(v, f"quality.estimated_pose_noise.{k}", path)
+                for k, v in noise.items()
+            },
+            _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.bundle_adjustment:
+            out["bundle_adjustment"] = {k: s.to_plain() for k, s in self.bundle_adjustment.items()}
+        if self.pairing is not None:
+            out["pairing"] = self.pairing.to_plain()
+        out["frames"] = {k: f.to_plain() for k, f in self.frames.items()}
+        if self.joint_in_world:
+            out["joint_in_world"] = dict(self.joint_in_world)
+        out["residual_rms"] = (
+            dict(self.residual_rms) if isinstance(self.residual_rms, dict) else self.residual_rms
+        )
+        if self.estimated_pose_noise:
+            out["estimated_pose_noise"] = {
+                k: n.to_plain() for k, n in self.estimated_pose_noise.items()
+            }
+        return out
+
+
+# ----------------------------------------------------------------------------- the artifact
+
+SCENARIOS = ("fixed_joint", "overlap")
+
+
+@dataclass(frozen=True, eq=False)
+class JointArtifact(YamlArtifact):
+    """The joint of an ACS (``acscal/joint``): Algorithm I (overlap) or II (fixed joint).
+
+    Attributes
+    ----------
+    scenario : {"fixed_joint", "overlap"}
+    joint : JointSection
+        Positions in camera A's and B's frames (``units`` their length unit).
+    quality : JointQuality
+    warnings : list of str
+    header : dict
+    source : str or None
+    """
+
+    KIND: ClassVar[str] = "joint"
+    REQUIRED: ClassVar[tuple[str, ...]] = ("joint.position_in_a",)
+
+    scenario: str
+    joint: JointSection
+    quality: JointQuality = field(default_factory=JointQuality)
+    warnings: list[str] = field(default_factory=list)
+    header: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
+
+    @property
+    def length_unit(self) -> str:
+        """The positions' length unit (``joint.units``, else the header's, else ``m``)."""
+        if self.joint.units is not None:
+            return self.joint.units
+        return str(self.units.get("length", "m"))
+
+    def validate(self) -> None:
+        if self.scenario not in SCENARIOS:
+            raise InputError(
+                f"'scenario' must be one of {', '.join(SCENARIOS)}, got {self.scenario!r}",
+                path=self.source,
+            )
+        self.joint.validate(self.source)
+
+    @classmethod
+    def from_doc(cls, doc: dict[str, Any], path: Path) -> JointArtifact:
+        return cls(
+            scenario=str(doc.get("scenario", "fixed_joint")),
+            joint=JointSection.parse(doc.get("joint"), path),
+            quality=JointQuality.parse(doc.get("quality"), path),
+            warnings=as_str_list(doc.get("warnings"), "warnings", path),
+            header=header_of(doc),
+            source=str(path),
+        )
+
+    def body(self) -> dict[str, Any]:
+        return {
+            "scenario": self.scenario,
+            "joint": self.joint.to_plain(),
+            "quality": self.quality.to_plain(),
+            "warnings": list(self.warnings),
+        }
+
+    def summary(self) -> str:
+        u = self.length_unit
+        lines = [f"joint ({self.scenario}): {self.header.get('method', '')}".rstrip(": ")]
+        lines += self.joint.summary_lines(u)
+        rms = self.quality.residual_rms
+        if isinstance(rms, dict):
+            lines += [f"  residual RMS ({k}): {v:.3g} {u}" for k, v in rms.items()]
+        else:
+            lines.append(f"  residual RMS: {rms:.3g} {u}")
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def load_joint_section(path: str | Path) -> JointSection:
+    """The joint of a ``joint.yaml``, or of a ``relpose.yaml`` (its estimated joint).
+
+    Raises
+    ------
+    InputError
+        Neither kind, or a joint that is missing or malformed.
+    """
+    p = Path(path)
+    try:
+        return JointArtifact.load(p).joint
+    except InputError as exc:
+        if "acscal/relpose" not in exc.message:
+            raise
+    from acs_cli.io.relpose import RelposeArtifact
+
+    rel = RelposeArtifact.load(p)
+    if rel.joint is None:
+        raise InputError("missing key 'joint.position_in_a'", path=p)
+    return rel.joint

@@ -1,0 +1,282 @@
+"""Small validators for values read from artifacts: one place, one wording.
+
+Every function takes the raw value (as YAML or an NPZ gives it), the artifact's key (a
+dotted name such as ``"joint.position_in_a"``, named in the message) and the artifact's
+file, and returns a checked value or raises :class:`~acs_cli.errors.InputError` naming
+the file and the key. The ``optional_*`` variants return ``None`` for a missing (``None``)
+value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acs_cli.errors import InputError
+
+__all__ = [
+    "COV_TOL",
+    "TIME_TOL",
+    "as_bool",
+    "as_covariance3",
+    "as_int",
+    "as_mapping",
+    "as_matrix",
+    "as_number",
+    "as_str_list",
+    "as_vector",
+    "listed_mask",
+    "optional_covariance3",
+    "optional_matrix",
+    "optional_number",
+    "optional_vector",
+]
+
+FloatArray = NDArray[np.floating[Any]]
+Source = str | Path | None
+
+#: Largest difference (seconds or frame numbers) for two timestamps to be the same sample.
+TIME_TOL = 1e-6
+#: Relative tolerance of a covariance's symmetry and of its smallest eigenvalue (PSD).
+COV_TOL = 1e-6
+
+
+def _floats(value: Any) -> FloatArray | None:
+    """``value`` as a float array, or None when it is not numeric (strings, ragged lists)."""
+    if isinstance(value, (str, bytes, Mapping)) or value is None:
+        return None
+    try:
+        with np.errstate(all="ignore"):
+            arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    if arr.dtype.kind != "f":  # pragma: no cover - dtype=float always gives floats
+        return None
+    return arr
+
+
+def as_number(
+    value: Any,
+    key: str,
+    path: Source,
+    *,
+    positive: bool = False,
+    non_negative: bool = False,
+    allow_nan: bool = False,
+) -> float:
+    """A finite number (not a bool).
+
+    Parameters
+    ----------
+    value : Any
+        The raw value.
+    key : str
+        The artifact key, for the message.
+    path : str or Path or None
+        The artifact's file, for the message.
+    positive, non_negative : bool
+        Also require ``> 0`` or ``>= 0``.
+    allow_nan : bool
+        Accept NaN and inf (e.g. a standard deviation that could not be computed).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        Not a finite number, or of the wrong sign.
+    """
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok:
+        try:
+            v = float(value)
+        except OverflowError:  # an int beyond float range
+            ok = False
+        else:
+            ok = allow_nan or bool(np.isfinite(v))
+    if not ok:
+        raise InputError(f"'{key}' must be a finite number, got {str(value)[:40]!r}", path=path)
+    if positive and not v > 0:
+        raise InputError(f"'{key}' must be a positive number, got {v!r}", path=path)
+    if non_negative and not v >= 0:
+        raise InputError(f"'{key}' must not be negative, got {v!r}", path=path)
+    return v
+
+
+def optional_number(value: Any, key: str, path: Source, **kwargs: Any) -> float | None:
+    """:func:`as_number`, or ``None`` for ``None``."""
+    return None if value is None else as_number(value, key, path, **kwargs)
+
+
+def as_int(value: Any, key: str, path: Source, *, minimum: int | None = None) -> int:
+    """An integer that fits an int32 (an integral float is accepted), not a bool.
+
+    Raises
+    ------
+    InputError
+        Not an integer, out of the int32 range, or below ``minimum``.
+    """
+    ok = False
+    if not isinstance(value, bool) and isinstance(value, (int, np.integer)):
+        ok = abs(int(value)) < 2**31
+    elif isinstance(value, (float, np.floating)):
+        v = float(value)
+        ok = bool(np.isfinite(v)) and v.is_integer() and abs(v) < 2**31
+    if not ok:
+        raise InputError(f"'{key}' must be an integer, got {str(value)[:40]!r}", path=path)
+    n = int(value)
+    if minimum is not None and n < minimum:
+        raise InputError(f"'{key}' must be at least {minimum}, got {n}", path=path)
+    return n
+
+
+def as_bool(value: Any, key: str, path: Source) -> bool:
+    """A YAML boolean (``true``/``false``)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"'{key}' must be true or false, got {str(value)[:40]!r}", path=path)
+    return bool(value)
+
+
+def as_matrix(
+    value: Any, shape: tuple[int, ...], key: str, path: Source, *, allow_nan: bool = False
+) -> FloatArray:
+    """Finite numbers of the given shape.
+
+    Parameters
+    ----------
+    value : Any
+        Nested lists (YAML) or an array.
+    shape : tuple of int
+        The required shape, e.g. ``(4, 4)``.
+    key, path
+        For the message.
+    allow_nan : bool
+        Accept NaN and inf entries (standard deviations, covariances that could not be
+        computed).
+
+    Raises
+    ------
+    InputError
+        Not numbers, another shape, or a NaN/inf.
+    """
+    arr = _floats(value)
+    what = "x".join(map(str, shape))
+    if arr is None or arr.shape != shape or not (allow_nan or np.all(np.isfinite(arr))):
+        got = "" if arr is None else f", got shape {arr.shape}"
+        raise InputError(f"'{key}' must be a finite {what} array{got}", path=path)
+    return arr
+
+
+def optional_matrix(
+    value: Any, shape: tuple[int, ...], key: str, path: Source, *, allow_nan: bool = False
+) -> FloatArray | None:
+    """:func:`as_matrix`, or ``None`` for ``None``."""
+    return None if value is None else as_matrix(value, shape, key, path, allow_nan=allow_nan)
+
+
+def as_vector(
+    value: Any, key: str, path: Source, n: int = 3, *, allow_nan: bool = False
+) -> FloatArray:
+    """``n`` finite numbers (default 3: a point or a vector in some frame).
+
+    ``allow_nan`` accepts NaN and inf entries (a standard deviation not computed).
+
+    Raises
+    ------
+    InputError
+        Not ``n`` finite numbers; the message names ``key`` and the file.
+    """
+    arr = _floats(value)
+    if arr is None or arr.shape != (n,) or not (allow_nan or np.all(np.isfinite(arr))):
+        words = {3: "three"}.get(n, str(n))
+        raise InputError(f"'{key}' must be {words} finite numbers", path=path)
+    return arr
+
+
+def optional_vector(
+    value: Any, key: str, path: Source, n: int = 3, *, allow_nan: bool = False
+) -> FloatArray | None:
+    """:func:`as_vector`, or ``None`` for ``None``."""
+    return None if value is None else as_vector(value, key, path, n, allow_nan=allow_nan)
+
+
+def as_covariance3(value: Any, key: str, path: Source) -> FloatArray:
+    """A 3x3 covariance: finite, symmetric and positive semi-definite (within :data:`COV_TOL`
+    of its largest entry).
+
+    Raises
+    ------
+    InputError
+        Not a finite 3x3 matrix, not symmetric, or with a negative eigenvalue.
+    """
+    C = as_matrix(value, (3, 3), key, path)
+    scale = float(np.abs(C).max())
+    if scale == 0.0:
+        return C
+    if np.abs(C - C.T).max() > COV_TOL * scale:
+        raise InputError(f"'{key}' must be a symmetric 3x3 covariance", path=path)
+    if np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -COV_TOL * scale:
+        raise InputError(
+            f"'{key}' must be a positive semi-definite 3x3 covariance (it has a negative "
+            "eigenvalue)",
+            path=path,
+        )
+    return C
+
+
+def optional_covariance3(value: Any, key: str, path: Source) -> FloatArray | None:
+    """:func:`as_covariance3`, or ``None`` for ``None``."""
+    return None if value is None else as_covariance3(value, key, path)
+
+
+def as_mapping(value: Any, key: str, path: Source) -> dict[str, Any]:
+    """A mapping (with string keys, as YAML gives them)."""
+    if not isinstance(value, Mapping):
+        raise InputError(f"'{key}' must be a mapping", path=path)
+    return {str(k): v for k, v in value.items()}
+
+
+def as_str_list(value: Any, key: str, path: Source) -> list[str]:
+    """A list of strings (``None`` is the empty list; other scalars are refused)."""
+    if value is None:
+        return []
+    if not isinstance(value, (list, tuple)):
+        raise InputError(f"'{key}' must be a list", path=path)
+    return [str(v) for v in value]
+
+
+def listed_mask(labels: NDArray[Any], listed: Any) -> NDArray[np.bool_]:
+    """Which of ``labels`` (timestamps or indices, shape ``(n,)``) appear in ``listed``.
+
+    Parameters
+    ----------
+    labels : ndarray, shape (n,)
+        Timestamps (s) or frame numbers.
+    listed : sequence of numbers
+        E.g. an artifact's ``quality.frames.rejected``; entries within :data:`TIME_TOL`
+        match. Non-numbers are ignored.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    lab = np.asarray(labels, dtype=float).reshape(-1)
+    mask = np.zeros(lab.shape[0], dtype=bool)
+    if isinstance(listed, (list, tuple, np.ndarray)):
+        vals = np.asarray(
+            [
+                float(v)
+                for v in listed
+                if not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
+            ],
+            dtype=float,
+        )
+        if vals.size and lab.size:
+            mask = np.any(np.abs(lab[:, None] - vals[None, :]) <= TIME_TOL, axis=1)
+    return mask

@@ -1,0 +1,193 @@
+"""The report as data: a tree of dataclasses built from the artifacts, rendered afterwards.
+
+:func:`acs_cli.stages.report.build_report` reads a run folder into a :class:`ReportModel`
+(no drawing); :func:`acs_cli.report.render.render_report` turns the model into the HTML
+page and its PNG figures (no file access). Lengths are in each section's ``unit``;
+figure data holds arrays (shapes in each class).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from acs_cli.core.se3 import FloatArray
+from acs_cli.report.figures import CameraView, CoverageData, ReprojectionData, ResidualSeries
+
+__all__ = [
+    "ArtifactRow",
+    "Estimate",
+    "ReportModel",
+    "RigTrajectory",
+    "SectionNotes",
+    "display_unit",
+]
+
+
+def display_unit(unit: str) -> tuple[float, str]:
+    """The factor and unit lengths are shown in: metres as millimetres, others as they are."""
+    return (1000.0, "mm") if unit == "m" else (1.0, unit)
+
+
+@dataclass(frozen=True)
+class ArtifactRow:
+    """One artifact found in the run folder: its file (relative to the folder), schema,
+    creation date and method, as recorded."""
+
+    file: str
+    schema: str
+    created: str
+    method: str
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One estimated quantity with its one-sigma standard deviation.
+
+    Attributes
+    ----------
+    quantity : str
+        What it is, e.g. ``"joint in A (o_a) x"``.
+    value : float or None
+    std : float or None
+        One sigma, in ``unit`` (None: not known).
+    unit : str
+    source : str
+        The artifact it comes from (relative to the run folder).
+    digits : int
+        Significant digits of the value.
+    """
+
+    quantity: str
+    value: float | None
+    std: float | None
+    unit: str
+    source: str
+    digits: int = 6
+
+
+@dataclass(frozen=True)
+class RigTrajectory:
+    """The rig over time in camera A's frame at the reference instant.
+
+    Attributes
+    ----------
+    title : str
+        Where it comes from.
+    unit : str
+        Length unit of the translations.
+    T_r_a, T_r_b : ndarray, shape (n, 4, 4)
+        Camera A's and B's poses in the reference frame.
+    joint_a, joint_b : ndarray, shape (n, 3)
+        The joint as A and as B locate it.
+    consistency : ndarray, shape (n,)
+        ``|joint_a - joint_b|`` per frame, ``unit``.
+    x : ndarray, shape (n,)
+        A's timestamps (s) or frame numbers.
+    rejected : ndarray of bool, shape (n,)
+        Frames the estimator rejected as outliers.
+    reference : int
+        The reference frame (``T_r_a[reference]`` is the identity).
+    position_in_a : ndarray, shape (3,)
+        The joint in camera A's frame.
+    """
+
+    title: str
+    unit: str
+    T_r_a: FloatArray
+    T_r_b: FloatArray
+    joint_a: FloatArray
+    joint_b: FloatArray
+    consistency: FloatArray
+    x: FloatArray
+    rejected: np.ndarray
+    reference: int
+    position_in_a: FloatArray
+
+    @property
+    def consistency_rms(self) -> float:
+        """RMS of :attr:`consistency`, ``unit``."""
+        return float(np.sqrt(np.mean(self.consistency**2)))
+
+
+@dataclass(frozen=True)
+class RigOfManyView:
+    """A rig of many cameras (``rig.yaml``) for the report: where each camera and joint is.
+
+    Attributes
+    ----------
+    unit : str
+        Length unit (the reference camera's).
+    T_ref_cam : dict of str to ndarray, shape (4, 4)
+        Each camera's pose in the reference camera's frame at the reference instant.
+    joints : list of (name, type, p, q, point (3,) or None)
+        Each edge; ``point`` is the joint (ball centre or hinge point) in the reference frame.
+    paths : dict of str to ndarray, shape (n, 3)
+        Each camera's and joint's path over time in the same frame (``trajectories/*.tum``).
+    """
+
+    unit: str
+    T_ref_cam: dict[str, FloatArray]
+    joints: list[tuple[str, str, str, str, FloatArray | None]]
+    paths: dict[str, FloatArray] = field(default_factory=dict)
+
+
+@dataclass
+class SectionNotes:
+    """Notes a section shows in place of what it could not draw, in order."""
+
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class ReportModel:
+    """Everything the report shows, before any drawing.
+
+    Attributes
+    ----------
+    title, meta : str
+        The page's title and the line under it.
+    views : tuple of CameraView
+        How to draw camera A's and B's frustums.
+    artifacts : list of ArtifactRow
+    artifact_notes : list of str
+        Artifacts that could not be read.
+    trajectory : RigTrajectory or None
+    residuals : list of ResidualSeries
+        One panel per joint-stage camera (or pair) and one for relpose.
+    reprojection : list of ReprojectionData
+    coverage : list of CoverageData
+    estimates : list of Estimate
+    warnings : list of str
+        ``source: text`` of every warning.
+    notes : list of str
+        Every section skipped and every artifact not read, in order.
+    section_notes : dict of str to SectionNotes
+        The notes shown in each section (by anchor).
+    """
+
+    title: str
+    meta: str
+    views: tuple[CameraView, CameraView] = (CameraView(), CameraView())
+    artifacts: list[ArtifactRow] = field(default_factory=list)
+    artifact_notes: list[str] = field(default_factory=list)
+    trajectory: RigTrajectory | None = None
+    rig: RigOfManyView | None = None
+    residuals: list[ResidualSeries] = field(default_factory=list)
+    reprojection: list[ReprojectionData] = field(default_factory=list)
+    coverage: list[CoverageData] = field(default_factory=list)
+    estimates: list[Estimate] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    section_notes: dict[str, SectionNotes] = field(default_factory=dict)
+
+    def skip(self, section: str, text: str) -> None:
+        """Record that part of ``section`` was skipped, and why."""
+        self.notes.append(text)
+        self.section_notes.setdefault(section, SectionNotes()).notes.append(text)
+
+    def notes_of(self, section: str) -> list[str]:
+        """The notes ``section`` shows."""
+        sec = self.section_notes.get(section)
+        return [] if sec is None else list(sec.notes)

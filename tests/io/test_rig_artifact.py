@@ -1,0 +1,73 @@
+"""rig.yaml: written then read back equal; bad files refused naming the key."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from acs_cli.core.rig_solve import CameraTrack, estimate_rig
+from acs_cli.errors import InputError
+from acs_cli.io.artifacts import make_header
+from acs_cli.io.rig import RigArtifact
+from acs_cli.stages.rig import rig_artifact
+from sample_data_gen.rig_sim import rig_recording
+
+
+@pytest.fixture
+def artifact(rng: np.random.Generator) -> RigArtifact:
+    rec = rig_recording(rng, 30, sigma_rot_deg=0.2, sigma_trans=0.005, unknown_scale=("cam4",))
+    tracks = {
+        c: CameraTrack(T, np.ones(30, bool), rec.unknown_scale[c]) for c, T in rec.T_wc_c.items()
+    }
+    est = estimate_rig(rec.topology, tracks)
+    art = rig_artifact(est, "m", ["a warning"])
+    return dataclasses.replace(art, header=make_header("rig", {}, "test", {"length": "m"}, {}))
+
+
+def test_round_trip(artifact: RigArtifact, tmp_path: Path) -> None:
+    path = tmp_path / "rig.yaml"
+    artifact.save(path)
+    back = RigArtifact.load(path)
+    assert back.body().keys() == artifact.body().keys()
+    for name, cam in artifact.cameras.items():
+        got = back.cameras[name]
+        np.testing.assert_allclose(got.T_cam_ref, cam.T_cam_ref, atol=1e-12)
+        np.testing.assert_allclose(got.translation_std, cam.translation_std)
+        assert got.scale == pytest.approx(cam.scale) and got.scale_std == cam.scale_std
+    for name, j in artifact.joints.items():
+        got_j = back.joints[name]
+        assert got_j.type == j.type and got_j.between == j.between
+        for c, v in j.axis_in.items():
+            np.testing.assert_allclose(got_j.axis_in[c], v)
+    assert back.warnings == ["a warning"] and back.source == str(path)
+    assert "cam4" in back.summary() and "scale" in back.summary()
+    np.testing.assert_allclose(back.T_a_b("cam1", "cam1"), np.eye(4), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (
+            lambda d: d["cameras"]["cam1"].update(T_cam_ref=[[1, 0], [0, 1]]),
+            "cameras.cam1.T_cam_ref",
+        ),
+        (lambda d: d["cameras"]["cam4"].update(scale=-1.0), "cameras.cam4.scale"),
+        (lambda d: d["joints"]["j23"].update(type="slider"), "joints.j23.type"),
+        (lambda d: d["joints"]["j23"]["axis_in"].pop("cam3"), "joints.j23.axis_in"),
+        (lambda d: d["joints"]["j02"].update(between=["cam0", "cam9"]), "joints.j02.between"),
+        (lambda d: d.update(reference={"camera": "camX"}), "reference.camera"),
+    ],
+)
+def test_bad_rig_yaml_names_the_key(artifact: RigArtifact, tmp_path: Path, edit, key: str) -> None:
+    path = tmp_path / "rig.yaml"
+    artifact.save(path)
+    doc = yaml.safe_load(path.read_text())
+    edit(doc)
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError) as err:
+        RigArtifact.load(path)
+    assert key in str(err.value) and str(path) in str(err.value)
