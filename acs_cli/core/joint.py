@@ -489,3 +489,394 @@ def estimate_joint_overlap(
         inliers={"ab": inl},
         noise={"ab": _noise_dict(theta)},
     )
+
+
+# ----------------------------------------------------------------------------- hinge joints
+
+
+@dataclass(frozen=True)
+class HingeEstimate:
+    """A hinge (a joint that turns about one axis) in one camera's frame.
+
+    See :func:`estimate_hinge_fixed`. The hinge is the line ``{point_in_cam + s axis_in_cam}``
+    (camera frame); in the trajectory's world it is ``{point_in_world + s axis_in_world}``.
+
+    Attributes
+    ----------
+    axis_in_cam : ndarray, shape (3,)
+        Unit axis ``u`` in the camera's frame; its largest-magnitude component is positive.
+    point_in_cam : ndarray, shape (3,)
+        The axis point nearest the camera's optical centre (``point_in_cam @ axis_in_cam``
+        is 0), trajectory units.
+    covariance_axis : ndarray, shape (3, 3)
+        Covariance of ``axis_in_cam`` (rank 2: perpendicular to the axis; radians squared).
+    covariance_point : ndarray, shape (3, 3)
+        Covariance of ``point_in_cam`` (trajectory units squared). It includes the shift of
+        the nearest point along the axis that an error of the axis's direction causes.
+    axis_std_deg : float
+        RMS angle between the estimated and the true axis, ``sqrt(trace(covariance_axis))``
+        in degrees (each of the two perpendicular directions has ``axis_std_deg / sqrt(2)``).
+    angle_range_deg : float
+        The angle the hinge swept (largest minus smallest turn of the frames used).
+    residual_rms : float
+        RMS norm of the per-frame point residual ``R_i o + t_i - p_w`` (trajectory units).
+    inliers : ndarray of bool, shape (n,)
+        The frames used.
+    noise : dict
+        Estimated pose noise: ``sigma_rot_deg`` (from the axis fit) and ``sigma_trans``
+        (from the point fit); empty for ``method="paper"``.
+    axis_in_world : ndarray, shape (3,)
+        The axis in the trajectory's world, ``a_w = R_i u``.
+    point_in_world : ndarray, shape (3,)
+        ``p_w = R_i o + t_i``: where ``point_in_cam`` stays in the world.
+    method : str
+        ``"refined"`` or ``"paper"``.
+    """
+
+    axis_in_cam: FloatArray
+    point_in_cam: FloatArray
+    covariance_axis: FloatArray
+    covariance_point: FloatArray
+    axis_std_deg: float
+    angle_range_deg: float
+    residual_rms: float
+    inliers: np.ndarray
+    noise: dict[str, float]
+    axis_in_world: FloatArray
+    point_in_world: FloatArray
+    method: str = "refined"
+
+    @property
+    def std_point(self) -> FloatArray:
+        return np.sqrt(np.diag(self.covariance_point))
+
+
+@dataclass(frozen=True)
+class HingePairEstimate:
+    """Fixed-joint hinge results for camera A and, when given, camera B
+    (see :func:`estimate_hinge_fixed_pair`)."""
+
+    a: HingeEstimate
+    b: HingeEstimate | None
+    method: str
+
+
+def perpendicular_basis(v: FloatArray) -> FloatArray:
+    """An orthonormal basis ``(3, 2)`` of the plane perpendicular to unit ``v`` ``(3,)``
+    (a deterministic, continuous choice away from ``v``'s smallest component's axis)."""
+    e = np.zeros(3)
+    e[int(np.argmin(np.abs(v)))] = 1.0
+    b1 = np.cross(v, e)
+    b1 /= np.linalg.norm(b1)
+    return np.stack([b1, np.cross(v, b1)], axis=1)
+
+
+def _unit_chart(v0: FloatArray, B0: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit vector ``v = (v0 + B0 y) / |v0 + B0 y|`` ``(3,)`` and ``dv/dy`` ``(3, 2)``."""
+    w = v0 + B0 @ y
+    nw = float(np.linalg.norm(w))
+    v = w / nw
+    return v, (np.eye(3) - np.outer(v, v)) @ B0 / nw
+
+
+class _AxisProblem:
+    """The hinge-axis constraint ``R_i u = a_w`` as a :class:`estimation.LeastSquaresProblem`.
+
+    Parameters ``x = (y, z)`` ``(4,)``: ``u`` and ``a_w`` in charts around starting unit
+    vectors ``u0``, ``a0`` (:func:`_unit_chart`, fixed tangent bases ``B0``, ``C0``). Residual
+    per frame ``r_i = [B0^T (R_i^T a_w - u), 0]``: with ``R~_i = R_i Exp(n_i)`` it is
+    ``-B0^T (n_i x u)`` to first order, covariance ``theta_r B0^T (I - u u^T) B0``, the
+    rotation noise across the axis (the third component is identically zero).
+    """
+
+    def __init__(self, R: FloatArray, u0: FloatArray, a0: FloatArray) -> None:
+        self.R, self.u0, self.a0 = R, u0, a0
+        self.B0, self.C0 = perpendicular_basis(u0), perpendicular_basis(a0)
+
+    def vectors(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``u``, ``a_w`` and their derivatives ``(3, 2)`` at ``x``."""
+        u, du = _unit_chart(self.u0, self.B0, x[:2])
+        a, da = _unit_chart(self.a0, self.C0, x[2:])
+        return u, a, du, da
+
+    def residuals(self, x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+        n = self.R.shape[0]
+        u, a, du, da = self.vectors(x)
+        c = np.einsum("nji,j->ni", self.R, a)  # R_i^T a
+        r = np.zeros((n, 3))
+        r[:, :2] = (c - u) @ self.B0
+        if not jac:
+            return r, None
+        J = np.zeros((n, 3, 4))
+        J[:, :2, :2] = -self.B0.T @ du
+        J[:, :2, 2:] = np.einsum("ij,nkj,kl->nil", self.B0.T, self.R, da)  # B0^T R_i^T da
+        return r, J
+
+    def noise_shapes(self, x: FloatArray) -> FloatArray:
+        u = self.vectors(x)[0]
+        L = np.zeros((self.R.shape[0], 3, 3))
+        L[:, :2, :2] = self.B0.T @ (np.eye(3) - np.outer(u, u)) @ self.B0
+        return L
+
+    def problem(self) -> estimation.LeastSquaresProblem:
+        return estimation.LeastSquaresProblem(self.residuals, self.noise_shapes)
+
+    def axis_covariance(self, x: FloatArray, cov: FloatArray) -> FloatArray:
+        """Covariance ``(3, 3)`` of ``u`` from the parameters' covariance ``(4, 4)``."""
+        du = self.vectors(x)[2]
+        return np.asarray(du @ cov[:2, :2] @ du.T)
+
+
+def _hinge_angle_range_deg(R: FloatArray, u: FloatArray, a: FloatArray) -> float:
+    """Swept angle (degrees) of rotations ``R`` ``(n, 3, 3)`` about the world axis ``a``."""
+    w = perpendicular_basis(u)[:, 0]
+    v = se3.rotate(R, w)  # (n, 3): w in the world, turning about a
+    v0 = v[0]
+    phi = np.arctan2(np.cross(v0, v) @ a, v @ v0)
+    mean = np.arctan2(np.mean(np.sin(phi)), np.mean(np.cos(phi)))
+    centred = np.angle(np.exp(1j * (phi - mean)))
+    return float(np.degrees(centred.max() - centred.min()))
+
+
+def _sign_convention(u: FloatArray) -> float:
+    """``+1`` or ``-1``: the sign that makes ``u``'s largest-magnitude component positive."""
+    return 1.0 if u[int(np.argmax(np.abs(u)))] >= 0.0 else -1.0
+
+
+def _ball_error(what: str, pivot: PivotEstimate, ratio: float) -> DegenerateMotionError:
+    o = pivot.position_in_cam
+    return DegenerateMotionError(
+        f"{what}: the motion turns about more than one axis (weakest/strongest rotation "
+        f"ratio {ratio:.3f}); this is a ball joint, use estimate_pivot / --type ball "
+        f"(it puts the joint at [{o[0]:+.3f} {o[1]:+.3f} {o[2]:+.3f}] in the camera's frame).",
+        details={"rotation_ratio": ratio, "ball_joint_in_cam": o.tolist()},
+    )
+
+
+#: A fit whose residual RMS is below this share of the data's scale is exact (noise-free
+#: data): there is no noise to estimate (and its estimate would underflow).
+EXACT_FIT = 1e-12
+
+
+def _solve_or_exact(
+    problem: estimation.LeastSquaresProblem, x0: FloatArray, scale: float
+) -> tuple[estimation.LeastSquaresResult, bool]:
+    """:func:`estimation.solve` from ``x0``, or ``x0`` itself when it fits exactly (the
+    second value): unweighted covariance, every frame kept."""
+    r, J = problem.residuals(x0, True)
+    if J is None or float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) > EXACT_FIT * scale:
+        return estimation.solve(problem, x0), False
+    n, p = r.shape[0], J.shape[2]
+    s2 = float(np.sum(r**2)) / max(r.size - p, 1)
+    H = J.reshape(-1, p).T @ J.reshape(-1, p)
+    result = estimation.LeastSquaresResult(
+        x=x0,
+        covariance=s2 * np.linalg.pinv(H, hermitian=True),
+        theta=np.array([s2, s2]),
+        residuals=r,
+        mahalanobis_sq=np.zeros(n),
+        inliers=np.ones(n, dtype=bool),
+        iterations=0,
+        converged=True,
+        information=H,
+    )
+    return result, True
+
+
+def estimate_hinge_fixed(
+    T_w_c: FloatArray, what: str = "camera", *, method: str = "refined"
+) -> HingeEstimate:
+    """A hinge's axis and line in one camera's frame from a fixed-joint motion.
+
+    The camera's body turns about a hinge whose axis stays fixed in the world (the other
+    body held still). Every pose ``T_w_c[i] = [R_i, t_i]`` then satisfies, for the axis
+    direction ``u`` (camera frame) and ``a_w`` (world), and every point ``o`` of the axis,
+
+        R_i u = a_w                                               (axis)
+        R_i o + t_i = p_w                                         (eq. (11)-(12))
+
+    The second is the pivot constraint of Algorithm II (:func:`estimate_pivot`; the paper's
+    eq. (11)-(12)), which a hinge satisfies for any ``o = o_0 + s u``: the gauge is fixed by
+    ``o . u = 0``, the axis point nearest the camera's optical centre.
+
+    ``"refined"`` (maximum likelihood to first order; pose noise
+    ``[R_i Exp(n_i), t_i + m_i]``, isotropic per axis):
+
+    1. ``u, a_w``: the ML estimate of ``R_i u = a_w`` under isotropic rotation noise is the
+       top singular pair of ``sum R_i`` (equivalently the weakest direction of the
+       stacked, centred rotations, :func:`rotation_spread`); it starts a Levenberg-Marquardt
+       fit of ``B^T (R_i^T a_w - u)`` (residual across the axis, covariance
+       ``sigma_rot^2 I``) by :func:`estimation.solve`, which estimates the rotation noise
+       and rejects outlier frames. ``covariance_axis`` is from its information matrix.
+    2. ``o = B y`` (``B`` ``(3, 2)`` a basis perpendicular to ``u``) and ``p_w`` ``(3,)``:
+       the weighted least squares of ``R_i B y + t_i - p_w`` with covariance
+       ``sigma_t^2 I + sigma_rot^2 R_i [o]x [o]x^T R_i^T`` per frame (noise levels
+       estimated, outliers rejected; the frames of step 1's inliers), then the
+       errors-in-variables correction of :func:`pivot_bias_step` restricted to the plane
+       (with step 1's rotation noise: the point fit sees it only through the lever arm).
+       ``covariance_point = B Cov(y) B^T + (o^T Cov(u) o) u u^T``: an axis error ``du``
+       moves the nearest point along the axis by ``-(o . du)``.
+
+    ``"paper"``: the axis by the same singular vector, unweighted; the point by linear
+    least squares of eq. (12) relative to the first frame, ``(R^i - I) B y = -T^i``;
+    no noise estimation or outlier rejection. Its point covariance is the naive one of
+    that regression (it ignores that every row shares the first frame's error) and is
+    optimistic.
+
+    Noise-free poses (a fit exact to ``EXACT_FIT``) are solved directly, with no noise to
+    estimate.
+
+    Parameters
+    ----------
+    T_w_c : ndarray, shape (n, 4, 4)
+        Poses ``T_world_cam`` (any world fixed during the motion), trajectory units.
+    what : str
+        Name used in messages (e.g. ``"camera A"``).
+    method : {"refined", "paper"}
+        Keyword only.
+
+    Returns
+    -------
+    HingeEstimate
+        Axis and nearest point in the camera's frame, with covariances; angles in degrees.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Fewer than 3 poses; too little rotation (:func:`rotation_spread`); or motion about
+        more than one axis, judged as :func:`estimate_pivot` judges a hinge (when it can
+        locate the joint as a point, the motion is a ball joint's).
+    """
+    _check_method(method)
+    T = se3.check_transforms(T_w_c, name=f"{what} poses")
+    n = T.shape[0]
+    if n < 3:
+        raise DegenerateMotionError(
+            f"{what}: {n} poses; a fixed-joint hinge calibration needs at least 3"
+        )
+    R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
+    spread = rotation_spread(R, what)
+    if spread.ratio >= HINGE_RATIO_EXACT:
+        try:
+            pivot = estimate_pivot(T, method, what)
+        except DegenerateMotionError:
+            pass  # a hinge: the point is not determined
+        else:
+            raise _ball_error(what, pivot, spread.ratio)
+    u0 = spread.axis
+    a0 = R.sum(axis=0) @ u0
+    a0 /= np.linalg.norm(a0)
+    axis_problem = _AxisProblem(R, u0, a0)
+    cov_y: np.ndarray
+    if method == "paper":
+        r_ax, J_ax = axis_problem.residuals(np.zeros(4), True)
+        assert J_ax is not None
+        Jf = J_ax[:, :2].reshape(-1, 4)
+        theta_r = float(np.sum(r_ax**2) / max(2 * n - 4, 1))
+        cov_axis = axis_problem.axis_covariance(np.zeros(4), theta_r * np.linalg.inv(Jf.T @ Jf))
+        u, a = u0, a0
+        B = perpendicular_basis(u)
+        # eq. (11)-(12): H^i = inv(T_0) T_i, (R^i - I) B y = -T^i, i = 1..n-1
+        H = se3.invert_transforms(T[0]) @ T[1:]
+        M = np.einsum("nij,jk->nik", H[:, :3, :3] - np.eye(3), B).reshape(-1, 2)
+        rhs = -H[:, :3, 3].reshape(-1)
+        y, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+        res = (M @ y - rhs).reshape(-1, 3)
+        s2 = float(np.sum(res**2) / max(res.size - 2, 1))
+        cov_y = s2 * np.linalg.inv(M.T @ M)
+        o = B @ y
+        p_w = se3.transform_points(T[0], o)
+        rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+        inl = np.ones(n, dtype=bool)
+        noise: dict[str, float] = {}
+        R_used = R
+    else:
+        ax, _ = _solve_or_exact(axis_problem.problem(), np.zeros(4), 1.0)
+        u, a, _, _ = axis_problem.vectors(ax.x)
+        # the residual has 2 (not 3) dimensions a frame: solve's ML variance correction
+        # 3m / (3m - 4) becomes 2m / (2m - 4)
+        m = int(ax.inliers.sum())
+        dof_fix = (2.0 * m / max(2 * m - 4, 1)) / (3.0 * m / (3 * m - 4))
+        theta_r = float(ax.theta[1]) * dof_fix
+        cov_axis = axis_problem.axis_covariance(ax.x, ax.covariance) * dof_fix
+        keep = np.flatnonzero(ax.inliers)
+        R_used, t_used = R[keep], t[keep]
+        B = perpendicular_basis(u)
+        RB = np.einsum("nij,jk->nik", R_used, B)
+        J = np.concatenate([RB, np.broadcast_to(-np.eye(3), (m, 3, 3))], axis=2)
+
+        def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
+            return np.einsum("nij,j->ni", RB, x[:2]) + t_used - x[2:], J
+
+        def noise_shapes(x: FloatArray) -> FloatArray:
+            return lever_shapes(R_used, B @ x[:2])
+
+        x0, *_ = np.linalg.lstsq(J.reshape(-1, 5), -t_used.reshape(-1), rcond=None)
+        sol, exact = _solve_or_exact(
+            estimation.LeastSquaresProblem(residuals, noise_shapes),
+            x0,
+            1.0 + float(np.abs(t_used).max()),
+        )
+        used = sol.inliers
+        x = sol.x
+        if not exact:
+            # the score's bias, with the rotation noise of the axis fit (the point fit
+            # tells it only through the lever arm |o|: not at all for a camera on the axis)
+            x6 = np.concatenate([B @ x[:2], x[2:]])
+            theta_bias = np.array([sol.theta[0], theta_r])
+            b6 = pivot_bias_step(x6, theta_bias, R_used[used], np.eye(6))
+            x = x + np.linalg.solve(sol.information, np.concatenate([B.T @ b6[:3], b6[3:]]))
+        o, p_w = B @ x[:2], x[2:]
+        cov_y = sol.covariance[:2, :2]
+        rms = float(np.sqrt(np.mean(np.sum(sol.residuals[used] ** 2, axis=1))))
+        inl = np.zeros(n, dtype=bool)
+        inl[keep[used]] = True
+        R_used = R_used[used]
+        noise = {
+            "sigma_trans": float(np.sqrt(sol.theta[0])),
+            "sigma_rot_deg": float(np.degrees(np.sqrt(theta_r))),
+        }
+    cov_point = B @ cov_y @ B.T + float(o @ cov_axis @ o) * np.outer(u, u)
+    sign = _sign_convention(u)
+    return HingeEstimate(
+        axis_in_cam=sign * u,
+        point_in_cam=o,
+        covariance_axis=cov_axis,
+        covariance_point=cov_point,
+        axis_std_deg=float(np.degrees(np.sqrt(max(np.trace(cov_axis), 0.0)))),
+        angle_range_deg=_hinge_angle_range_deg(R_used, u, a),
+        residual_rms=rms,
+        inliers=inl,
+        noise=noise,
+        axis_in_world=sign * a,
+        point_in_world=p_w,
+        method=method,
+    )
+
+
+def estimate_hinge_fixed_pair(
+    T_wa_a: FloatArray, T_wb_b: FloatArray | None = None, method: str = "refined"
+) -> HingePairEstimate:
+    """A hinge in one or two cameras' frames, each from its own fixed-joint session.
+
+    The hinge analogue of :func:`estimate_joint_fixed`: camera A's body turns about the
+    hinge while B's is held, and (optionally) the other way round; each trajectory is in
+    its own world and the two need not be paired.
+
+    Parameters
+    ----------
+    T_wa_a : ndarray, shape (n, 4, 4)
+        Camera A's poses ``T_world_a`` while A's body turns about the hinge.
+    T_wb_b : ndarray, shape (m, 4, 4), optional
+        Camera B's poses ``T_world_b`` in its own session.
+    method : {"refined", "paper"}
+
+    Returns
+    -------
+    HingePairEstimate
+        ``a`` and ``b`` (``None`` without ``T_wb_b``), as :func:`estimate_hinge_fixed`.
+    """
+    _check_method(method)
+    a = estimate_hinge_fixed(T_wa_a, "camera A", method=method)
+    b = None if T_wb_b is None else estimate_hinge_fixed(T_wb_b, "camera B", method=method)
+    return HingePairEstimate(a=a, b=b, method=method)
