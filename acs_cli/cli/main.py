@@ -67,6 +67,7 @@ class PairBy(str, Enum):
 class ExportFormat(str, Enum):
     kalibr = "kalibr"
     opencv = "opencv"
+    urdf = "urdf"
 
 
 MethodOpt = Annotated[
@@ -297,22 +298,50 @@ def relpose(
 
 @app.command()
 def export(
-    relpose_file: Annotated[Path, typer.Argument(help="relpose.yaml from `acscal relpose`.")],
+    relpose_file: Annotated[
+        Path, typer.Argument(help="relpose.yaml from `acscal relpose`, or a rig's rig.yaml.")
+    ],
     output: Annotated[Path, typer.Option("-o", "--output", help="File to write.")],
     fmt: Annotated[
         ExportFormat,
-        typer.Option("--format", help="kalibr (camchain YAML) or opencv (cv2.FileStorage YAML)."),
+        typer.Option(
+            "--format",
+            help="kalibr (camchain YAML), opencv (cv2.FileStorage YAML; relpose only) or urdf "
+            "(a rig, for robot_state_publisher).",
+        ),
     ] = ExportFormat.kalibr,
+    intrinsics: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--intrinsics",
+            help="A rig's camera intrinsics as NAME=intrinsics.yaml (repeat per camera); "
+            "default cam_NAME/intrinsics.yaml beside rig.yaml.",
+        ),
+    ] = None,
+    robot_name: Annotated[str, typer.Option("--robot-name", help="urdf: the robot's name.")] = (
+        "acs_rig"
+    ),
 ) -> None:
-    """Export a relative pose for other tools.
+    """Export a relative pose, or a whole rig, for other tools.
 
     Example:
 
         acscal export relpose.yaml --format opencv -o relpose_cv.yaml
+
+        acscal export out/rig.yaml --format urdf -o rig.urdf
     """
+    from acs_cli.errors import InputError
     from acs_cli.stages.export import run_export
 
-    info = run_export(relpose_file, output, fmt.value)
+    given: dict[str, Path] = {}
+    for item in intrinsics or []:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise InputError(f"--intrinsics {item!r}: write it as NAME=intrinsics.yaml")
+        given[name] = Path(path)
+    info = run_export(
+        relpose_file, output, fmt.value, intrinsics=given or None, robot_name=robot_name
+    )
     out.print(f"wrote {info['output']} ({info['format']}: {', '.join(info['keys'])})")
 
 

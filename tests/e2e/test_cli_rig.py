@@ -154,3 +154,25 @@ def test_a_planar_hinge_exits_3_naming_the_joint(tmp_path: Path) -> None:
     res = acscal("run", cfg)
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "out" / "rig.yaml").is_file()
+
+
+def test_export_a_rig_as_urdf_and_refuse_kalibr_without_intrinsics(
+    recording: Path, tmp_path: Path
+) -> None:
+    import xml.etree.ElementTree as ET
+
+    rig_file = recording / "out" / "rig.yaml"
+    if not rig_file.is_file():
+        assert acscal("run", recording / "config.yaml").returncode == 0
+    res = acscal("export", rig_file, "--format", "urdf", "-o", tmp_path / "rig.urdf")
+    assert res.returncode == 0, res.stderr
+    assert "wrote" in res.stdout
+    robot = ET.parse(tmp_path / "rig.urdf").getroot()
+    joints = {j.get("name"): j.get("type") for j in robot.iter("joint")}
+    assert joints["j23"] == "revolute" and joints["r34"] == "fixed"
+    assert {"j02_x", "j02_y", "j02_z"} <= set(joints)  # a ball: three revolutes
+    res = acscal("export", rig_file, "--format", "kalibr", "-o", tmp_path / "cc.yaml")
+    assert res.returncode == 2 and "intrinsics" in res.stderr
+    assert not (tmp_path / "cc.yaml").exists()
+    res = acscal("export", rig_file, "--format", "opencv", "-o", tmp_path / "cv.yaml")
+    assert res.returncode == 2 and "kalibr or urdf" in res.stderr
