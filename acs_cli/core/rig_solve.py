@@ -53,6 +53,10 @@ MIN_EDGE_FRAMES = 14
 OUTLIER_ALPHA = 0.01
 #: Largest share of an edge's frames rejected as outliers.
 MAX_OUTLIER_FRACTION = 0.3
+#: The reference instant's constraint rows are weighted this much more than the others: the
+#: poses there are unknowns (tied to their measurements by the pose noise), and the joint
+#: constraints hold for them exactly, as for the two-camera estimator's reference poses.
+REFERENCE_GAIN = 1e2
 #: Noise-level refits (each followed by a solve).
 REWEIGHT_ROUNDS = 4
 #: Normalised information eigenvalue below which a direction is not determined at all.
@@ -216,6 +220,7 @@ class _State:
     ref_frame: int
     frames: dict[str, np.ndarray]  # per edge: frame indices where both cameras are valid
     mask: dict[str, np.ndarray]  # per edge: inlier mask over its frames
+    gain: dict[str, np.ndarray]  # per edge: row gain over its frames (REFERENCE_GAIN at k)
     whiten_pos: dict[str, FloatArray]  # per edge: (m, 3, 3) inverse Cholesky factors
     w_rot: dict[str, float]  # per edge: 1 / sigma of axis or rigid-rotation rows
     w_trans: dict[str, float]  # per edge: 1 / sigma of rigid-translation rows
@@ -302,7 +307,7 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
     G = {c: _poses(st, x, c) for c in st.topo.cameras}
     parts: list[FloatArray] = []
     for j in st.topo.joints:
-        m = st.mask[j.name][:, None]
+        m = (st.mask[j.name] * st.gain[j.name])[:, None]
         b = _edge_blocks(st, x, j, G)
         if "pos" in b:
             w = np.matmul(st.whiten_pos[j.name], b["pos"][:, :, None])[:, :, 0]
@@ -407,7 +412,7 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
         f = st.frames[j.name]
         st.frames_cur = f
         m = f.size
-        mask = st.mask[j.name].astype(float)[:, None, None]
+        mask = (st.mask[j.name] * st.gain[j.name])[:, None, None]
         kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any
         ecols = L.edge_columns(j.name)
         Pp, Pq = P[p], P[q]
@@ -587,7 +592,7 @@ def _initial(
         elif j.type == "hinge":
             # relative rotations R_s_t[i] = Rot(u_s, theta_i) R0: u_t with R_s_t u_t constant
             Rst = np.einsum("nji,njk->nik", Gs[:, :3, :3], Gt_R)
-            _, _, Vt = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3))
+            _, _, Vt = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), full_matrices=False)
             u = {t_name: Vt[2], s_name: _unit(Rst.mean(axis=0) @ Vt[2])}
             # slide the point along the axis to the one nearest p's centre
             lam = -float(o[p] @ u[p])
@@ -624,7 +629,8 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
     for j in st.topo.joints:
         p, q = j.between
         f = st.frames[j.name]
-        m = st.mask[j.name]
+        # the reference instant's rows fit by construction: not evidence of the noise
+        m = st.mask[j.name] & (f != st.ref_frame)
         b = _edge_blocks(st, x, j, G)
         d: dict[str, float] = {}
         if "pos" in b:
@@ -692,7 +698,8 @@ def _reject(st: _State, x: FloatArray) -> int:
         n = m.size
         thr = float(chi2.isf(OUTLIER_ALPHA / max(n, 1), dof))
         room = int(np.floor(MAX_OUTLIER_FRACTION * n)) - int((~m).sum())
-        bad = np.flatnonzero(m & (d2 > thr))
+        # the reference instant is never dropped: its poses are corrected to fit
+        bad = np.flatnonzero(m & (d2 > thr) & (st.frames[j.name] != st.ref_frame))
         if bad.size and room > 0:
             bad = bad[np.argsort(d2[bad])[::-1][:room]]
             m[bad] = False
@@ -828,6 +835,7 @@ def estimate_rig(
         ref_frame=k,
         frames=frames,
         mask={j.name: np.ones(frames[j.name].size, bool) for j in topology.joints},
+        gain={j.name: np.ones(frames[j.name].size) for j in topology.joints},
         whiten_pos={
             j.name: np.broadcast_to(np.eye(3), (frames[j.name].size, 3, 3)).copy()
             for j in topology.joints
@@ -871,6 +879,11 @@ def estimate_rig(
             x, nf, sol = run(x)
             nfev += nf
     noise = _refit_weights(st, x, L.size)
+    # last, from the converged point: the reference instant's constraints made (nearly) hard,
+    # so that its poses are corrected to fit them; the rest of the solution barely moves
+    # (started there at once, the trust region can stall on the stiff rows)
+    for j in topology.joints:
+        st.gain[j.name] = np.where(frames[j.name] == k, REFERENCE_GAIN, 1.0)
     x, nf, sol = run(x)
     nfev += nf
     assert sol is not None
@@ -1006,7 +1019,7 @@ def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
 def _single_axis(R: FloatArray) -> FloatArray | None:
     """The world axis ``(3,)`` of rotations ``(n, 3, 3)`` that turn about one axis only, or
     None. (The axis ``v`` in the body with ``R_i v`` constant; ``mean(R_i) v`` in the world.)"""
-    _, s, Vt = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3))
+    _, s, Vt = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), full_matrices=False)
     if s[0] <= 0 or s[2] >= SINGLE_AXIS_RATIO * s[0]:
         return None
     return _unit(R.mean(axis=0) @ Vt[2])
