@@ -23,7 +23,8 @@ the maximum-likelihood pose and not the noisy measured one.
 Weights: the point residual of a ball or hinge has covariance ``theta_t I + theta_r L_i``
 with ``L_i`` the lever shapes of both cameras (as in :mod:`acs_cli.core.estimation`), the
 noise levels fitted per edge; axis and rigid residuals have one fitted variance each. The
-solve alternates scipy's ``least_squares`` (``jac_sparsity`` from the edge structure) with
+solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`: scipy's
+``least_squares``, trust-region steps on the analytic sparse Jacobian) with
 refitting the noise levels, and rejects per edge and frame the residuals beyond a
 chi-square bound. Covariances come from the final whitened Jacobian.
 """
@@ -35,10 +36,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix, csr_matrix
 
-from acs_cli.core import se3
+from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
@@ -854,10 +854,9 @@ def estimate_rig(
         return _jacobian(st, x)
 
     def run(x: FloatArray) -> tuple[FloatArray, int, Any]:
-        sol = least_squares(
-            fun, x, jac=jac, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10,
-            gtol=1e-10, max_nfev=200,
-        )  # fmt: skip
+        sol = lsq.solve(
+            fun, x, jac=jac, method="trf", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=200
+        )
         return sol.x, int(sol.nfev), sol
 
     x = x0
