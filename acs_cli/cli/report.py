@@ -14,6 +14,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from acs_cli.errors import InputError
+
 __all__ = ["register", "report", "trajectory"]
 
 out = Console(highlight=False)
@@ -35,19 +37,40 @@ class _PairBy(str, Enum):
 
 
 def trajectory(
-    relpose: Annotated[Path, typer.Option("--relpose", help="relpose.yaml from `acscal relpose`.")],
-    poses_a: Annotated[
-        Path, typer.Option("--poses-a", help="Camera A's trajectory (as given to relpose).")
-    ],
-    poses_b: Annotated[
-        Path, typer.Option("--poses-b", help="Camera B's trajectory (as given to relpose).")
-    ],
     output: Annotated[
         Path,
         typer.Option(
-            "-o", "--output", help="Folder for cam_a.tum, cam_b.tum, joint.tum, trajectory.yaml."
+            "-o",
+            "--output",
+            help="Folder for cam_a.tum, cam_b.tum, joint.tum, trajectory.yaml (a rig: "
+            "<camera>.tum and <joint>.tum).",
         ),
     ],
+    relpose: Annotated[
+        Path | None, typer.Option("--relpose", help="relpose.yaml from `acscal relpose`.")
+    ] = None,
+    poses_a: Annotated[
+        Path | None, typer.Option("--poses-a", help="Camera A's trajectory (as given to relpose).")
+    ] = None,
+    poses_b: Annotated[
+        Path | None, typer.Option("--poses-b", help="Camera B's trajectory (as given to relpose).")
+    ] = None,
+    rig: Annotated[
+        Path | None,
+        typer.Option(
+            "--rig",
+            help="rig.yaml from `acscal run` on a rig config: every camera and joint (instead "
+            "of --relpose, --poses-a, --poses-b).",
+        ),
+    ] = None,
+    poses: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--poses",
+            help="With --rig: a camera's trajectory as NAME=FILE (default: the file rig.yaml "
+            "records).",
+        ),
+    ] = None,
     joint: Annotated[
         Path | None,
         typer.Option(
@@ -89,7 +112,20 @@ def trajectory(
 
         acscal trajectory --joint joint.yaml --relpose relpose.yaml --poses-a a.tum \\
             --poses-b b.tum -o trajectory/
+
+        acscal trajectory --rig out/rig.yaml -o trajectory/
     """
+    if rig is not None:
+        if relpose is not None or poses_a is not None or poses_b is not None:
+            raise InputError(
+                "--rig replaces --relpose, --poses-a and --poses-b: give one or the other"
+            )
+        _rig_trajectory(rig, poses or [], output)
+        return
+    if relpose is None or poses_a is None or poses_b is None:
+        missing = [n for n, v in (("--relpose", relpose), ("--poses-a", poses_a),
+                                   ("--poses-b", poses_b)) if v is None]  # fmt: skip
+        raise InputError(f"missing {', '.join(missing)} (or give --rig rig.yaml)")
     from acs_cli.stages.trajectory import TrajectoryConfig, run_trajectory
 
     cfg = TrajectoryConfig(
@@ -149,6 +185,39 @@ def report(
     for note in run.notes:
         err.print(f"[yellow]note:[/] {note}")
     out.print(f"wrote {run.output} ({len(run.figures)} figures in {run.figures_dir})")
+
+
+def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
+    """``acscal trajectory --rig``: every camera and joint of a rig in the reference frame."""
+    from acs_cli.io.rig import RigArtifact
+    from acs_cli.io.trajectory import read_trajectory, write_tum
+    from acs_cli.stages.rig import trajectories_from_rig
+
+    art = RigArtifact.load(rig_file)
+    files: dict[str, Path] = {}
+    for c in art.cameras:
+        rec = art.inputs.get(f"poses_{c}")
+        if isinstance(rec, dict) and rec.get("path"):
+            p = Path(str(rec["path"]))
+            files[c] = p if p.is_file() or p.is_absolute() else rig_file.parent / p
+    for item in poses:
+        name, sep, path = item.partition("=")
+        if not sep or name not in art.cameras:
+            raise InputError(
+                f"--poses {item!r}: write it as NAME=FILE with NAME one of {', '.join(art.cameras)}"
+            )
+        files[name] = Path(path)
+    trajectories = {c: read_trajectory(p) for c, p in files.items()}
+    paths = trajectories_from_rig(art, trajectories)
+    written = []
+    for name, (times, T) in paths.items():
+        f = output / f"{name}.tum"
+        write_tum(f, times, T)
+        written.append(f.name)
+    out.print(
+        f"wrote {len(written)} trajectories to {output} ({', '.join(written)}), in "
+        f"{art.reference_camera}'s frame at frame {art.reference_frame} ({art.length_unit})"
+    )
 
 
 def register(app: typer.Typer) -> None:

@@ -120,6 +120,9 @@ class CameraEstimate:
     #: the camera's trajectory in the reference world and units: ``(n, 4, 4)`` ``G_c[i]``
     #: (identity rows where the camera has no pose), with the reference instant corrected
     poses_in_reference_world: FloatArray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    #: ``X_c``'s rotation and translation ``(4, 4)``: the camera's trajectory world (scaled
+    #: by ``scale``) into the reference world: ``G_c = [R_X R_c, scale R_X t_c + t_X]``
+    world_to_reference_world: FloatArray = field(default_factory=lambda: np.eye(4))
 
     @property
     def rotation_std_deg(self) -> FloatArray:
@@ -948,12 +951,18 @@ def _assemble(
             scale = float(np.exp(x[L.logs[c]]))
             scale_std = float(scale * np.sqrt(max(cov[L.logs[c], L.logs[c]], 0.0)))
         R, t = _poses(st, x, c)
+        X: FloatArray = np.eye(4)
+        if c in L.rot:
+            X = se3.transforms_from_rt(
+                st.R0X[c] @ se3.matrix_from_rotvec(x[L.rot[c]]), x[L.trans[c]]
+            )
         cams[c] = CameraEstimate(
             T0 if c != ref else np.eye(4),
             C6 if c != ref else np.zeros((6, 6)),
             scale,
             scale_std,
             se3.transforms_from_rt(R, t),
+            X,
         )
     edges: dict[str, EdgeEstimate] = {}
     G = {c: _poses(st, x, c) for c in topo.cameras}

@@ -11,6 +11,7 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         unknown_scale: bool
         scale: float                    # reference units per trajectory unit of this camera
         scale_std: float | fixed        # "fixed" where the scale is not estimated
+        T_ref_world: 4x4                # the camera's trajectory world (x scale) -> ref frame
     joints:
       <name>:
         type: ball | hinge | rigid
@@ -60,6 +61,10 @@ class RigCameraResult:
     unknown_scale: bool = False
     scale: float = 1.0
     scale_std: float | None = None  # None: fixed, not estimated
+    #: maps the camera's trajectory world (its translations times ``scale``) into the
+    #: reference camera's frame at the reference instant: T_ref_cam[i] = T_ref_world @
+    #: [R_i, scale t_i]; None when not recorded
+    T_ref_world: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -160,6 +165,8 @@ class RigArtifact(YamlArtifact):
                 "scale": c.scale,
                 "scale_std": "fixed" if c.scale_std is None else c.scale_std,
             }
+            if c.T_ref_world is not None:
+                cams[c.name]["T_ref_world"] = c.T_ref_world
         joints = {}
         for j in self.joints.values():
             d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
@@ -224,6 +231,9 @@ class RigArtifact(YamlArtifact):
                 scale_std=None
                 if scale_std == "fixed"
                 else as_number(scale_std, f"{k}.scale_std", p, non_negative=True),
+                T_ref_world=None
+                if c.get("T_ref_world") is None
+                else as_matrix(c["T_ref_world"], (4, 4), f"{k}.T_ref_world", p),
             )
         reference = str(ref["camera"])
         if reference not in cameras:

@@ -344,6 +344,10 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
 
 def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> RigArtifact:
     """The ``rig.yaml`` content of an estimate."""
+    ref = est.topology.reference
+    T_ref_refworld = se3.invert_transforms(
+        est.cameras[ref].poses_in_reference_world[est.reference_frame]
+    )
     cams = {
         c: RigCameraResult(
             name=c,
@@ -353,6 +357,7 @@ def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> Rig
             unknown_scale=e.scale_std is not None,
             scale=e.scale,
             scale_std=e.scale_std,
+            T_ref_world=T_ref_refworld @ e.world_to_reference_world,
         )
         for c, e in est.cameras.items()
     }
@@ -451,6 +456,51 @@ def run_rig(
 
 #: Folder (beside rig.yaml) of every camera's and joint's trajectory in one frame.
 TRAJECTORY_DIR = "trajectories"
+
+
+def trajectories_from_rig(
+    rig: RigArtifact, trajectories: dict[str, Trajectory]
+) -> dict[str, tuple[np.ndarray, FloatArray]]:
+    """Every camera's and every ball or hinge joint's poses in the reference camera's frame
+    at the reference instant, from ``rig.yaml`` and each camera's own trajectory.
+
+    Each measured pose is mapped as it is, the reference instant's too (the run's own
+    ``trajectories/`` hold there the poses corrected by the joint constraints, which
+    ``T_cam_ref`` reports: they differ by the pose noise).
+
+    Returns
+    -------
+    dict
+        Name to ``(times (n,), T_ref_x (n, 4, 4))``; a joint has its point and the
+        orientation of its first camera, at that camera's times.
+
+    Raises
+    ------
+    InputError
+        A camera without ``T_ref_world`` (a rig.yaml older than this) or without poses.
+    """
+    out: dict[str, tuple[np.ndarray, FloatArray]] = {}
+    for c, cam in rig.cameras.items():
+        if cam.T_ref_world is None:
+            raise InputError(
+                f"cameras.{c}.T_ref_world is missing: rerun acscal run to record it",
+                path=rig.source,
+            )
+        if c not in trajectories:
+            raise InputError(f"no trajectory for camera {c} (--poses {c}=FILE)")
+        t = trajectories[c]
+        T = t.T_world_cam.copy()
+        T[:, :3, 3] *= cam.scale
+        out[c] = (t.timestamps, cam.T_ref_world @ T)
+    for name, j in rig.joints.items():
+        if j.type == "rigid":
+            continue
+        p = j.between[0]
+        times, T = out[p]
+        J = T.copy()
+        J[:, :3, 3] = se3.transform_points(T, j.position_in[p])
+        out[name] = (times, J)
+    return out
 
 
 def write_rig_trajectories(

@@ -52,6 +52,11 @@ def test_run_calibrates_the_rig_beside_its_truth(recording: Path) -> None:
     np.testing.assert_allclose(first["cam0"], np.eye(4), atol=1e-9)
     for c, cam in rig.cameras.items():
         np.testing.assert_allclose(first[c], se3.invert_transforms(cam.T_cam_ref), atol=1e-9)
+    # the run ends with a report that shows the whole rig
+    assert "report: written" in res.stdout, res.stdout
+    html = (recording / "out" / "report.html").read_text(encoding="utf-8")
+    assert "rig of 5 cameras" in html and "j23 axis in cam2" in html
+    assert (recording / "out" / "report_files" / "rig_cameras.png").stat().st_size > 10_000
     # unchanged inputs: the stage is skipped
     again = acscal("run", recording / "config.yaml")
     assert again.returncode == 0 and "rig: skipped" in again.stdout
@@ -176,3 +181,19 @@ def test_export_a_rig_as_urdf_and_refuse_kalibr_without_intrinsics(
     assert not (tmp_path / "cc.yaml").exists()
     res = acscal("export", rig_file, "--format", "opencv", "-o", tmp_path / "cv.yaml")
     assert res.returncode == 2 and "kalibr or urdf" in res.stderr
+
+
+def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> None:
+    rig_file = recording / "out" / "rig.yaml"
+    if not rig_file.is_file():
+        assert acscal("run", recording / "config.yaml").returncode == 0
+    res = acscal("trajectory", "--rig", rig_file, "-o", tmp_path / "traj")
+    assert res.returncode == 0, res.stderr
+    for name in ("cam0", "cam4", "j23"):
+        mine = read_tum(tmp_path / "traj" / f"{name}.tum").T_world_cam
+        run = read_tum(recording / "out" / "trajectories" / f"{name}.tum").T_world_cam
+        # every frame but the reference instant (corrected there by the joint constraints)
+        np.testing.assert_allclose(mine[1:], run[1:], atol=1e-6)
+        assert np.linalg.norm(mine[0, :3, 3] - run[0, :3, 3]) < 0.1
+    bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
+    assert bad.returncode == 2 and "--rig replaces" in bad.stderr
