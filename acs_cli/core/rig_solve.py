@@ -176,14 +176,20 @@ class _Layout:
         self.rot: dict[str, slice] = {}
         self.trans: dict[str, slice] = {}
         self.logs: dict[str, int] = {}
+        shared: int | None = None  # metric cameras share one scale to an unknown reference
         for c in topo.cameras:
             if c == ref:
                 continue
             self.rot[c], self.trans[c] = slice(k, k + 3), slice(k + 3, k + 6)
             k += 6
-            if ref_unknown or tracks[c].unknown_scale:
+            if tracks[c].unknown_scale:
                 self.logs[c] = k
                 k += 1
+            elif ref_unknown:
+                if shared is None:
+                    shared = k
+                    k += 1
+                self.logs[c] = shared
         # ball: o_p, o_q (3 + 3). hinge: o_p in the plane across its axis (2), o_q (3), and
         # each axis as a 2-dof step from its starting direction (2 + 2). rigid: T_q_p (3 + 3).
         self.edge: dict[str, slice] = {}
@@ -648,16 +654,16 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
             d["sigma_trans"] = float(np.sqrt(th[0] / 2.0))
             d["sigma_rot_deg"] = float(np.degrees(np.sqrt(th[1])))
             for c in (p, q):
-                cam_rot[c].append(th[1])
+                if j.type == "ball":  # a hinge's axis rows tell the rotation noise better
+                    cam_rot[c].append(th[1])
                 cam_trans[c].append(th[0] / 2.0)
         if "rot" in b:
             dof = 2.0 if j.type == "hinge" else 3.0
             v = max(float(np.mean(np.sum(b["rot"][m] ** 2, axis=1))) / dof, NOISE_FLOOR_ROT**2)
             st.w_rot[j.name] = 1.0 / np.sqrt(v)
             d["sigma_rot_deg"] = float(np.degrees(np.sqrt(v / 2.0)))
-            if j.type == "rigid":
-                for c in (p, q):
-                    cam_rot[c].append(v / 2.0)
+            for c in (p, q):
+                cam_rot[c].append(v / 2.0)
         if "trans" in b:
             v = max(
                 float(np.mean(np.sum(b["trans"][m] ** 2, axis=1))) / 3.0,
@@ -893,6 +899,7 @@ def estimate_rig(
     H = np.asarray((J.T @ J).toarray() if hasattr(J, "toarray") else J.T @ J)
     cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev)
+    est.warnings.extend(check_joint_types(st, x))
     _check_determined(st, x, H, cov, est, travel)
     return est
 
@@ -1012,6 +1019,58 @@ def _assemble(
 
 # --------------------------------------------------------------------------- degeneracy
 
+#: A rigid pair whose cameras turn relative to each other by more than this (RMS, degrees),
+#: or a hinge whose axis moves by more than this in one body as seen from the other, does
+#: not fit its declared joint type: refused (exit 3) with the type that fits.
+MODEL_REFUSE_DEG = 5.0
+#: ... and above this, a warning.
+MODEL_WARN_DEG = 2.0
+
+
+def check_joint_types(st: _State, x: FloatArray) -> list[str]:
+    """Warnings for joints that fit their declared type poorly; raises for gross misfits.
+
+    A rigid edge's cameras must not turn relative to each other (``R_p^T R_q`` constant); a
+    hinge's axis must stay one line in both bodies. The RMS of those rotation residuals over
+    the frames used is compared with :data:`MODEL_WARN_DEG` and :data:`MODEL_REFUSE_DEG`.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Naming each misfit joint and the type that fits its motion.
+    """
+    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    warnings: list[str] = []
+    refused: list[str] = []
+    for j in st.topo.joints:
+        if j.type not in ("rigid", "hinge"):
+            continue
+        b = _edge_blocks(st, x, j, G)
+        m = st.mask[j.name]
+        rms = float(np.degrees(np.sqrt(np.mean(np.sum(b["rot"][m] ** 2, axis=1)))))
+        p, q = j.between
+        if j.type == "rigid":
+            text = (
+                f"joint {j.name} ({p}-{q}) is declared rigid, but the two cameras turn "
+                f"relative to each other by {rms:.2f} deg RMS: a ball or a hinge?"
+            )
+        else:
+            text = (
+                f"joint {j.name} ({p}-{q}) is declared a hinge, but its axis moves by "
+                f"{rms:.2f} deg RMS between the bodies: it bends about more than one axis "
+                "(declare it type: ball)"
+            )
+        if rms > MODEL_REFUSE_DEG:
+            refused.append(text)
+        elif rms > MODEL_WARN_DEG:
+            warnings.append(text + " (or the poses are noisy)")
+    if refused:
+        raise DegenerateMotionError(
+            "the joints do not fit their types: " + " | ".join(refused) + ".",
+            details={"model_refuse_deg": MODEL_REFUSE_DEG},
+        )
+    return warnings
+
 
 def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
     """``"turns about one axis only"`` and the like for rotations ``(n, 3, 3)``, or ``""``."""
@@ -1073,8 +1132,8 @@ def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
             f"and joint {j.name} bends about that axis only (planar motion)"
         )
     return (
-        f"the offset between {p} and {q} along the axis {p} turns about: a rigid pair that "
-        "turns about one axis only (planar motion) cannot see it"
+        f"the offset between {p} and {q} along the axis {p} turns about (a rigid pair that "
+        "turns about one axis only, planar motion)"
     )
 
 
@@ -1130,10 +1189,12 @@ def _check_determined(
             continue
         f = st.frames[j.name]
         Rst = np.einsum("nji,njk->nik", G[p][0][f], G[q][0][f])
-        why = [
-            _motion_words(G[p][0][f], f"camera {p}", False),
-            _motion_words(Rst, f"joint {j.name}", j.type == "hinge") if j.type != "rigid" else "",
-        ]
+        bends = (
+            _motion_words(Rst, f"joint {j.name}", j.type == "hinge") if j.type != "rigid" else ""
+        )
+        if "hardly turns" in bends:
+            bends += f"; if {p} and {q} are on one body, declare it type: rigid"
+        why = [_motion_words(G[p][0][f], f"camera {p}", False), bends]
         if j.type == "ball":
             s = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), compute_uv=False)
             if s[2] < SINGLE_AXIS_RATIO * s[0]:
@@ -1144,8 +1205,11 @@ def _check_determined(
             f"ground) while joint {j.name} moves"
         )
         if j.type in ("ball", "hinge"):
+            # a hinge's point is the one nearest p's centre: q's offset along the axis is the
+            # unknown; a ball seen from a camera turning about one axis: that camera's
+            cam = q if j.type == "hinge" else p
             advice += (
-                f", or give the joint in the config (joints.{j.name}.position_in.{q}: "
+                f", or give the joint in the config (joints.{j.name}.position_in.{cam}: "
                 f"[x, y, z] in metres, measured on the rig)"
             )
         size = (

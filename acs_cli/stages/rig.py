@@ -189,6 +189,8 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         joints[name] = RigJointSpec(
             name, (str(between[0]), str(between[-1])), jtype, pos, std, fixed
         )
+    if not raw:
+        raise c.fail("joints", "names no joint: a rig needs two cameras and a joint between them")
     try:
         topo = rig_topology(list(cameras), raw, ref_cam)
     except InputError as exc:
@@ -302,7 +304,15 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
     from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
 
     out = {}
+    metric = not config.cameras[config.reference_camera].unknown_scale
     for name, j in config.joints.items():
+        if j.position_in and not metric:
+            raise InputError(
+                f"joints.{name}.position_in is in metres, but the reference camera "
+                f"{config.reference_camera} has an unknown scale: choose a metric camera as "
+                "reference.camera",
+                path=config.path,
+            )
         cov = None if j.position_std is None else np.eye(3) * j.position_std**2
         position = dict(j.position_in)
         covariance: dict[str, FloatArray] = (
@@ -321,7 +331,10 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
                     "reference camera to be metric (scale: known)",
                     path=config.path,
                 )
-            T = read_trajectory(path).T_world_cam
+            try:
+                T = read_trajectory(path).T_world_cam
+            except InputError as exc:
+                raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
             if j.type == "ball":
                 pv = estimate_pivot(T, "refined", f"{key} (camera {cam})")
                 position.setdefault(cam, pv.position_in_cam)
@@ -410,7 +423,13 @@ def run_rig(
         else:
             raise InputError(f"cameras.{name}: no poses (run its poses stage first)")
     priors = _priors(config)
-    trajectories = {n: read_trajectory(p, fmt) for n, (p, fmt) in files.items()}
+    trajectories = {}
+    for n, (p, fmt) in files.items():
+        try:
+            trajectories[n] = read_trajectory(p, fmt)
+        except InputError as exc:  # name the config key with the file
+            key = f"cameras.{n}.poses" if config.cameras[n].poses is not None else f"poses of {n}"
+            raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
     tracks, slots, warnings = tracks_on_timeline(config, trajectories)
     est = estimate_rig(
         config.topology, tracks, reference_frame=config.reference_frame, priors=priors

@@ -834,7 +834,8 @@ def run_pipeline(
         try:
             warnings = stage.action()
         except DegenerateMotionError as exc:  # the report shows what ran, and why this failed
-            write_run_report(out, report, [f"{stage.stage} failed: {exc.one_line()}"])
+            if out.is_dir() and any(out.iterdir()):
+                write_run_report(out, report, [f"{stage.stage} failed: {exc.one_line()}"])
             raise
         state[stage.stage] = {
             "stamp": stamp,

@@ -168,3 +168,44 @@ def test_a_ball_that_only_bends_about_one_axis_is_named(rng: np.random.Generator
     rec = rig_recording(rng, 60, joints=joints, planar=True, sigma_rot_deg=0.2, sigma_trans=0.005)
     with pytest.raises(DegenerateMotionError, match=r"joint j01 \(cam0-cam1\)"):
         estimate_rig(rec.topology, _tracks(rec))
+
+
+@pytest.mark.parametrize(
+    ("declared", "words"), [("rigid", "declared rigid"), ("hinge", "declared a hinge")]
+)
+def test_a_ball_declared_otherwise_is_named(
+    rng: np.random.Generator, declared: str, words: str
+) -> None:
+    from acs_cli.core.rig import rig_topology
+
+    rec = rig_recording(
+        rng, 60, joints=(("j01", ("cam0", "cam1"), "ball"),), sigma_rot_deg=0.3, sigma_trans=0.01
+    )
+    topo = rig_topology(["cam0", "cam1"], [("j01", ["cam0", "cam1"], declared)], "cam0")
+    with pytest.raises(DegenerateMotionError, match=rf"joint j01 \(cam0-cam1\) is {words}"):
+        estimate_rig(topo, _tracks(rec))
+
+
+def test_metric_cameras_share_one_scale_to_an_unknown_reference(rng: np.random.Generator) -> None:
+    rec = rig_recording(rng, 40, unknown_scale=("cam0",))
+    est = estimate_rig(rec.topology, _tracks(rec))
+    scales = {c: e.scale for c, e in est.cameras.items() if c != "cam0"}
+    assert max(scales.values()) - min(scales.values()) < 1e-12  # one shared unknown
+    assert scales["cam1"] == pytest.approx(rec.scale()["cam1"], rel=1e-8)
+
+
+def test_hinge_rotation_std_is_honest_on_a_two_camera_rig() -> None:
+    z = []
+    for seed in range(12):
+        rng = np.random.default_rng(100 + seed)
+        rec = rig_recording(
+            rng, 60, joints=(("h", ("a", "b"), "hinge"),), reference="a",
+            sigma_rot_deg=0.3, sigma_trans=0.01,
+        )  # fmt: skip
+        est = estimate_rig(rec.topology, _tracks(rec))
+        e = est.cameras["b"]
+        T_true = rec.T_cam_ref(0)["b"]
+        dR = se3.rotvec_from_matrix(T_true[:3, :3].T @ e.T_cam_ref[:3, :3])
+        z.extend(dR / np.sqrt(np.diag(e.covariance)[:3]))
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.6 < rms < 1.5, rms
