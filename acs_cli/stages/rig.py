@@ -273,6 +273,15 @@ def tracks_on_timeline(
             n: np.where(np.arange(m) < len(t), np.arange(m), -1) for n, t in trajectories.items()
         }
     warnings: list[str] = []
+    if not by_time:
+        lengths = {n: len(t) for n, t in trajectories.items()}
+        if len(set(lengths.values())) > 1:
+            warnings.append(
+                "poses paired by index, but the cameras have different numbers of poses ("
+                + ", ".join(f"{n}: {k}" for n, k in lengths.items())
+                + "): frame i of one camera is taken as frame i of the others; check the "
+                "pairing if a joint fits poorly"
+            )
     for j in config.topology.joints:
         p, q = j.between
         common = int(np.sum((index[p] >= 0) & (index[q] >= 0)))

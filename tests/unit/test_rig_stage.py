@@ -88,3 +88,23 @@ def test_fixed_joint_of_a_camera_with_unknown_scale_is_refused(tmp_path: Path) -
     cfg = parse_rig_config(__import__("yaml").safe_load(text), tmp_path / "rig.yaml")
     with pytest.raises(InputError, match=r"joints\.j01\.fixed_joint\.cam1: .*metric"):
         run_rig(cfg, output=tmp_path / "x.yaml")
+
+
+def test_index_pairing_of_unequal_lengths_is_warned(tmp_path: Path) -> None:
+    from acs_cli.io.trajectory import Trajectory
+    from acs_cli.stages.rig import tracks_on_timeline
+
+    text = (
+        "schema_version: 2\noutput: out\npair_by: index\ncameras:\n"
+        "  a: {poses: a.txt}\n  b: {poses: b.txt}\n"
+        "joints:\n  j: {between: [a, b], type: ball}\n"
+    )
+    cfg = parse_rig_config(__import__("yaml").safe_load(text), tmp_path / "rig.yaml")
+    eye = np.broadcast_to(np.eye(4), (20, 4, 4))
+    trajs = {
+        "a": Trajectory(np.arange(20.0), eye.copy(), "a.txt", "kitti", False),
+        "b": Trajectory(np.arange(17.0), eye[:17].copy(), "b.txt", "kitti", False),
+    }
+    tracks, slots, warnings = tracks_on_timeline(cfg, trajs)
+    assert slots.size == 20 and int(tracks["b"].valid.sum()) == 17
+    assert any("different numbers of poses (a: 20, b: 17)" in w for w in warnings)
