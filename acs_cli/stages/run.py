@@ -519,11 +519,38 @@ def _numbers(kind: str, output: Path) -> str:
     return ""
 
 
+def _poses_stage(
+    stage: str,
+    images: Path,
+    intrinsics: Path,
+    npz: Path,
+    board: tuple[int, int, float],
+    workers: int | None,
+) -> _Stage:
+    """The poses stage of one camera's image folder (``npz`` and the TUM file beside it)."""
+    from acs_cli.stages.poses import PosesConfig, run_poses
+
+    cols, rows, square = board
+    tum = npz.with_suffix(".tum")
+    pcfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=workers)
+
+    def do_poses() -> list[str]:
+        return run_poses(images, intrinsics, npz, pcfg).warnings
+
+    return _Stage(
+        stage,
+        "poses",
+        {"images": images, "intrinsics": intrinsics},
+        {"cols": cols, "rows": rows, "square": square},
+        [npz, tum],
+        do_poses,
+    )
+
+
 def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a run in order, and the intrinsics file of each camera."""
     from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
     from acs_cli.stages.joint import JointConfig, run_joint
-    from acs_cli.stages.poses import PosesConfig, run_poses
     from acs_cli.stages.relpose import RelposeConfig, run_relpose
 
     out = config.output
@@ -579,27 +606,14 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
 
     def poses_stage(name: str, images: Path, stem: str, label: str) -> Path:
         npz = out / f"cam_{name}" / f"{stem}.npz"
-        tum = out / f"cam_{name}" / f"{stem}.tum"
-        pcfg = PosesConfig(
-            cols=config.cols,
-            rows=config.rows,
-            square=config.square,
-            tum=tum,
-            workers=config.workers,
-        )
-        intr = intrinsics[name]
-
-        def do_poses() -> list[str]:
-            return run_poses(images, intr, npz, pcfg).warnings
-
         stages.append(
-            _Stage(
+            _poses_stage(
                 f"{label} {name}",
-                "poses",
-                {"images": images, "intrinsics": intr},
-                dict(board),
-                [npz, tum],
-                do_poses,
+                images,
+                intrinsics[name],
+                npz,
+                (config.cols, config.rows, config.square),
+                config.workers,
             )
         )
         return npz
@@ -669,7 +683,6 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
 def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
     from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
-    from acs_cli.stages.poses import PosesConfig, run_poses
     from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, run_rig
 
     out = config.output
@@ -704,23 +717,9 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 do_intrinsics,
             )
         )
-        npz, tum = cam_dir / "poses.npz", cam_dir / "poses.tum"
-        pcfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=config.workers)
-
-        def do_poses(
-            images: Path = images, intr: Path = intr_out, npz: Path = npz, pcfg: PosesConfig = pcfg
-        ) -> list[str]:
-            return run_poses(images, intr, npz, pcfg).warnings
-
+        npz = cam_dir / "poses.npz"
         stages.append(
-            _Stage(
-                f"poses {name}",
-                "poses",
-                {"images": images, "intrinsics": intr_out},
-                dict(board),
-                [npz, tum],
-                do_poses,
-            )
+            _poses_stage(f"poses {name}", images, intr_out, npz, config.board, config.workers)
         )
         poses[name] = npz
     rig_out = out / RIG_FILE

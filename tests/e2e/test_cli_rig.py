@@ -197,3 +197,27 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
         assert np.linalg.norm(mine[0, :3, 3] - run[0, :3, 3]) < 0.1
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr
+
+
+def test_a_rig_of_image_folders_calibrates_intrinsics_poses_and_rig(tmp_path: Path) -> None:
+    """Cameras given as board images: intrinsics and poses stages run before the rig."""
+    from sample_data_gen.render import render_scenario
+
+    render_scenario(tmp_path / "images", "general", seed=2, frames=20, size=(640, 480))
+    cfg = tmp_path / "rig.yaml"
+    cfg.write_text(
+        "schema_version: 2\noutput: run\nboard: {cols: 9, rows: 6, square: 0.025}\n"
+        "cameras:\n  a: {images: images/general/cam_a}\n  b: {images: images/general/cam_b}\n"
+        "joints:\n  j: {between: [a, b], type: ball}\n",
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg)
+    assert res.returncode == 0, res.stdout + res.stderr
+    for stage in ("intrinsics a", "poses a", "intrinsics b", "poses b", "rig"):
+        assert f"{stage}: ran" in res.stdout, res.stdout
+    rig = RigArtifact.load(tmp_path / "run" / "rig.yaml")
+    assert "poses_a" in rig.inputs and str(rig.inputs["poses_a"]["path"]).endswith("poses.npz")
+    truth = yaml.safe_load((tmp_path / "images" / "general" / "truth.yaml").read_text())
+    o_a = np.asarray(truth["joint"]["position_in_a"], dtype=float)
+    err = float(np.linalg.norm(rig.joints["j"].position_in["a"] - o_a))
+    assert err < 0.02, (err, rig.joints["j"].position_in["a"], o_a)
