@@ -248,8 +248,8 @@ def common_timeline(
     """Put every camera's samples on one timeline (a rig's cameras, paired all at once).
 
     Samples of all cameras are sorted together and grouped: a group (a *slot*) starts at a
-    sample more than ``max_dt`` after the group's first sample. Each camera contributes at
-    most its nearest sample to a slot's time (the slot's first sample time).
+    sample more than ``max_dt`` after the sample before it. Each camera contributes at most
+    its sample nearest the slot's time (the slot's first sample), within ``max_dt``.
 
     Parameters
     ----------
@@ -271,11 +271,10 @@ def common_timeline(
     if not np.isfinite(max_dt):
         max_dt = float("inf")
     allt = np.sort(np.concatenate([t for t in ts.values()] or [np.zeros(0)]))
-    slots: list[float] = []
-    for v in allt:  # one pass over the sorted samples, grouping them into slots
-        if not slots or v - slots[-1] > max_dt:
-            slots.append(float(v))
-    slot_times = np.asarray(slots, dtype=float)
+    starts = np.ones(allt.shape[0], dtype=bool)
+    with np.errstate(invalid="ignore"):
+        starts[1:] = np.diff(allt) > max_dt
+    slot_times = allt[starts]
     index: dict[str, IntArray] = {}
     for c, t in ts.items():
         idx = np.full(slot_times.shape[0], -1, dtype=np.intp)

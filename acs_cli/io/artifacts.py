@@ -24,6 +24,7 @@ from acs_cli.io.atomic import atomic_write_text
 
 __all__ = [
     "SCHEMA_VERSION",
+    "check_yaml_artifact",
     "get_path",
     "load_yaml_file",
     "make_header",
@@ -275,8 +276,16 @@ def read_yaml_artifact(path: str | Path, kind: str, required: Sequence[str] = ()
         artifact, a newer schema_version, or a missing required key.
     """
     p = Path(path)
+    return check_yaml_artifact(load_yaml_file(p, "a YAML artifact"), p, kind, required)
+
+
+def check_yaml_artifact(
+    doc: Any, path: str | Path, kind: str, required: Sequence[str] = ()
+) -> dict[str, Any]:
+    """The checks of :func:`read_yaml_artifact` on a document already parsed from ``path``
+    (kind, version, required keys): read a file once, then decide what it is."""
+    p = Path(path)
     expected = f"acscal/{kind}"
-    doc = load_yaml_file(p, "a YAML artifact")
     if not isinstance(doc, dict):
         raise InputError(
             f"not an acscal artifact: expected a YAML mapping, got {type(doc).__name__}", path=p

@@ -21,7 +21,7 @@ from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
-from acs_cli.io.artifacts import read_yaml_artifact, write_yaml_artifact
+from acs_cli.io.artifacts import check_yaml_artifact, load_yaml_file, write_yaml_artifact
 
 __all__ = ["HEADER_KEYS", "Artifact", "YamlArtifact", "header_of"]
 
@@ -93,7 +93,7 @@ class YamlArtifact(Artifact):
 
     Subclasses implement :meth:`body` and :meth:`from_doc`; :meth:`load` and :meth:`save`
     are done here (kind and version checks in
-    :func:`~acs_cli.io.artifacts.read_yaml_artifact`, atomic writes in
+    :func:`~acs_cli.io.artifacts.check_yaml_artifact`, atomic writes in
     :func:`~acs_cli.io.artifacts.write_yaml_artifact`).
     """
 
@@ -113,8 +113,13 @@ class YamlArtifact(Artifact):
     def load(cls: type[Y], path: str | Path) -> Y:
         """Read, check the kind and version, parse and validate (see :class:`Artifact`)."""
         p = Path(path)
-        doc = read_yaml_artifact(p, cls.KIND, cls.REQUIRED)
-        art = cls.from_doc(doc, p)
+        return cls.from_parsed(load_yaml_file(p, "a YAML artifact"), p)
+
+    @classmethod
+    def from_parsed(cls: type[Y], doc: Any, path: str | Path) -> Y:
+        """:meth:`load` on a file already parsed (``load_yaml_file``): the same checks."""
+        p = Path(path)
+        art = cls.from_doc(check_yaml_artifact(doc, p, cls.KIND, cls.REQUIRED), p)
         art.validate()
         return art
 

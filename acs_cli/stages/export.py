@@ -14,11 +14,6 @@ from acs_cli.io.relpose import RelposeArtifact
 EXPORT_FORMATS = ("kalibr", "opencv", "urdf")
 
 
-def _schema(path: Path) -> str | None:
-    doc = load_yaml_file(path, "an acscal artifact (YAML)")
-    return str(doc.get("schema")) if isinstance(doc, dict) else None
-
-
 def run_rig_export(
     rig_file: Path,
     output: Path,
@@ -26,6 +21,7 @@ def run_rig_export(
     *,
     intrinsics: dict[str, Path] | None = None,
     robot_name: str = "acs_rig",
+    doc: Any = None,
 ) -> dict[str, Any]:
     """Export ``rig.yaml`` as a URDF or a Kalibr camchain of every camera.
 
@@ -40,7 +36,7 @@ def run_rig_export(
         raise InputError(f"a rig exports as kalibr or urdf, not {fmt!r}", path=rig_file)
     found = dict(intrinsics or {})
     check_distinct_output(output, [rig_file, *found.values()])
-    rig = RigArtifact.load(rig_file)
+    rig = RigArtifact.load(rig_file) if doc is None else RigArtifact.from_parsed(doc, rig_file)
     unknown = [c for c in found if c not in rig.cameras]
     if unknown:
         raise InputError(
@@ -89,12 +85,15 @@ def run_export(
     """
     if fmt not in EXPORT_FORMATS:
         raise InputError(f"unknown export format {fmt!r}; use one of {', '.join(EXPORT_FORMATS)}")
-    if _schema(relpose) == "acscal/rig":
-        return run_rig_export(relpose, output, fmt, intrinsics=intrinsics, robot_name=robot_name)
+    doc = load_yaml_file(relpose, "an acscal artifact (YAML)")  # read once: rig or relpose
+    if isinstance(doc, dict) and doc.get("schema") == "acscal/rig":
+        return run_rig_export(
+            relpose, output, fmt, intrinsics=intrinsics, robot_name=robot_name, doc=doc
+        )
     if fmt == "urdf":
         raise InputError("urdf exports a rig (rig.yaml from acscal run)", path=relpose)
     check_distinct_output(output, [relpose])
-    art = RelposeArtifact.load(relpose)
+    art = RelposeArtifact.from_parsed(doc, relpose)
     T_b_a = art.relative_pose.T_b_a
     if fmt == "kalibr":
         write_camchain_yaml(output, [{"name": "cam_a"}, {"name": "cam_b", "T_cn_cnm1": T_b_a}])

@@ -211,10 +211,8 @@ def _gather(run_dir: Path) -> _Found:
     return found
 
 
-def _rig_view(found: _Found) -> RigOfManyView:
+def _rig_view(found: _Found, rig: RigArtifact) -> RigOfManyView:
     """The rig of many cameras: its cameras and joints, and their paths when written."""
-    rig = found.rig
-    assert rig is not None
     T_ref_cam = {c: se3.invert_transforms(r.T_cam_ref) for c, r in rig.cameras.items()}
     joints = []
     for name, j in rig.joints.items():
@@ -233,10 +231,8 @@ def _rig_view(found: _Found) -> RigOfManyView:
     return RigOfManyView(rig.length_unit, T_ref_cam, joints, paths)
 
 
-def _rig_estimates(found: _Found) -> list[Estimate]:
+def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
     """Every camera's pose and scale and every joint of ``rig.yaml``, with their std."""
-    rig = found.rig
-    assert rig is not None
     src = found.rel(rig.source)
     u = rig.length_unit
     rows: list[Estimate] = []
@@ -716,7 +712,7 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     model.notes = list(found.notes)
 
     if found.rig is not None:
-        model.rig = _rig_view(found)
+        model.rig = _rig_view(found, found.rig)
     try:
         model.trajectory = _trajectory(found)
     except AcsError as exc:
@@ -759,7 +755,7 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
 
     model.estimates = _estimates(found)
     if found.rig is not None:
-        model.estimates += _rig_estimates(found)
+        model.estimates += _rig_estimates(found, found.rig)
     if not model.estimates:
         model.skip("estimates", "No estimates: no intrinsics, joint or relpose artifact.")
 

@@ -195,14 +195,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         topo = rig_topology(list(cameras), raw, ref_cam)
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
-    board = None
-    if top.get("board") is not None:
-        b = c.mapping(top["board"], "board", required=("cols", "rows", "square"))
-        board = (
-            c.integer(b["cols"], "board.cols", 2),
-            c.integer(b["rows"], "board.rows", 2),
-            c.positive(b["square"], "board.square"),
-        )
+    board = None if top.get("board") is None else c.board(top["board"])
     image_cams = [n for n, s in cameras.items() if s.images is not None]
     if image_cams and board is None:
         raise c.fail("board", f"missing (camera {image_cams[0]} has images)")

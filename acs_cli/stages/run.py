@@ -172,6 +172,15 @@ class _Checker:
             raise self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}")
         return value
 
+    def board(self, value: Any) -> tuple[int, int, float]:
+        """``board: {cols, rows, square}``: inner corners and the square's side (m)."""
+        b = self.mapping(value, "board", required=("cols", "rows", "square"))
+        return (
+            self.integer(b["cols"], "board.cols", 2),
+            self.integer(b["rows"], "board.rows", 2),
+            self.positive(b["square"], "board.square"),
+        )
+
     def path(self, value: Any, key: str) -> Path:
         if not isinstance(value, str) or not value.strip():
             raise self.fail(key, f"must be a path (a string), got {_describe(value)}")
@@ -215,10 +224,7 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             f"{version} is newer than this acscal reads ({CONFIG_VERSION}); upgrade acscal",
         )
     output = c.path(top["output"], "output")
-    board = c.mapping(top["board"], "board", required=("cols", "rows", "square"))
-    cols = c.integer(board["cols"], "board.cols", 2)
-    rows = c.integer(board["rows"], "board.rows", 2)
-    square = c.positive(board["square"], "board.square")
+    cols, rows, square = c.board(top["board"])
 
     cams_doc = c.mapping(top["cameras"], "cameras", required=("a",), optional=("b",))
     cameras: dict[str, CameraSpec] = {}

@@ -162,6 +162,8 @@ def recover_from_relpose(
     mu_b = None if scale is None else scale.mu_b
     if joint_path is None:
         o_a, o_b = joint.position_in_a, joint.position_in_b
+        if o_b is None:  # require_joint refuses this; the check keeps o_b's type
+            raise InputError("missing key 'joint.position_in_b'", path=relpose_path)
         source = f"{relpose_path} (joint estimated with the relative pose)"
     else:
         given = read_joint(joint_path)
@@ -176,7 +178,6 @@ def recover_from_relpose(
         if mu_a is not None and mu_b is not None:
             o_a, o_b = o_a * mu_a, o_b * mu_b
             source += " (metric, scaled by mu_a and mu_b of relpose.yaml)"
-    assert o_b is not None  # require_joint and the check above
     k = _reference_index(relpose, pair)
     try:
         traj = recover_trajectory(
