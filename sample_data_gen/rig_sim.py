@@ -202,3 +202,108 @@ def rig_recording(
         unknown_scale={c: c in unknown_scale for c in cams},
         timestamps=np.arange(n) / fps,
     )
+
+
+@dataclass(frozen=True)
+class CornerRecording:
+    """A rig whose cameras each see their own checkerboard: corners, PnP poses and truth.
+
+    Attributes
+    ----------
+    rig : RigRecording
+        The truth (``T_W_c``; ``T_wc_c`` is not used).
+    board_points : ndarray, shape (m, 3)
+        The board's corners in its frame (metres), the same board for every camera.
+    corners : dict of ndarray (n, m, 2)
+        Detected corners (pixels, with noise) of each camera.
+    valid : dict of ndarray of bool (n, m)
+        Frames where the camera sees its whole board, facing it (all corners or none).
+    intrinsics, intrinsics0 : dict of ndarray (9,)
+        True and initial ``fx fy cx cy k1 k2 p1 p2 k3``.
+    T_board_cam : dict of ndarray (n, 4, 4)
+        PnP poses with the initial intrinsics (identity where not ``valid``).
+    """
+
+    rig: RigRecording
+    board_points: FloatArray
+    corners: dict[str, FloatArray]
+    valid: dict[str, np.ndarray]
+    intrinsics: dict[str, FloatArray]
+    intrinsics0: dict[str, FloatArray]
+    T_board_cam: dict[str, FloatArray]
+
+    @property
+    def common(self) -> np.ndarray:
+        """Frames where every camera sees its board."""
+        return np.all([v.all(axis=1) for v in self.valid.values()], axis=0)
+
+
+def rig_corner_recording(
+    rng: np.random.Generator,
+    n: int = 150,
+    *,
+    joints: tuple[tuple[str, tuple[str, str], str], ...] = SAMPLE_JOINTS,
+    noise_px: float = 0.2,
+    intrinsics_error: float = 0.003,
+    board_distance: float = 2.0,
+) -> CornerRecording:
+    """Simulate a rig of board cameras: each camera's board stands ``board_distance`` in
+    front of its mean pose, facing it; frames where the board is behind, seen at more than
+    55 deg or far outside a 640x480 image are not observed. The initial intrinsics are off
+    by ``intrinsics_error`` in focal length (and 1 px in the centre, 5% in distortion), and
+    the PnP poses use them, as a calibration from separate sessions would.
+    """
+    import cv2
+
+    rec = rig_recording(
+        rng,
+        n,
+        joints=joints,
+        edges=make_edges(rng, joints, joint_range=(0.4, 0.8)),
+        max_rotation_deg=35.0,
+        max_articulation_deg=35.0,
+        translation_range=0.3,
+    )
+    gx, gy = np.meshgrid(np.arange(9), np.arange(6))
+    board = np.stack([gx.ravel() * 0.15, gy.ravel() * 0.15, np.zeros(gx.size)], axis=1)
+    board[:, :2] -= board[:, :2].mean(axis=0)
+    corners, valid, intr, intr0, poses = {}, {}, {}, {}, {}
+    for c in rec.topology.cameras:
+        f = 600.0 + 20.0 * rng.normal()
+        K = np.array([[f, 0.0, 320.0], [0.0, 1.001 * f, 240.0], [0.0, 0.0, 1.0]])
+        dist = np.array([-0.2, 0.08, 1e-3, -1e-3, 0.0])
+        T_W_c = rec.T_W_c[c]
+        U, _, Vt = np.linalg.svd(T_W_c[:, :3, :3].sum(axis=0))  # the mean orientation
+        Rm = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        T_W_b = se3.transforms_from_rt(Rm, T_W_c[:, :3, 3].mean(axis=0) + board_distance * Rm[:, 2])
+        T_c_b = np.matmul(se3.invert_transforms(T_W_c), T_W_b)
+        depth = np.einsum("nj,mj->nm", T_c_b[:, 2, :3], board) + T_c_b[:, None, 2, 3]
+        px = np.stack(
+            [
+                cv2.projectPoints(board, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], K, dist)[0][:, 0]
+                for T in T_c_b
+            ]
+        )
+        px += rng.normal(scale=noise_px, size=px.shape)
+        seen = (
+            (depth > 0.3).all(axis=1)
+            & (np.abs(T_c_b[:, 2, 2]) > np.cos(np.radians(55.0)))
+            & (np.abs(px[..., 0] - 320.0) < 600.0).all(axis=1)
+            & (np.abs(px[..., 1] - 240.0) < 500.0).all(axis=1)
+        )
+        K0 = K.copy()
+        K0[0, 0] *= 1.0 + intrinsics_error
+        K0[1, 1] *= 1.0 + intrinsics_error
+        K0[0, 2] += 1.0
+        K0[1, 2] -= 1.0
+        d0 = 0.95 * dist
+        T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        for i in np.flatnonzero(seen):
+            _ok, rv, tv = cv2.solvePnP(board, px[i], K0, d0)
+            T[i] = se3.invert_transforms(se3.transforms_from_rt(cv2.Rodrigues(rv)[0], tv.ravel()))
+        corners[c] = px
+        valid[c] = np.broadcast_to(seen[:, None], px.shape[:2]).copy()
+        intr[c] = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist])
+        intr0[c] = np.array([K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], *d0])
+        poses[c] = T
+    return CornerRecording(rec, board, corners, valid, intr, intr0, poses)

@@ -272,6 +272,101 @@ def _normal_equations_lm(
     return Solution(x, r, J, 0.5 * cost, converged, nfev)
 
 
+def propagate(
+    f: Callable[[FloatArray], FloatArray], x: FloatArray, cols: list[int], cov: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """``f(x)`` and its covariance, by one-sided differences over the unknowns ``cols``.
+
+    Parameters
+    ----------
+    f : x -> ndarray, shape (k,)
+        A quantity derived from the solution (it depends on ``x[cols]`` only).
+    x : ndarray, shape (p,)
+    cols : list of int
+        The unknowns ``f`` depends on (a handful: differenced one by one).
+    cov : ndarray, shape (len(cols), len(cols))
+        Covariance of ``x[cols]``.
+
+    Returns
+    -------
+    value : ndarray, shape (k,)
+    covariance : ndarray, shape (k, k)
+    """
+    y0 = f(x)
+    G = np.zeros((y0.size, len(cols)))
+    for i, c in enumerate(cols):
+        h = 1e-7 * max(1.0, abs(float(x[c])))
+        xc = x.copy()
+        xc[c] += h
+        G[:, i] = (f(xc) - y0) / h
+    return y0, G @ cov @ G.T
+
+
+def block_jacobian(
+    fun: Callable[[FloatArray], FloatArray],
+    x: FloatArray,
+    f0: FloatArray,
+    n_shared: int,
+    block_size: int,
+    row_block: np.ndarray,
+) -> sparse.csr_array:
+    """A sparse Jacobian by differences in groups, for residuals made of independent blocks.
+
+    The unknowns are ``n_shared`` shared ones (any row may depend on them), then one group
+    of ``block_size`` unknowns per block (frame): ``x[n_shared + block_size * b + k]``
+    touches only the rows of block ``b`` (``row_block``). The ``k``-th unknown of every
+    block is differenced at once (as scipy's ``jac_sparsity`` grouping does), so the cost is
+    ``n_shared + block_size`` evaluations of ``fun``, whatever the number of blocks.
+
+    Parameters
+    ----------
+    fun : x -> ndarray, shape (m,)
+    x : ndarray, shape (p,)
+        ``p = n_shared + block_size * n_blocks``.
+    f0 : ndarray, shape (m,)
+        ``fun(x)``.
+    n_shared, block_size : int
+    row_block : ndarray of int, shape (m,)
+        The block of each residual row.
+
+    Returns
+    -------
+    scipy.sparse.csr_array, shape (m, p)
+    """
+    n_blocks = (x.size - n_shared) // block_size
+    if n_shared + block_size * n_blocks != x.size or row_block.shape != f0.shape:
+        raise ValueError(
+            f"x {x.shape} is not {n_shared} shared unknowns and blocks of {block_size}, or "
+            f"row_block {row_block.shape} does not match the residuals {f0.shape}"
+        )
+    step = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x))
+    rows, cols, vals = [], [], []
+    for c in range(n_shared):
+        xc = x.copy()
+        xc[c] += step[c]
+        d = fun(xc) - f0
+        nz = np.flatnonzero(d)
+        rows.append(nz)
+        cols.append(np.full(nz.size, c))
+        vals.append(d[nz] / step[c])
+    for k in range(block_size):
+        idx = n_shared + k + block_size * np.arange(n_blocks)
+        xc = x.copy()
+        xc[idx] += step[idx]
+        d = fun(xc) - f0
+        nz = np.flatnonzero(d)
+        col = n_shared + k + block_size * row_block[nz]
+        rows.append(nz)
+        cols.append(col)
+        vals.append(d[nz] / step[col])
+    data = np.concatenate(vals) if vals else np.zeros(0)
+    rc = (
+        np.concatenate(rows) if rows else np.zeros(0, int),
+        np.concatenate(cols) if cols else np.zeros(0, int),
+    )
+    return sparse.csr_array(sparse.coo_array((data, rc), shape=(f0.size, x.size)))
+
+
 def _densified(jac: Callable[[FloatArray], Jacobian]) -> Callable[[FloatArray], FloatArray]:
     """``jac`` returning a dense array (for MINPACK) instead of a sparse matrix."""
     return lambda x: np.asarray(jac(x).toarray())

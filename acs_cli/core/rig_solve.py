@@ -31,7 +31,6 @@ chi-square bound. Covariances come from the final whitened Jacobian.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -914,20 +913,6 @@ def _settled(a: dict[str, dict[str, float]], b: dict[str, dict[str, float]]) -> 
     return True
 
 
-def _propagate(
-    f: Callable[[FloatArray], FloatArray], x: FloatArray, cov: FloatArray, cols: list[int]
-) -> tuple[FloatArray, FloatArray]:
-    """``f(x)`` and its covariance from ``cov`` by one-sided differences over ``cols``."""
-    y0 = f(x)
-    G = np.zeros((y0.size, x.size))
-    for c in cols:  # the unknowns that f depends on (a handful), not frames
-        h = 1e-7 * max(1.0, abs(float(x[c])))
-        xc = x.copy()
-        xc[c] += h
-        G[:, c] = (f(xc) - y0) / h
-    return y0, G @ cov @ G.T
-
-
 def _assemble(
     st: _State,
     x: FloatArray,
@@ -952,7 +937,7 @@ def _assemble(
             return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
 
         cols = sorted(set(L.camera_columns(c) + L.camera_columns(ref)))
-        _, C6 = _propagate(vec, x, cov, cols)
+        _, C6 = lsq.propagate(vec, x, cols, cov[np.ix_(cols, cols)])
         scale, scale_std = 1.0, None
         if c in L.logs:
             scale = float(np.exp(x[L.logs[c]]))
@@ -985,7 +970,7 @@ def _assemble(
             def geometry(xx: FloatArray, j: RigJoint = j) -> FloatArray:
                 return np.concatenate([v for v in joint_geometry(st, xx, j) if v is not None])
 
-            g, Cg = _propagate(geometry, x, cov, cols)
+            g, Cg = lsq.propagate(geometry, x, cols, cov[np.ix_(cols, cols)])
             for side, c in enumerate((p, q)):
                 sl = slice(3 * side, 3 * side + 3)
                 pos[c], pcov[c] = g[sl], Cg[sl, sl]

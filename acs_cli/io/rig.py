@@ -23,6 +23,9 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         residual_rms: float             # of the joint constraint over the frames used
         frames_used: int
         frames_rejected: int
+    bundle_adjustment:                  # when every camera's poses carried board corners
+      <name>: {intrinsics_file, rms_px, sigma_px, frames, camera_matrix, distortion,
+               intrinsics_std}          # as joint.yaml's quality.bundle_adjustment.<cam>
     warnings: [str]
 
 Every length (``T_cam_ref`` translations, joint positions) is in the reference camera's
@@ -43,6 +46,7 @@ from acs_cli.core.rig import JOINT_TYPES
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.joint import BundleSection
 from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector
 
 KIND = "rig"
@@ -95,6 +99,9 @@ class RigArtifact(YamlArtifact):
     cameras : dict of RigCameraResult
     joints : dict of RigJointResult
     warnings : list of str
+    bundle_adjustment : dict of BundleSection
+        Per camera, when the rig was refined on its board corners (refined intrinsics,
+        reprojection RMS); empty when solved from poses.
     header : dict
         The artifact header (tool, inputs, method, units, frames); set when loaded or saved.
     """
@@ -105,6 +112,7 @@ class RigArtifact(YamlArtifact):
     cameras: dict[str, RigCameraResult]
     joints: dict[str, RigJointResult]
     warnings: list[str] = field(default_factory=list)
+    bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
 
@@ -146,6 +154,13 @@ class RigArtifact(YamlArtifact):
                 s += ", axis [" + " ".join(f"{v:+.3f}" for v in a) + "]"
             s += f", residual RMS {j.residual_rms:.3g}"
             lines.append(s)
+        if self.bundle_adjustment:
+            b = next(iter(self.bundle_adjustment.values()))
+            lines.append(
+                f"  bundle adjustment on the corners of {b.frames} frames: RMS "
+                + ", ".join(f"{c} {v.rms_px:.3f}" for c, v in self.bundle_adjustment.items())
+                + " px"
+            )
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
@@ -180,13 +195,16 @@ class RigArtifact(YamlArtifact):
             d["frames_used"] = j.frames_used
             d["frames_rejected"] = j.frames_rejected
             joints[j.name] = d
-        return {
+        out = {
             "reference": {"camera": self.reference_camera, "frame": self.reference_frame},
             "length_unit": self.length_unit,
             "cameras": cams,
             "joints": joints,
-            "warnings": list(self.warnings),
         }
+        if self.bundle_adjustment:
+            out["bundle_adjustment"] = {c: b.to_plain() for c, b in self.bundle_adjustment.items()}
+        out["warnings"] = list(self.warnings)
+        return out
 
     def validate(self) -> None:
         """Every camera a rigid ``T_cam_ref``; joints between known cameras."""
@@ -282,6 +300,12 @@ class RigArtifact(YamlArtifact):
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):
             raise InputError("'warnings' must be a list", path=p)
+        ba_doc = as_mapping(doc.get("bundle_adjustment") or {}, "bundle_adjustment", p)
+        bundle = {}
+        for c, b in ba_doc.items():
+            if str(c) not in cameras:
+                raise InputError(f"'bundle_adjustment.{c}' is not one of the cameras", path=p)
+            bundle[str(c)] = BundleSection.parse(b, f"bundle_adjustment.{c}", p)
         return cls(
             reference_camera=reference,
             reference_frame=frame,
@@ -289,6 +313,7 @@ class RigArtifact(YamlArtifact):
             cameras=cameras,
             joints=joints,
             warnings=[str(w) for w in warnings],
+            bundle_adjustment=bundle,
             header=header_of(doc),
             source=str(p),
         )

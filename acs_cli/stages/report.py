@@ -265,6 +265,11 @@ def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
                          None, j.axis_std_deg_in.get(c), "deg", src)
             )  # fmt: skip
         rows.append(Estimate(f"{name} residual RMS", j.residual_rms, None, u, src, 4))
+    for c, b in rig.bundle_adjustment.items():  # the rig's bundle adjustment on the corners
+        for key, val in b.values().items():
+            unit = "px" if key in ("fx", "fy", "cx", "cy") else ""
+            rows.append(Estimate(f"{c} {key} (bundle)", val, b.intrinsics_std.get(key), unit, src))
+        rows.append(Estimate(f"{c} reprojection RMS (bundle)", b.rms_px, None, "px", src, 4))
     return rows
 
 

@@ -30,15 +30,19 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core import se3
+from acs_cli.core.bundle import INTRINSIC_NAMES, camera_matrix
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
 from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
+from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
-from acs_cli.errors import InputError
+from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header
+from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
+from acs_cli.stages.bundle import bundle_frames, corner_views
 
 RIG_CONFIG_VERSION = 2
 SCALES = ("known", "unknown")
@@ -85,6 +89,7 @@ class RigRunConfig:
     pair_by: str = "auto"
     max_dt: float | None = None
     workers: int | None = None
+    bundle: bool = True
 
 
 def is_rig_config(doc: Any) -> bool:
@@ -113,6 +118,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         required=("output", "cameras", "joints"),
         optional=(
             "schema", "schema_version", "reference", "board", "pair_by", "max_dt", "workers",
+            "bundle",
         ),
     )  # fmt: skip
     if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
@@ -217,6 +223,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         pair_by=c.choice(top.get("pair_by", "auto"), "pair_by", PAIR_BY),
         max_dt=max_dt,
         workers=workers,
+        bundle=c.boolean(top.get("bundle", True), "bundle"),
     )
 
 
@@ -235,10 +242,11 @@ class RigRun:
 
 def tracks_on_timeline(
     config: RigRunConfig, trajectories: dict[str, Trajectory]
-) -> tuple[dict[str, CameraTrack], np.ndarray, list[str]]:
+) -> tuple[dict[str, CameraTrack], np.ndarray, dict[str, np.ndarray], list[str]]:
     """Every camera's poses on one timeline; checks that neighbours share instants.
 
-    Returns the tracks, the timeline (seconds or frame numbers) and warnings.
+    Returns the tracks, the timeline (seconds or frame numbers), each camera's row of its
+    trajectory at every instant (-1 where it has none) and warnings.
 
     Raises
     ------
@@ -296,7 +304,7 @@ def tracks_on_timeline(
         if left:
             warnings.append(f"camera {name}: {left} of {len(t)} poses share no instant")
         tracks[name] = CameraTrack(T, valid, config.cameras[name].unknown_scale)
-    return tracks, slots, warnings
+    return tracks, slots, index, warnings
 
 
 def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
@@ -432,7 +440,7 @@ def run_rig(
         except InputError as exc:  # name the config key with the file
             key = f"cameras.{n}.poses" if config.cameras[n].poses is not None else f"poses of {n}"
             raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
-    tracks, slots, warnings = tracks_on_timeline(config, trajectories)
+    tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
     est = estimate_rig(
         config.topology, tracks, reference_frame=config.reference_frame, priors=priors
     )
@@ -442,9 +450,13 @@ def run_rig(
                 f"joint {name}: {e.frames_rejected} of {e.frames_used + e.frames_rejected} "
                 "frames rejected as outliers"
             )
+    sections: dict[str, BundleSection] = {}
+    if config.bundle:
+        est, sections, notes = rig_bundle(config, files, trajectories, index, est)
+        warnings += notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
-    art = rig_artifact(est, unit, warnings)
+    art = dataclasses.replace(rig_artifact(est, unit, warnings), bundle_adjustment=sections)
     out = output if output is not None else config.output / RIG_FILE
     fixed = {
         f"fixed_joint_{jn}_{c}": p
@@ -456,7 +468,14 @@ def run_rig(
         {f"poses_{n}": p for n, (p, _) in files.items()} | fixed | {"config": config.path},
         "one maximum-likelihood solve over every joint (acs_cli.core.rig_solve.estimate_rig): "
         "ball, hinge and rigid constraints on each camera's trajectory, per-camera "
-        "world-to-reference similarities, noise levels per joint, outliers rejected",
+        "world-to-reference similarities, noise levels per joint, outliers rejected"
+        + (
+            "; then a bundle adjustment of the whole rig on every camera's board corners "
+            "(acs_cli.core.rig_bundle.bundle_adjust_rig): intrinsics, joints, boards and "
+            "each frame's articulation"
+            if sections
+            else ""
+        ),
         {
             "length": unit,
             "angles": "deg",
@@ -473,6 +492,93 @@ def run_rig(
     art.save(out)
     write_rig_trajectories(est, tracks, slots, out.parent / TRAJECTORY_DIR)
     return RigRun(est, art, out, warnings)
+
+
+def _priors_given(config: RigRunConfig) -> bool:
+    return any(j.position_in or j.fixed_joint for j in config.joints.values())
+
+
+def rig_bundle(
+    config: RigRunConfig,
+    files: dict[str, tuple[Path, str]],
+    trajectories: dict[str, Trajectory],
+    index: dict[str, np.ndarray],
+    est: RigEstimate,
+) -> tuple[RigEstimate, dict[str, BundleSection], list[str]]:
+    """Refine a rig on its corners when every camera's poses carry them (poses NPZs of
+    ``acscal poses``): the estimate, each camera's bundle section, and warnings.
+
+    A rig where only some cameras carry corners is solved from poses, with a warning; so
+    is one whose bundle adjustment fails (the pose-based estimate is kept).
+    """
+    views: dict[str, CameraViews] = {}
+    without: list[str] = []
+    notes: list[str] = []
+    files_of: dict[str, Path] = {}
+    n = index[config.reference_camera].size
+    for name, (path, _fmt) in files.items():
+        got, warning = corner_views(path, len(trajectories[name]))
+        if warning:
+            notes.append(f"camera {name}: {warning}")
+        if got is None:
+            without.append(name)
+            continue
+        rows = index[name]
+        valid = rows >= 0
+        corners = np.zeros((n, *got.corners.shape[1:]))
+        corners[valid] = got.corners[rows[valid]]
+        ok = np.broadcast_to(valid[:, None], corners.shape[:2]).copy()
+        views[name] = CameraViews(corners, ok, got.board_points, got.intrinsics)
+        files_of[name] = got.intrinsics_file
+    if not views:
+        return est, {}, notes
+    unknown = [c for c in views if config.cameras[c].unknown_scale]
+    if unknown:
+        return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
+                         f"{', '.join(unknown)} are configured with scale: unknown, but board "
+                         "corners are metric"]  # fmt: skip
+    if _priors_given(config):
+        return est, {}, [*notes, "no bundle adjustment of the rig: it does not take joint "
+                         "priors (position_in, fixed_joint) yet, so the rig is solved from "
+                         "poses with them"]  # fmt: skip
+    if without:
+        return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
+                         f"{', '.join(without)} have no corners (a trajectory file), so the "
+                         "rig is solved from poses"]  # fmt: skip
+    use = np.ones(n, bool)
+    for e in est.edges.values():
+        inl = np.zeros(n, bool)
+        inl[e.inliers] = True
+        use &= inl
+    mask, thinned = bundle_frames(use, est.reference_frame)
+    if thinned:
+        notes.append(thinned)
+    if not mask[est.reference_frame] or mask.sum() < MIN_RIG_BUNDLE_FRAMES:
+        return est, {}, [*notes, f"no bundle adjustment of the rig: {int(mask.sum())} frames "
+                         "where every camera sees its board and no joint rejected it (the "
+                         "reference frame among them; at least "
+                         f"{MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
+    try:
+        ba = bundle_adjust_rig(config.topology, views, est, np.flatnonzero(mask))
+    except DegenerateMotionError as exc:
+        return est, {}, [*notes, f"no bundle adjustment of the rig: {exc.message}; the "
+                         "pose-based estimate is kept"]  # fmt: skip
+    if not ba.success:
+        return est, {}, [*notes, "the rig's bundle adjustment did not converge; the "
+                         "pose-based estimate is kept"]  # fmt: skip
+    sections = {
+        c: BundleSection(
+            intrinsics_file=str(files_of[c]),
+            rms_px=ba.rms_px[c],
+            sigma_px=ba.sigma_px,
+            frames=int(ba.frames.size),
+            camera_matrix=camera_matrix(ba.intrinsics[c]),
+            distortion=np.asarray(ba.intrinsics[c][4:], dtype=float),
+            intrinsics_std=dict(zip(INTRINSIC_NAMES, ba.intrinsics_std[c].tolist(), strict=True)),
+        )
+        for c in config.topology.cameras
+    }
+    return ba.estimate, sections, notes
 
 
 #: Folder (beside rig.yaml) of every camera's and joint's trajectory in one frame.

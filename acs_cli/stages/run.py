@@ -507,6 +507,10 @@ def _numbers(kind: str, output: Path) -> str:
             text = f"{len(cams)} cameras, {len(joints)} joints"
             if unk:
                 text += ", scale " + ", ".join(f"{n} {float(cams[n]['scale']):.4g}" for n in unk)
+            ba = doc.get("bundle_adjustment")
+            if isinstance(ba, dict) and ba:
+                worst = max(float(b["rms_px"]) for b in ba.values())
+                text += f", bundle adjustment RMS <= {worst:.3f} px"
             return text
         if kind == "relpose":
             rel = doc["relative_pose"]

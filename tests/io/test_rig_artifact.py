@@ -48,6 +48,34 @@ def test_round_trip(artifact: RigArtifact, tmp_path: Path) -> None:
     np.testing.assert_allclose(back.T_a_b("cam1", "cam1"), np.eye(4), atol=1e-12)
 
 
+def test_round_trip_with_bundle_sections(artifact: RigArtifact, tmp_path: Path) -> None:
+    from acs_cli.io.joint import BundleSection
+
+    section = BundleSection(
+        intrinsics_file="cam1/intrinsics.yaml",
+        rms_px=0.21,
+        sigma_px=0.15,
+        frames=40,
+        camera_matrix=np.array([[600.0, 0, 320], [0, 601, 240], [0, 0, 1]]),
+        distortion=np.array([-0.2, 0.08, 1e-3, -1e-3, 0.0]),
+        intrinsics_std={"fx": 0.2, "fy": 0.2, "cx": 0.1, "cy": 0.1, "k3": 0.0},
+    )
+    art = dataclasses.replace(artifact, bundle_adjustment={"cam1": section})
+    path = tmp_path / "rig.yaml"
+    art.save(path)
+    back = RigArtifact.load(path)
+    got = back.bundle_adjustment["cam1"]
+    np.testing.assert_allclose(got.camera_matrix, section.camera_matrix)
+    np.testing.assert_allclose(got.distortion, section.distortion)
+    assert got.frames == 40 and got.rms_px == pytest.approx(0.21)
+    assert "bundle adjustment on the corners of 40 frames" in back.summary()
+    doc = yaml.safe_load(path.read_text())
+    doc["bundle_adjustment"]["ghost"] = doc["bundle_adjustment"]["cam1"]
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError, match=r"bundle_adjustment\.ghost"):
+        RigArtifact.load(path)
+
+
 @pytest.mark.parametrize(
     ("edit", "key"),
     [

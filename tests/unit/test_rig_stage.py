@@ -11,7 +11,7 @@ from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import write_tum
-from acs_cli.stages.rig import parse_rig_config, run_rig
+from acs_cli.stages.rig import RigRunConfig, parse_rig_config, run_rig
 from sample_data_gen.acs_sim import add_pose_noise, random_rotations, random_transform
 from sample_data_gen.rig_sim import rig_recording
 
@@ -105,6 +105,88 @@ def test_index_pairing_of_unequal_lengths_is_warned(tmp_path: Path) -> None:
         "a": Trajectory(np.arange(20.0), eye.copy(), "a.txt", "kitti", False),
         "b": Trajectory(np.arange(17.0), eye[:17].copy(), "b.txt", "kitti", False),
     }
-    tracks, slots, warnings = tracks_on_timeline(cfg, trajs)
+    tracks, slots, _rows, warnings = tracks_on_timeline(cfg, trajs)
     assert slots.size == 20 and int(tracks["b"].valid.sum()) == 17
     assert any("different numbers of poses (a: 20, b: 17)" in w for w in warnings)
+
+
+def _board_camera_files(tmp_path: Path) -> tuple[dict[str, Path], Path]:
+    """Poses NPZs with corners (and their intrinsics files) of a simulated 2-camera rig,
+    with a few frames dropped from one camera (so that rows and instants differ)."""
+    import dataclasses as dc
+
+    from acs_cli.io.artifacts import make_header
+    from acs_cli.io.intrinsics import IntrinsicsArtifact
+    from acs_cli.io.poses import PosesArtifact
+    from acs_cli.io.trajectory import Trajectory
+    from sample_data_gen.rig_sim import rig_corner_recording
+
+    joints = (("j", ("cam0", "cam1"), "ball"),)
+    rec = rig_corner_recording(np.random.default_rng(3), 60, joints=joints)
+    out = {}
+    for c in ("cam0", "cam1"):
+        seen = rec.valid[c].all(axis=1)
+        if c == "cam1":
+            seen[[5, 6, 20]] = False
+        K = np.array(
+            [[rec.intrinsics0[c][0], 0, rec.intrinsics0[c][2]],
+             [0, rec.intrinsics0[c][1], rec.intrinsics0[c][3]], [0, 0, 1.0]]
+        )  # fmt: skip
+        intr = IntrinsicsArtifact(
+            model="pinhole", image_size=(640, 480), camera_matrix=K,
+            distortion=rec.intrinsics0[c][4:],
+        )  # fmt: skip
+        intr = dc.replace(intr, header=make_header("intrinsics", {}, "test", {}, {}))
+        intr.save(tmp_path / f"{c}_intrinsics.yaml")
+        idx = np.flatnonzero(seen)
+        traj = Trajectory(idx / 30.0, rec.T_board_cam[c][idx], "x", "npz", True)
+        art = PosesArtifact(
+            trajectory=traj,
+            corners=rec.corners[c][idx],
+            board_points=rec.board_points,
+            header=make_header("poses", {}, "test", {}, {})
+            | {"intrinsics_file": str(tmp_path / f"{c}_intrinsics.yaml")},
+        )
+        out[c] = tmp_path / f"{c}.npz"
+        art.save(out[c])
+    return out, tmp_path
+
+
+def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
+    tmp_path: Path,
+) -> None:
+    from acs_cli.io.trajectory import read_trajectory
+
+    files, _ = _board_camera_files(tmp_path)
+    text = (
+        "schema_version: 2\noutput: out\ncameras:\n  cam0: {poses: cam0.npz}\n"
+        "  cam1: {poses: cam1.npz}\njoints:\n  j: {between: [cam0, cam1], type: ball}\n"
+    )
+
+    def config(name: str, body: str) -> RigRunConfig:
+        (tmp_path / name).write_text(body, encoding="utf-8")
+        return parse_rig_config(__import__("yaml").safe_load(body), tmp_path / name)
+
+    run = run_rig(config("rig.yaml", text))
+    assert set(run.artifact.bundle_adjustment) == {"cam0", "cam1"}
+    assert all(b.rms_px < 0.4 for b in run.artifact.bundle_adjustment.values())
+    loaded = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+    assert "bundle adjustment" in loaded.header["method"]
+    # the same rig with bundle: false is solved from poses, with no section
+    off = config("off.yaml", text + "bundle: false\n")
+    assert not run_rig(off, output=tmp_path / "off.yaml").artifact.bundle_adjustment
+    # a camera given as a TUM file carries no corners: solved from poses, and said so
+    t1 = read_trajectory(files["cam1"])
+    write_tum(tmp_path / "cam1.tum", t1.timestamps, t1.T_world_cam)
+    mixed = config("mixed.yaml", text.replace("cam1.npz", "cam1.tum"))
+    res = run_rig(mixed, output=tmp_path / "mixed.yaml")
+    assert not res.artifact.bundle_adjustment
+    assert any("camera(s) cam1 have no corners" in w for w in res.warnings), res.warnings
+    # joint priors are not taken by the bundle adjustment: said so, solved from poses
+    o = run.artifact.joints["j"].position_in["cam0"]
+    prior = text.replace(
+        "type: ball}", f"type: ball, position_in: {{cam0: [{o[0]}, {o[1]}, {o[2]}]}}}}"
+    )
+    res = run_rig(config("prior.yaml", prior), output=tmp_path / "prior.yaml.out")
+    assert not res.artifact.bundle_adjustment
+    assert any("does not take joint priors" in w for w in res.warnings), res.warnings
