@@ -246,6 +246,7 @@ def rig_corner_recording(
     noise_px: float = 0.2,
     intrinsics_error: float = 0.003,
     board_distance: float = 2.0,
+    reference: str = "cam0",
 ) -> CornerRecording:
     """Simulate a rig of board cameras: each camera's board stands ``board_distance`` in
     front of its mean pose, facing it; frames where the board is behind, seen at more than
@@ -259,6 +260,7 @@ def rig_corner_recording(
         rng,
         n,
         joints=joints,
+        reference=reference,
         edges=make_edges(rng, joints, joint_range=(0.4, 0.8)),
         max_rotation_deg=35.0,
         max_articulation_deg=35.0,

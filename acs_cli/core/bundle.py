@@ -162,7 +162,7 @@ class _SparseRows:
         return sparse.csr_array(sparse.coo_array((data, rc), shape=self.shape))
 
 
-def _information(J: Any) -> FloatArray:
+def information(J: Any) -> FloatArray:
     """``J^T J`` ``(p, p)`` as a dense array, from a sparse or dense Jacobian ``(m, p)``."""
     H = J.T @ J
     return np.asarray(H.toarray() if sparse.issparse(H) else H)
@@ -303,7 +303,7 @@ def bundle_adjust_fixed_joint(
     r = sol.fun.reshape(-1, 2)
     dof = max(r.size - sol.x.size, 1)
     sigma2 = float(np.sum(r**2) / dof)
-    cov_full = sigma2 * np.linalg.pinv(_information(sol.jac), hermitian=True)
+    cov_full = sigma2 * np.linalg.pinv(information(sol.jac), hermitian=True)
     cov = np.zeros((15, 15))
     idx = [*free_intr, *range(9, 15)]
     cov[np.ix_(idx, idx)] = cov_full[:n_shared, :n_shared]
@@ -612,7 +612,7 @@ def bundle_adjust_articulated(
         sol = solve(sol.x)
         sigma2 = float(np.sum(sol.fun[:n_px] ** 2) / dof)
     # information: pixels over their variance, plus the priors' own
-    info = _information(sol.jac[:n_px]) / max(sigma2, 1e-300)
+    info = information(sol.jac[:n_px]) / max(sigma2, 1e-300)
     for key, _mean, Wp in priors:
         c0 = k_oa + (0 if key == "oa" else 3)
         info[c0 : c0 + 3, c0 : c0 + 3] += Wp.T @ Wp

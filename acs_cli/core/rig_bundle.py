@@ -40,9 +40,9 @@ import numpy as np
 import scipy.linalg
 
 from acs_cli.core import lsq, se3
-from acs_cli.core.bundle import project_points
+from acs_cli.core.bundle import information, project_points
 from acs_cli.core.rig import RigJoint, RigTopology
-from acs_cli.core.rig_solve import RigEstimate, tangent_basis
+from acs_cli.core.rig_solve import CameraEstimate, RigEstimate, tangent_basis
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
@@ -89,8 +89,10 @@ class RigBundle:
     Attributes
     ----------
     estimate : RigEstimate
-        The rig with the bundle's ``T_cam_ref`` (and covariances), joints, boards' frames
-        and the poses of the frames adjusted.
+        The rig with the bundle's ``T_cam_ref`` (and covariances), joints and boards'
+        frames; each camera's measured poses mapped by its refined board frame, and at the
+        reference instant the bundle's pose. The joints' ``residual_rms``, frame counts,
+        inliers and noise stay those of the pose-based solve.
     intrinsics, intrinsics_std : dict of camera to ndarray (9,)
         Refined ``fx fy cx cy k1 k2 p1 p2 k3`` and their standard deviations (0 if held).
     rms_px : dict of camera to float
@@ -242,8 +244,12 @@ class _Model:
         return W0[:3, :3] @ se3.matrix_from_rotvec(w[:3]), W0[:3, 3] + w[3:]
 
     def residuals(self, x: FloatArray) -> FloatArray:
+        """Pixel residuals, camera by camera in ``topo.cameras`` order (as
+        :meth:`row_frames`), each in its observations' order."""
         out = []
-        for c, (R, t) in self.poses(x).items():
+        poses = self.poses(x)
+        for c in self.topo.cameras:
+            R, t = poses[c]
             fi, ki, px = self.obs[c]
             Rw, tw = self.board(x, c)
             Xw = self.views[c].board_points[ki] @ Rw.T + tw
@@ -252,6 +258,7 @@ class _Model:
         return np.concatenate(out)
 
     def row_frames(self) -> np.ndarray:
+        """The frame of each residual row (the order of :meth:`residuals`)."""
         return np.concatenate([np.repeat(self.obs[c][0], 2) for c in self.topo.cameras])
 
 
@@ -375,6 +382,13 @@ def bundle_adjust_rig(
         )
     if frames[0] < 0 or frames[-1] >= n_total or initial.reference_frame not in frames:
         raise InputError("the frames must be on the timeline and include the reference instant")
+    for c, v in views.items():
+        blind = frames[~v.valid[frames].any(axis=1)]
+        if blind.size:
+            raise InputError(
+                f"camera {c} sees no corner at frame(s) {', '.join(map(str, blind[:5]))}: the "
+                "bundle adjustment takes frames where every camera sees its board"
+            )
     unknown = [c for c, e in initial.cameras.items() if e.scale_std is not None]
     if unknown:
         raise InputError(
@@ -415,14 +429,15 @@ def bundle_adjust_rig(
 
 
 def _inverse_columns(J: object, cols: list[int]) -> FloatArray:
-    """``(J^T J)^-1`` restricted to ``cols`` (rows and columns), by a Cholesky solve for
-    those columns only; ``DegenerateMotionError`` when the information is singular."""
-    JtJ = J.T @ J  # type: ignore[attr-defined]
-    H = np.asarray(JtJ.toarray() if hasattr(JtJ, "toarray") else JtJ)
+    """``(J^T J)^-1`` restricted to ``cols`` (rows and columns), by a Cholesky solve of the
+    column-scaled information for those columns only; ``DegenerateMotionError`` when the
+    information is singular."""
+    H = information(J)
+    d = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))  # unit diagonal: far better conditioned
     E = np.zeros((H.shape[0], len(cols)))
-    E[cols, np.arange(len(cols))] = 1.0
+    E[cols, np.arange(len(cols))] = d[cols]
     try:
-        X = scipy.linalg.cho_solve(scipy.linalg.cho_factor(H), E)
+        X = d[:, None] * scipy.linalg.cho_solve(scipy.linalg.cho_factor(H * np.outer(d, d)), E)
     except np.linalg.LinAlgError:
         raise DegenerateMotionError(
             "the corners do not determine the rig (its information matrix is singular: a "
@@ -452,7 +467,7 @@ def _assemble(
         return se3.invert_transforms(se3.transforms_from_rt(R[k_ref], t[k_ref]))
 
     poses = model.poses(x)
-    cams = {}
+    cams: dict[str, CameraEstimate] = {}
     for c in topo.cameras:
         c0 = initial.cameras[c]
         T0 = T_cam_ref(x, c)
@@ -466,15 +481,21 @@ def _assemble(
             return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
 
         C6 = lsq.propagate(vec, x, cols, sub(cols))[1] if cols else np.zeros((6, 6))
-        world = initial.cameras[c].poses_in_reference_world.copy()
-        world[model.frames] = se3.transforms_from_rt(*poses[c])
+        # every measured pose mapped into the reference world by the refined board frame (as
+        # the pose-based solve maps them by its own), and at the reference instant the
+        # bundle's pose, which T_cam_ref describes
         Rw, tw = model.board(x, c)
+        W = se3.transforms_from_rt(Rw, tw)
+        world = np.matmul(W @ se3.invert_transforms(c0.world_to_reference_world),
+                          c0.poses_in_reference_world)  # fmt: skip
+        R_k, t_k = poses[c]
+        world[initial.reference_frame] = se3.transforms_from_rt(R_k[k_ref], t_k[k_ref])
         cams[c] = dataclasses.replace(
             c0,
             T_cam_ref=T0,
             covariance=C6,
             poses_in_reference_world=world,
-            world_to_reference_world=se3.transforms_from_rt(Rw, tw),
+            world_to_reference_world=W,
         )
     edges = {}
     for j in topo.joints:

@@ -37,6 +37,7 @@ __all__ = [
     "bundle_fixed_joint",
     "bundle_general",
     "bundle_overlap",
+    "bundle_section",
     "corner_views",
     "shared_board_flip",
 ]
@@ -114,7 +115,7 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
     return CornerViews(obs.corners, obs.board_points, vec, path), None
 
 
-def _section(
+def bundle_section(
     views: CornerViews, intr: np.ndarray, std: np.ndarray, rms: float, sigma: float, n: int
 ) -> BundleSection:
     return BundleSection(
@@ -159,7 +160,7 @@ def bundle_fixed_joint(
     )
     refined.position_in_world[cam] = ba.joint_in_world
     std = np.sqrt(np.clip(np.diag(ba.covariance)[:9], 0.0, None))
-    section = _section(views, ba.intrinsics, std, ba.rms_px, ba.sigma_px, int(inl.sum()))
+    section = bundle_section(views, ba.intrinsics, std, ba.rms_px, ba.sigma_px, int(inl.sum()))
     return refined, section, notes
 
 
@@ -230,9 +231,9 @@ def _articulated(
                             "estimate is kept"]  # fmt: skip
     n = int(inliers.sum())
     sections = {
-        "a": _section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
+        "a": bundle_section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
                       ba.sigma_px, n),
-        "b": _section(views[1], ba.intrinsics_b, ba.intrinsics_std_b, ba.rms_px["b"],
+        "b": bundle_section(views[1], ba.intrinsics_b, ba.intrinsics_std_b, ba.rms_px["b"],
                       ba.sigma_px, n),
     }  # fmt: skip
     return ba, sections, notes

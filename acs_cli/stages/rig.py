@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.bundle import INTRINSIC_NAMES, camera_matrix
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
 from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
@@ -42,7 +41,7 @@ from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
-from acs_cli.stages.bundle import bundle_frames, corner_views
+from acs_cli.stages.bundle import CornerViews, bundle_frames, bundle_section, corner_views
 
 RIG_CONFIG_VERSION = 2
 SCALES = ("known", "unknown")
@@ -514,10 +513,13 @@ def rig_bundle(
     views: dict[str, CameraViews] = {}
     without: list[str] = []
     notes: list[str] = []
-    files_of: dict[str, Path] = {}
+    sources: dict[str, CornerViews] = {}
     n = index[config.reference_camera].size
     for name, (path, _fmt) in files.items():
-        got, warning = corner_views(path, len(trajectories[name]))
+        try:
+            got, warning = corner_views(path, len(trajectories[name]))
+        except InputError as exc:  # unreadable corners or intrinsics: the poses still serve
+            got, warning = None, f"its corners cannot be used ({exc})"
         if warning:
             notes.append(f"camera {name}: {warning}")
         if got is None:
@@ -529,7 +531,7 @@ def rig_bundle(
         corners[valid] = got.corners[rows[valid]]
         ok = np.broadcast_to(valid[:, None], corners.shape[:2]).copy()
         views[name] = CameraViews(corners, ok, got.board_points, got.intrinsics)
-        files_of[name] = got.intrinsics_file
+        sources[name] = got
     if not views:
         return est, {}, notes
     unknown = [c for c in views if config.cameras[c].unknown_scale]
@@ -543,8 +545,8 @@ def rig_bundle(
                          "poses with them"]  # fmt: skip
     if without:
         return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
-                         f"{', '.join(without)} have no corners (a trajectory file), so the "
-                         "rig is solved from poses"]  # fmt: skip
+                         f"{', '.join(without)} have no usable corners, so the rig is solved "
+                         "from poses"]  # fmt: skip
     use = np.ones(n, bool)
     for e in est.edges.values():
         inl = np.zeros(n, bool)
@@ -567,17 +569,10 @@ def rig_bundle(
         return est, {}, [*notes, "the rig's bundle adjustment did not converge; the "
                          "pose-based estimate is kept"]  # fmt: skip
     sections = {
-        c: BundleSection(
-            intrinsics_file=str(files_of[c]),
-            rms_px=ba.rms_px[c],
-            sigma_px=ba.sigma_px,
-            frames=int(ba.frames.size),
-            camera_matrix=camera_matrix(ba.intrinsics[c]),
-            distortion=np.asarray(ba.intrinsics[c][4:], dtype=float),
-            intrinsics_std=dict(zip(INTRINSIC_NAMES, ba.intrinsics_std[c].tolist(), strict=True)),
-        )
+        c: bundle_section(sources[c], ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c],
+                          ba.sigma_px, int(ba.frames.size))
         for c in config.topology.cameras
-    }
+    }  # fmt: skip
     return ba.estimate, sections, notes
 
 

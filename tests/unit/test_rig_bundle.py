@@ -92,6 +92,42 @@ def test_joints_and_intrinsics_are_recovered(solved: tuple) -> None:
         assert ba.intrinsics_std[c][8] == 0.0  # k3 held
 
 
+def test_cameras_in_any_order_with_their_own_corners_and_noise() -> None:
+    """A reference that is not the first camera (tree order differs from config order), one
+    camera (cam1, second in tree order, third in config order) seeing part of its board with three times the noise: each camera's residuals
+    and RMS are its own."""
+    rec = rig_corner_recording(np.random.default_rng(9), 120, joints=JOINTS, reference="cam2")
+    rng = np.random.default_rng(10)
+    corners = dict(rec.corners)
+    corners["cam1"] = corners["cam1"] + rng.normal(scale=0.6, size=corners["cam1"].shape)
+    valid = dict(rec.valid)
+    valid["cam1"] = valid["cam1"].copy()
+    valid["cam1"][:, 30:] = False
+    common = rec.common
+    ref = int(np.flatnonzero(common)[0])
+    tracks = {c: CameraTrack(T, rec.valid[c].all(axis=1)) for c, T in rec.T_board_cam.items()}
+    topo = rec.rig.topology
+    assert [s.target for s in topo.tree_order()] != [c for c in topo.cameras if c != "cam2"]
+    est = estimate_rig(topo, tracks, reference_frame=ref)
+    views = {
+        c: CameraViews(corners[c], valid[c], rec.board_points, rec.intrinsics0[c])
+        for c in topo.cameras
+    }
+    ba = bundle_adjust_rig(topo, views, est, np.flatnonzero(common))
+    for c in topo.cameras:
+        noisy = np.hypot(NOISE_PX, 0.6) if c == "cam1" else NOISE_PX
+        assert ba.rms_px[c] == pytest.approx(np.sqrt(2) * noisy, rel=0.12), (c, ba.rms_px)
+    truth = rec.rig.T_cam_ref(ref)
+    for c in topo.cameras:
+        rot, trans = _pose_errors(truth[c], ba.estimate.cameras[c].T_cam_ref)
+        assert rot < 0.3 and trans < 0.006, (c, rot, trans)
+    # the trajectories: at the reference instant the bundle's poses, which T_cam_ref relates
+    G = {c: ba.estimate.cameras[c].poses_in_reference_world[ref] for c in topo.cameras}
+    for c in topo.cameras:
+        T = se3.invert_transforms(G[c]) @ G["cam2"]
+        np.testing.assert_allclose(T, ba.estimate.cameras[c].T_cam_ref, atol=1e-9)
+
+
 def test_bad_views_are_refused(solved: tuple) -> None:
     rec, est, _ba, ref = solved
     views = {
@@ -109,6 +145,9 @@ def test_bad_views_are_refused(solved: tuple) -> None:
     bad = dict(views, cam1=dataclasses.replace(views["cam1"], board_points=np.zeros((3, 3))))
     with pytest.raises(InputError, match="board points"):
         bundle_adjust_rig(topo, bad, est, frames)
+    blind = dict(views, cam1=dataclasses.replace(views["cam1"], valid=views["cam1"].valid & False))
+    with pytest.raises(InputError, match="sees no corner"):
+        bundle_adjust_rig(topo, blind, est, frames)
     scaled = dataclasses.replace(
         est, cameras=dict(est.cameras, cam1=dataclasses.replace(est.cameras["cam1"], scale_std=0.1))
     )
