@@ -16,7 +16,7 @@ Noise model: each pose ``T_world_cam = [R, t]`` becomes ``[R Exp(n_r), t + n_t]`
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -230,3 +230,56 @@ def scale_translations(T_world_cam: FloatArray, mu: float) -> FloatArray:
     out = T_world_cam.copy()
     out[:, :3, 3] *= mu
     return out
+
+
+def _smooth_rotvecs(rng: np.random.Generator, t: FloatArray, amp_deg: float) -> FloatArray:
+    """``(n, 3)`` rotation vectors: per axis a sum of three sinusoids (0.05-0.5 Hz)."""
+    freq = rng.uniform(0.05, 0.5, size=(3, 3))
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(3, 3))
+    amp = np.radians(amp_deg) * rng.uniform(0.3, 1.0, size=(3, 3)) / 2.0
+    return np.sum(amp * np.sin(2.0 * np.pi * freq * t[:, None, None] + phase), axis=2)
+
+
+def smooth_general_sequence(
+    rng: np.random.Generator,
+    rig: SyntheticRig,
+    n: int = 300,
+    *,
+    fps: float = 30.0,
+    time_offset_s: float = 0.0,
+    max_rotation_deg: float = 60.0,
+    max_articulation_deg: float = 40.0,
+    translation_range: float = 1.0,
+) -> Sequence:
+    """General motion that is smooth in time (sums of sinusoids), sampled at ``fps``.
+
+    Camera B's clock runs ``time_offset_s`` ahead of A's: ``T_wb_b[i]`` is B's true pose at
+    A's time ``timestamps[i] - time_offset_s`` although B stamps it ``timestamps[i]``; so
+    A's pose stamped ``t`` pairs with B's stamped ``t + time_offset_s`` (the convention of
+    :mod:`acs_cli.core.time_offset`). ``T_a_b`` holds the truth at A's times.
+    """
+    t = np.arange(n) / fps
+    keys = (rng.integers(2**32), rng.integers(2**32), rng.integers(2**32))
+
+    def motion(tt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        g = [np.random.default_rng(int(k)) for k in keys]
+        R = se3.matrix_from_rotvec(_smooth_rotvecs(g[0], tt, max_rotation_deg))
+        freq = g[1].uniform(0.05, 0.4, size=(3, 2))
+        phase = g[1].uniform(0.0, 2.0 * np.pi, size=(3, 2))
+        pos = (
+            translation_range / 2 * np.sum(np.sin(2 * np.pi * freq * tt[:, None, None] + phase), 2)
+        )
+        Q = se3.matrix_from_rotvec(_smooth_rotvecs(g[2], tt, max_articulation_deg))
+        if rig.hinge_axis_a is not None:
+            ang = np.linalg.norm(se3.rotvec_from_matrix(Q), axis=1)
+            Q = se3.matrix_from_rotvec(ang[:, None] * rig.hinge_axis_a)
+        T_w_a = se3.transforms_from_rt(R, pos)
+        return T_w_a, rig.T_a_b(Q)
+
+    T_w_a, T_a_b = motion(t)
+    seq = _finish("general", rng, T_w_a, T_a_b, shared_world=False, fps=fps)
+    if time_offset_s:
+        T_w_a_b, T_a_b_b = motion(t - time_offset_s)  # B's samples, taken earlier
+        T_wb_w = seq.T_wb_b[0] @ se3.invert_transforms(T_w_a[0] @ T_a_b[0])
+        seq = replace(seq, T_wb_b=T_wb_w @ T_w_a_b @ T_a_b_b)
+    return seq

@@ -230,6 +230,18 @@ def relpose(
     pair_by: PairByOpt = PairBy.auto,
     max_dt: MaxDtOpt = None,
     length_unit: UnitOpt = "m",
+    estimate_time_offset: Annotated[
+        bool,
+        typer.Option(
+            "--estimate-time-offset",
+            help="Also estimate a constant offset between the cameras' clocks (B's minus "
+            "A's, time_offset_s); B's poses are interpolated on SE(3). Needs timestamps.",
+        ),
+    ] = False,
+    max_offset: Annotated[
+        float,
+        typer.Option("--max-offset", min=0.0, help="Largest clock offset searched, seconds."),
+    ] = 0.5,
 ) -> None:
     """Relative pose T_b_a of two cameras joined by a joint (no overlap needed).
 
@@ -245,6 +257,11 @@ def relpose(
     Example (self-calibration from one recording):
 
         acscal relpose --self-calibrate --poses-a a.tum --poses-b b.tum -o relpose.yaml
+
+    Example (cameras on separate clocks):
+
+        acscal relpose --self-calibrate --estimate-time-offset --max-offset 0.2 \
+            --poses-a a.tum --poses-b b.tum -o relpose.yaml
     """
     from acs_cli.stages.relpose import RelposeConfig, run_relpose
 
@@ -262,6 +279,8 @@ def relpose(
         max_dt=max_dt,
         length_unit=length_unit,
         bundle=bundle,
+        estimate_time_offset=estimate_time_offset,
+        max_offset=max_offset,
     )
     run = run_relpose(poses_a, poses_b, joint_file or joint_metric, output, cfg)
     est = run.estimate
@@ -289,6 +308,14 @@ def relpose(
         if est.mu_a is not None:
             table.add_row("mu_a", f"{est.mu_a:.5f}", f"{est.mu_a_std:.5f}")
             table.add_row("mu_b", f"{est.mu_b:.5f}", f"{est.mu_b_std:.5f}")
+    offset = run.artifact.get("time_offset")
+    if offset is not None:
+        std = offset["time_offset_s_std"]
+        table.add_row(
+            "time_offset_s (B's clock - A's)",
+            f"{offset['time_offset_s']:+.5f}",
+            "inf" if std is None else f"{std:.5f}",
+        )
     table.add_row("residual RMS", f"{est.residual_rms:.4g}", "")
     out.print(table)
     for w in run.warnings:

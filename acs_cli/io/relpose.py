@@ -205,6 +205,50 @@ class RelposeQuality:
         return out
 
 
+@dataclass(frozen=True)
+class TimeOffsetSection:
+    """``relpose.yaml``'s ``time_offset``: the constant offset between the cameras' clocks.
+
+    Attributes
+    ----------
+    time_offset_s : float
+        Camera B's clock minus camera A's at one instant, seconds: A's pose stamped ``t``
+        pairs with B's at B's time ``t + time_offset_s`` (interpolated on SE(3)).
+    time_offset_s_std : float or None
+        Its standard deviation, seconds (None when the profile is flat).
+    max_offset_s : float
+        The range searched, ``[-max_offset_s, max_offset_s]``.
+    frames : int
+        Frames of A paired at every offset searched.
+    """
+
+    time_offset_s: float
+    time_offset_s_std: float | None
+    max_offset_s: float
+    frames: int
+
+    @classmethod
+    def parse(cls, value: Any, path: Source) -> TimeOffsetSection:
+        d = as_mapping(value, "time_offset", path)
+        return cls(
+            as_number(d.get("time_offset_s"), "time_offset.time_offset_s", path),
+            optional_number(
+                d.get("time_offset_s_std"), "time_offset.time_offset_s_std", path,
+                non_negative=True,
+            ),
+            as_number(d.get("max_offset_s"), "time_offset.max_offset_s", path, positive=True),
+            as_int(d.get("frames", 0), "time_offset.frames", path, minimum=0),
+        )  # fmt: skip
+
+    def to_plain(self) -> dict[str, Any]:
+        return {
+            "time_offset_s": self.time_offset_s,
+            "time_offset_s_std": self.time_offset_s_std,
+            "max_offset_s": self.max_offset_s,
+            "frames": self.frames,
+        }
+
+
 @dataclass(frozen=True, eq=False)
 class RelposeArtifact(YamlArtifact):
     """The relative pose of two cameras (``acscal/relpose``): Algorithms III, IV and
@@ -221,6 +265,8 @@ class RelposeArtifact(YamlArtifact):
     warnings : list of str
     scenario : str
         ``general``.
+    time_offset : TimeOffsetSection or None
+        When estimated (``--estimate-time-offset``).
     header : dict
     source : str or None
     """
@@ -234,6 +280,7 @@ class RelposeArtifact(YamlArtifact):
     quality: RelposeQuality = field(default_factory=RelposeQuality)
     warnings: list[str] = field(default_factory=list)
     scenario: str = "general"
+    time_offset: TimeOffsetSection | None = None
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
 
@@ -278,6 +325,9 @@ class RelposeArtifact(YamlArtifact):
             quality=RelposeQuality.parse(doc.get("quality"), path),
             warnings=as_str_list(doc.get("warnings"), "warnings", path),
             scenario=str(doc.get("scenario", "general")),
+            time_offset=None
+            if doc.get("time_offset") is None
+            else TimeOffsetSection.parse(doc["time_offset"], path),
             header=header_of(doc),
             source=str(path),
         )
@@ -291,6 +341,8 @@ class RelposeArtifact(YamlArtifact):
             out["joint"] = self.joint.to_plain()
         if self.scale is not None:
             out["scale"] = self.scale.to_plain()
+        if self.time_offset is not None:
+            out["time_offset"] = self.time_offset.to_plain()
         out["quality"] = self.quality.to_plain()
         out["warnings"] = list(self.warnings)
         return out
@@ -313,6 +365,13 @@ class RelposeArtifact(YamlArtifact):
             lines.append(
                 f"  phi_ba = mu_b / mu_a: {s.phi_ba:.6g}"
                 + ("" if s.phi_ba_std is None else f" +- {s.phi_ba_std:.2g}")
+            )
+        if self.time_offset is not None:
+            o = self.time_offset
+            lines.append(
+                f"  time offset (B's clock - A's): {1e3 * o.time_offset_s:+.2f}"
+                + ("" if o.time_offset_s_std is None else f" +- {1e3 * o.time_offset_s_std:.2g}")
+                + " ms"
             )
         if self.quality.residual_rms is not None:
             lines.append(f"  residual RMS: {self.quality.residual_rms:.3g} {unit_b}")

@@ -2,19 +2,40 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from acs_cli.core.pairing import PairingResult
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
+from acs_cli.core.se3 import FloatArray
+from acs_cli.core.time_offset import (
+    PoseInterpolator,
+    TimeOffset,
+    estimate_time_offset,
+    synchronisation_check,
+)
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.joint import FramesUsed, JointSection, PoseNoise
-from acs_cli.io.relpose import RelativePose, RelposeArtifact, RelposeQuality, Scale
+from acs_cli.io.relpose import (
+    RelativePose,
+    RelposeArtifact,
+    RelposeQuality,
+    Scale,
+    TimeOffsetSection,
+)
+from acs_cli.io.trajectory import Trajectory, read_trajectory
 from acs_cli.stages.bundle import bundle_general
-from acs_cli.stages.common import StageRun, load_pair, pairing_section
+from acs_cli.stages.common import PairedTrajectories, StageRun, pair_loaded, pairing_section
 from acs_cli.stages.joint import read_joint
+
+#: Default largest time offset searched, seconds.
+DEFAULT_MAX_OFFSET = 0.5
 
 
 @dataclass(frozen=True)
@@ -38,6 +59,11 @@ class RelposeConfig:
         Refined method, known scale: when both poses NPZs carry their corners (``acscal
         poses``), refine the relative pose, the joint and the intrinsics by a bundle
         adjustment on them, fused with the given joint.
+    estimate_time_offset : bool
+        Estimate a constant offset between the cameras' clocks with the calibration
+        (:mod:`acs_cli.core.time_offset`); both trajectories need timestamps.
+    max_offset : float
+        Largest offset searched, seconds.
     """
 
     method: str = "refined"
@@ -51,6 +77,8 @@ class RelposeConfig:
     max_dt: float | None = None
     length_unit: str = "m"
     bundle: bool = True
+    estimate_time_offset: bool = False
+    max_offset: float = DEFAULT_MAX_OFFSET
 
 
 RelposeRun = StageRun[RelposeEstimate]
@@ -113,9 +141,20 @@ def run_relpose(
     check_distinct_output(output, inputs.values())
     check_writable(output)
     prior = None if joint is None else load_prior(joint, config.joint_metric)
-    pair = load_pair(
-        poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
-    )
+    traj_a = read_trajectory(poses_a, config.format_a)
+    traj_b = read_trajectory(poses_b, config.format_b)
+
+    def fit(Ta: FloatArray, Tb: FloatArray) -> FloatArray:
+        """The joint residuals of the refined estimate on one pairing (for the time offset)."""
+        return estimate_relpose(
+            Ta, Tb, prior, unknown_scale=config.unknown_scale, reject_outliers=False
+        ).residuals
+
+    offset = None
+    if config.estimate_time_offset:
+        pair, offset = _pair_with_offset(traj_a, traj_b, config, fit)
+    else:
+        pair = pair_loaded(traj_a, traj_b, config.pair_by, config.max_dt)
     warnings = list(pair.warnings)
     est = estimate_relpose(
         pair.a.T_world_cam,
@@ -125,8 +164,16 @@ def run_relpose(
         reference=config.reference,
         method=config.method,
     )
+    if offset is None and config.method == "refined":
+        warnings += _synchronisation(traj_a, traj_b, fit)
+    if offset is not None and offset.at_limit:
+        warnings.append(
+            f"the time offset {offset.offset_s:+.4f} s lies at the edge of the range searched "
+            f"(+-{config.max_offset:g} s): the clocks may differ by more; search a larger "
+            "--max-offset"
+        )
     bundle_section = None
-    if config.method == "refined" and config.bundle:
+    if config.method == "refined" and config.bundle and offset is None:
         est, bundle_section, notes = bundle_general((poses_a, poses_b), pair, est, prior)
         warnings += notes
     rpy_std, t_std = paper_pose_std(est.T_b_a, est.covariance)
@@ -216,11 +263,82 @@ def run_relpose(
         scale=scale,
         quality=quality,
         warnings=warnings,
+        time_offset=None
+        if offset is None
+        else TimeOffsetSection(
+            time_offset_s=offset.offset_s,
+            time_offset_s_std=offset.std_s if np.isfinite(offset.std_s) else None,
+            max_offset_s=config.max_offset,
+            frames=int(offset.frames.sum()),
+        ),
         header=header,
         source=str(output),
     )
     art.save(output)
     return StageRun(est, to_plain(art.to_doc()), output, warnings)
+
+
+def _pair_with_offset(
+    a: Trajectory,
+    b: Trajectory,
+    config: RelposeConfig,
+    fit: Callable[[FloatArray, FloatArray], FloatArray],
+) -> tuple[PairedTrajectories, TimeOffset]:
+    """Estimate the clocks' offset and pair A's poses with B's interpolated at ``t + dt``."""
+    if config.method != "refined":
+        raise InputError("--estimate-time-offset needs the refined method (not --method paper)")
+    for name, t in (("A", a), ("B", b)):
+        if not t.has_timestamps:
+            raise InputError(
+                f"--estimate-time-offset needs timestamps, but camera {name}'s trajectory has "
+                f"none ({t.format})",
+                path=t.source,
+            )
+    offset = estimate_time_offset(
+        a.timestamps, a.T_world_cam, b.timestamps, b.T_world_cam, fit, config.max_offset
+    )
+    idx = np.flatnonzero(offset.frames)
+    interp = PoseInterpolator(b.timestamps, b.T_world_cam)
+    tb = a.timestamps[idx] + offset.offset_s
+    keep = interp.valid(tb)  # the search range's frames, valid at the estimate too
+    idx, tb = idx[keep], tb[keep]
+    b_at = Trajectory(tb, interp(tb), b.source, b.format, True)
+    nearest = np.clip(np.searchsorted(b.timestamps, tb), 0, len(b) - 1)
+    pairing = PairingResult(
+        idx_a=idx,
+        idx_b=nearest,
+        unpaired_a=len(a) - idx.size,
+        unpaired_b=0,
+        max_dt=float(interp.max_gap),
+    )
+    notes = []
+    if len(a) - idx.size:
+        notes.append(
+            f"{len(a) - idx.size} of {len(a)} poses of A fall outside camera B's recording "
+            f"once shifted by up to +-{config.max_offset:g} s, and were left out"
+        )
+    notes.append(
+        f"camera B's poses are interpolated at A's times + {offset.offset_s:+.4f} s (SE(3) "
+        "splines); no bundle adjustment on the corners"
+    )
+    return PairedTrajectories(a.select(idx), b_at, pairing, notes), offset
+
+
+def _synchronisation(
+    a: Trajectory, b: Trajectory, fit: Callable[[FloatArray, FloatArray], FloatArray]
+) -> list[str]:
+    """A warning when shifting B's clock by up to a frame fits clearly better."""
+    if not (a.has_timestamps and b.has_timestamps):
+        return []
+    found = synchronisation_check(a.timestamps, a.T_world_cam, b.timestamps, b.T_world_cam, fit)
+    if found is None:
+        return []
+    dt, ratio = found
+    return [
+        f"shifting camera B's timestamps by {1e3 * dt:+.1f} ms makes the joint residual "
+        f"{100 * (1 - ratio):.0f}% smaller: the cameras are probably not synchronised; "
+        "estimate the offset with --estimate-time-offset"
+    ]
 
 
 def _float_or_none(x: Any) -> float | None:
