@@ -232,12 +232,19 @@ def scale_translations(T_world_cam: FloatArray, mu: float) -> FloatArray:
     return out
 
 
-def _smooth_rotvecs(rng: np.random.Generator, t: FloatArray, amp_deg: float) -> FloatArray:
+def smooth_rotvecs(rng: np.random.Generator, t: FloatArray, amp_deg: float) -> FloatArray:
     """``(n, 3)`` rotation vectors: per axis a sum of three sinusoids (0.05-0.5 Hz)."""
     freq = rng.uniform(0.05, 0.5, size=(3, 3))
     phase = rng.uniform(0.0, 2.0 * np.pi, size=(3, 3))
     amp = np.radians(amp_deg) * rng.uniform(0.3, 1.0, size=(3, 3)) / 2.0
     return np.sum(amp * np.sin(2.0 * np.pi * freq * t[:, None, None] + phase), axis=2)
+
+
+def smooth_positions(rng: np.random.Generator, t: FloatArray, extent: float) -> FloatArray:
+    """``(n, 3)`` positions (metres): per axis two sinusoids (0.05-0.4 Hz) of ``extent / 2``."""
+    freq = rng.uniform(0.05, 0.4, size=(3, 2))
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(3, 2))
+    return 0.5 * extent * np.sum(np.sin(2.0 * np.pi * freq * t[:, None, None] + phase), axis=2)
 
 
 def smooth_general_sequence(
@@ -263,13 +270,9 @@ def smooth_general_sequence(
 
     def motion(tt: FloatArray) -> tuple[FloatArray, FloatArray]:
         g = [np.random.default_rng(int(k)) for k in keys]
-        R = se3.matrix_from_rotvec(_smooth_rotvecs(g[0], tt, max_rotation_deg))
-        freq = g[1].uniform(0.05, 0.4, size=(3, 2))
-        phase = g[1].uniform(0.0, 2.0 * np.pi, size=(3, 2))
-        pos = (
-            translation_range / 2 * np.sum(np.sin(2 * np.pi * freq * tt[:, None, None] + phase), 2)
-        )
-        Q = se3.matrix_from_rotvec(_smooth_rotvecs(g[2], tt, max_articulation_deg))
+        R = se3.matrix_from_rotvec(smooth_rotvecs(g[0], tt, max_rotation_deg))
+        pos = smooth_positions(g[1], tt, translation_range)
+        Q = se3.matrix_from_rotvec(smooth_rotvecs(g[2], tt, max_articulation_deg))
         if rig.hinge_axis_a is not None:
             ang = np.linalg.norm(se3.rotvec_from_matrix(Q), axis=1)
             Q = se3.matrix_from_rotvec(ang[:, None] * rig.hinge_axis_a)

@@ -28,6 +28,8 @@ from sample_data_gen.acs_sim import (
     random_rotations,
     random_transform,
     random_unit_vectors,
+    smooth_positions,
+    smooth_rotvecs,
 )
 
 FloatArray = se3.FloatArray
@@ -145,6 +147,8 @@ def rig_recording(
     planar: bool = False,
     edges: dict[str, EdgeTruth] | None = None,
     fps: float = 30.0,
+    smooth: bool = False,
+    time_offsets: dict[str, float] | None = None,
 ) -> RigRecording:
     """Simulate a rig's general motion.
 
@@ -159,6 +163,12 @@ def rig_recording(
     planar : bool
         The reference body turns about its z axis only and moves in its x-y plane (a truck on
         flat ground); hinge axes then default to that z axis (pass ``edges`` to choose).
+    smooth : bool
+        Motion and articulations smooth in time (sums of sinusoids, sampled at ``fps``), as a
+        video's; otherwise independent at random from frame to frame.
+    time_offsets : dict of str to float, optional
+        With ``smooth``: a camera's clock minus the reference camera's (seconds). Its poses
+        are taken at ``t - offset`` and stamped ``t`` (``T_W_c`` keeps the truth at ``t``).
     """
     cams: list[str] = []
     for _, b, _t in joints:
@@ -168,6 +178,11 @@ def rig_recording(
     cams.insert(0, reference)
     topo = rig_topology(cams, joints, reference)
     edges = edges if edges is not None else make_edges(rng, joints)
+    if smooth:
+        return _smooth_recording(
+            rng, n, topo, edges, unknown_scale, sigma_rot_deg, sigma_trans, max_rotation_deg,
+            max_articulation_deg, translation_range, fps, time_offsets or {},
+        )  # fmt: skip
     if planar:
         ang = np.radians(rng.uniform(-max_rotation_deg, max_rotation_deg, size=n))
         R = se3.matrix_from_rotvec(ang[:, None] * np.array([0.0, 0.0, 1.0]))
@@ -201,6 +216,65 @@ def rig_recording(
         mu=mu,
         unknown_scale={c: c in unknown_scale for c in cams},
         timestamps=np.arange(n) / fps,
+    )
+
+
+def _smooth_recording(
+    rng: np.random.Generator,
+    n: int,
+    topo: RigTopology,
+    edges: dict[str, EdgeTruth],
+    unknown_scale: tuple[str, ...],
+    sigma_rot_deg: float,
+    sigma_trans: float,
+    max_rotation_deg: float,
+    max_articulation_deg: float,
+    translation_range: float,
+    fps: float,
+    offsets: dict[str, float],
+) -> RigRecording:
+    """:func:`rig_recording` with ``smooth``: each camera sampled on its own clock."""
+    keys = rng.integers(2**32, size=3 + len(edges))
+    t = np.arange(n) / fps
+
+    def chain(tt: FloatArray) -> dict[str, FloatArray]:
+        g = [np.random.default_rng(int(k)) for k in keys]
+        R = se3.matrix_from_rotvec(smooth_rotvecs(g[0], tt, max_rotation_deg))
+        pos = smooth_positions(g[1], tt, translation_range)
+        T_W = {topo.reference: se3.transforms_from_rt(R, pos)}
+        for i, step in enumerate(topo.tree_order()):
+            e = edges[step.joint.name]
+            w = smooth_rotvecs(g[3 + i], tt, max_articulation_deg)
+            if e.type == "rigid":
+                w = np.zeros_like(w)
+            elif e.type == "hinge" and e.axis_p is not None:
+                w = w[:, :1] * e.axis_p
+            T_p_q = e.T_p_q(se3.matrix_from_rotvec(w))
+            T_W[step.target] = T_W[step.source] @ (
+                T_p_q if step.forward else se3.invert_transforms(T_p_q)
+            )
+        return T_W
+
+    T_W = chain(t)
+    T_wc: dict[str, FloatArray] = {}
+    mu: dict[str, float] = {}
+    for c in topo.cameras:
+        sampled = chain(t - offsets.get(c, 0.0))[c] if offsets.get(c) else T_W[c]
+        T = random_transform(rng) @ sampled
+        if sigma_rot_deg > 0 or sigma_trans > 0:
+            T = add_pose_noise(rng, T, sigma_rot_deg, sigma_trans)
+        mu[c] = float(rng.uniform(0.3, 3.0)) if c in unknown_scale else 1.0
+        T = T.copy()
+        T[:, :3, 3] *= mu[c]
+        T_wc[c] = T
+    return RigRecording(
+        topology=topo,
+        edges=edges,
+        T_W_c=T_W,
+        T_wc_c=T_wc,
+        mu=mu,
+        unknown_scale={c: c in unknown_scale for c in topo.cameras},
+        timestamps=t,
     )
 
 

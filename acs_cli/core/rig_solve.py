@@ -147,6 +147,9 @@ class EdgeEstimate:
     frames_rejected: int
     inliers: np.ndarray
     noise: dict[str, float]
+    #: the raw constraint residuals over the inlier frames, by kind (``pos``, ``rot``,
+    #: ``trans``: ``(m, 3)`` each, see ``_edge_blocks``)
+    residual_blocks: dict[str, FloatArray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -998,6 +1001,7 @@ def _assemble(
             frames_rejected=int((~m).sum()),
             inliers=np.asarray(st.frames[j.name][m]),
             noise=noise.get(j.name, {}),
+            residual_blocks={kind: v[m] for kind, v in b.items()},
         )
     return RigEstimate(topo, k, cams, edges, cost, nfev)
 

@@ -36,12 +36,21 @@ __all__ = [
     "TimeOffset",
     "estimate_time_offset",
     "gaussian_profile_cost",
+    "profile_cost",
     "shifted_pairs",
     "synchronisation_check",
 ]
 
+#: Residuals of one calibration: one array ``(m, k)``, or blocks of different kinds.
+Residuals = FloatArray | dict[str, FloatArray]
+#: A calibration of paired poses ``(m, 4, 4)`` each, returning its residuals.
+Fit = Callable[[FloatArray, FloatArray], Residuals]
+
 #: Fewest frames paired at every offset searched.
 MIN_OFFSET_FRAMES = 20
+#: The grid search and the synchronisation check use at most this many frames (evenly
+#: spaced): enough to place the minimum, and a fixed cost per offset tried.
+COARSE_FRAMES = 100
 #: Largest gap (in median frame intervals) interpolated across.
 MAX_GAP_INTERVALS = 1.5
 
@@ -145,7 +154,7 @@ def estimate_time_offset(
     T_a: FloatArray,
     times_b: FloatArray,
     T_b: FloatArray,
-    fit: Callable[[FloatArray, FloatArray], FloatArray],
+    fit: Fit,
     max_offset: float,
 ) -> TimeOffset:
     """Estimate ``dt`` by minimising the calibration's profile cost over the shift.
@@ -156,10 +165,11 @@ def estimate_time_offset(
         Timestamps of each camera's poses, seconds, each on its own clock.
     T_a, T_b : ndarray, shape (n_a, 4, 4), (n_b, 4, 4)
         ``T_world_cam`` of each camera.
-    fit : (T_a (m, 4, 4), T_b (m, 4, 4)) -> ndarray (m, k)
+    fit : (T_a (m, 4, 4), T_b (m, 4, 4)) -> ndarray (m, k) or dict of them
         Calibrates the pair on paired poses and returns its residuals (e.g. the joint
         constraint's, without rejecting outliers, so that every offset sees the same
-        frames); it may raise ``DegenerateMotionError`` for an offset far from the truth.
+        frames), or residual blocks of different units (see :func:`profile_cost`); it may
+        raise ``DegenerateMotionError`` for an offset far from the truth.
     max_offset : float
         Largest ``|dt|`` searched, seconds.
 
@@ -195,11 +205,17 @@ def estimate_time_offset(
             "smaller --max-offset"
         )
     Tf, tf = Ta[frames], ta[frames]
+    coarse = _thinned(tf.size)
 
     def c(dt: float) -> float:
         return _cost(fit, Tf, interp(tf + dt))
 
-    values = np.array([c(dt) for dt in grid])
+    def c_coarse(dt: float) -> float:
+        return _cost(fit, Tf[coarse], interp(tf[coarse] + dt))
+
+    # the grid on at most COARSE_FRAMES frames (the cost's shape is set by the motion, not
+    # by the number of frames), the minimum and its curvature on them all
+    values = np.array([c_coarse(dt) for dt in grid])
     if not np.any(np.isfinite(values)):
         raise DegenerateMotionError(
             "the calibration fails at every time offset searched; check that the two "
@@ -208,7 +224,7 @@ def estimate_time_offset(
     best = int(np.argmin(values))
     lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
     res = minimize_scalar(c, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6})
-    dt = float(res.x) if res.fun <= values[best] else float(grid[best])
+    dt = float(res.x)
     h = 0.25 * step
     lo_c, hi_c = c(max(dt - h, -max_offset)), c(min(dt + h, max_offset))
     curvature = (lo_c - 2.0 * c(dt) + hi_c) / h**2
@@ -217,14 +233,25 @@ def estimate_time_offset(
     return TimeOffset(dt, std, frames, np.column_stack([grid, values]), at_limit)
 
 
-def _cost(
-    fit: Callable[[FloatArray, FloatArray], FloatArray], Ta: FloatArray, Tb: FloatArray
-) -> float:
+def _thinned(n: int) -> np.ndarray:
+    """Indices of at most :data:`COARSE_FRAMES` of ``n`` frames, evenly spaced."""
+    return np.unique(np.round(np.linspace(0, n - 1, min(n, COARSE_FRAMES))).astype(int))
+
+
+def _cost(fit: Fit, Ta: FloatArray, Tb: FloatArray) -> float:
     """The profile cost of one pairing (infinite where the calibration fails)."""
     try:
-        return gaussian_profile_cost(fit(Ta, Tb))
+        return profile_cost(fit(Ta, Tb))
     except DegenerateMotionError:
         return float("inf")
+
+
+def profile_cost(residuals: Residuals) -> float:
+    """:func:`gaussian_profile_cost` of residuals ``(m, k)``, or the sum over blocks of
+    residuals of different kinds (each with its own variance: metres, radians)."""
+    if isinstance(residuals, dict):
+        return float(sum(gaussian_profile_cost(r) for r in residuals.values()))
+    return gaussian_profile_cost(residuals)
 
 
 #: The synchronisation check flags a shift that lowers the cost by more than this (a
@@ -239,47 +266,75 @@ def synchronisation_check(
     T_a: FloatArray,
     times_b: FloatArray,
     T_b: FloatArray,
-    fit: Callable[[FloatArray, FloatArray], FloatArray],
+    fit: Fit,
+    steps: tuple[float, ...] = (-1.0, -0.5, 0.5, 1.0),
 ) -> tuple[float, float] | None:
     """Whether shifting B's clock by half or one frame interval fits clearly better.
 
-    Compares the pairing at ``dt = 0`` with ``dt = +-interval/2, +-interval`` on the frames
-    valid at all of them (see :func:`estimate_time_offset` for ``fit``).
+    Compares the pairing at ``dt = 0`` with ``dt = steps x interval`` on (at most
+    :data:`COARSE_FRAMES` of) the frames valid at all of them (see
+    :func:`estimate_time_offset` for ``fit``).
 
     Returns
     -------
     (dt, ratio) or None
         The best shift (seconds) and its residual RMS relative to ``dt = 0``, when it lowers
         the cost by more than :data:`SYNC_CHECK_COST` and the RMS by more than
-        :data:`SYNC_CHECK_RESIDUAL`; None otherwise (or when it cannot be checked).
+        :data:`SYNC_CHECK_RESIDUAL`; None otherwise, or when it cannot be checked (too few
+        frames, or snapshots rather than a video: A turning more than
+        :data:`SYNC_CHECK_MAX_STEP_DEG` between frames).
     """
     try:
         interp = PoseInterpolator(times_b, T_b)
     except InputError:
         return None
     Ta = np.asarray(T_a, dtype=float)
-    ta = np.asarray(times_a, dtype=float)
-    shifts = interp.interval * np.array([0.0, -1.0, -0.5, 0.5, 1.0])
-    frames = shifted_pairs(ta, interp, shifts)
-    if int(frames.sum()) < MIN_OFFSET_FRAMES:
+    if not _video_like(Ta):
         return None
-    res: list[FloatArray | None] = []
+    ta = np.asarray(times_a, dtype=float)
+    shifts = interp.interval * np.array([0.0, *steps])
+    frames = np.flatnonzero(shifted_pairs(ta, interp, shifts))
+    if frames.size < MIN_OFFSET_FRAMES:
+        return None
+    frames = frames[_thinned(frames.size)]
+    res: list[Residuals | None] = []
     for dt in shifts:
         try:
-            res.append(np.asarray(fit(Ta[frames], interp(ta[frames] + dt))))
+            res.append(fit(Ta[frames], interp(ta[frames] + dt)))
         except DegenerateMotionError:
             res.append(None)
-    if res[0] is None:
+    r0 = res[0]
+    if r0 is None:
         return None
-    base = gaussian_profile_cost(res[0])
-    rms0 = float(np.sqrt(np.mean(res[0] ** 2)))
+    base = profile_cost(r0)
     best: tuple[float, float] | None = None
     best_cost = base - SYNC_CHECK_COST
     for dt, r in zip(shifts[1:], res[1:], strict=True):
         if r is None:
             continue
-        cost = gaussian_profile_cost(r)
-        ratio = float(np.sqrt(np.mean(r**2))) / max(rms0, 1e-300)
+        cost = profile_cost(r)
+        ratio = _rms_ratio(r, r0)
         if cost < best_cost and ratio < 1.0 - SYNC_CHECK_RESIDUAL:
             best, best_cost = (float(dt), ratio), cost
     return best
+
+
+#: The check needs motion sampled finely enough for a shift by a frame to pair nearly the
+#: same poses: camera A turning less than this between frames (median, degrees).
+SYNC_CHECK_MAX_STEP_DEG = 10.0
+
+
+def _video_like(T: FloatArray) -> bool:
+    """Whether consecutive poses are close (a video, not independent snapshots)."""
+    if T.shape[0] < 3:
+        return False
+    R = T[:, :3, :3]
+    steps = se3.rotation_angle_deg(np.matmul(np.swapaxes(R[:-1], 1, 2), R[1:]))
+    return bool(np.median(steps) < SYNC_CHECK_MAX_STEP_DEG)
+
+
+def _rms_ratio(r: Residuals, r0: Residuals) -> float:
+    """RMS of ``r`` over that of ``r0`` (of their first block: the position residuals)."""
+    a = next(iter(r.values())) if isinstance(r, dict) else r
+    b = next(iter(r0.values())) if isinstance(r0, dict) else r0
+    return float(np.sqrt(np.mean(a**2)) / max(float(np.sqrt(np.mean(b**2))), 1e-300))

@@ -12,6 +12,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         scale: float                    # reference units per trajectory unit of this camera
         scale_std: float | fixed        # "fixed" where the scale is not estimated
         T_ref_world: 4x4                # the camera's trajectory world (x scale) -> ref frame
+        time_offset_s, time_offset_s_std   # with estimate_time_offset: this camera's clock
+                                        # minus the reference camera's, seconds
     joints:
       <name>:
         type: ball | hinge | rigid
@@ -47,7 +49,7 @@ from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector
+from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector, optional_number
 
 KIND = "rig"
 
@@ -69,6 +71,10 @@ class RigCameraResult:
     #: reference camera's frame at the reference instant: T_ref_cam[i] = T_ref_world @
     #: [R_i, scale t_i]; None when not recorded
     T_ref_world: FloatArray | None = None
+    #: the camera's clock minus the reference camera's (seconds) and its std, when
+    #: estimated (``estimate_time_offset``)
+    time_offset_s: float | None = None
+    time_offset_s_std: float | None = None
 
 
 @dataclass(frozen=True)
@@ -182,6 +188,9 @@ class RigArtifact(YamlArtifact):
             }
             if c.T_ref_world is not None:
                 cams[c.name]["T_ref_world"] = c.T_ref_world
+            if c.time_offset_s is not None:
+                cams[c.name]["time_offset_s"] = c.time_offset_s
+                cams[c.name]["time_offset_s_std"] = c.time_offset_s_std
         joints = {}
         for j in self.joints.values():
             d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
@@ -252,6 +261,10 @@ class RigArtifact(YamlArtifact):
                 T_ref_world=None
                 if c.get("T_ref_world") is None
                 else as_matrix(c["T_ref_world"], (4, 4), f"{k}.T_ref_world", p),
+                time_offset_s=optional_number(c.get("time_offset_s"), f"{k}.time_offset_s", p),
+                time_offset_s_std=optional_number(
+                    c.get("time_offset_s_std"), f"{k}.time_offset_s_std", p, non_negative=True
+                ),
             )
         reference = str(ref["camera"])
         if reference not in cameras:

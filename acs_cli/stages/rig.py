@@ -32,10 +32,16 @@ import numpy as np
 from acs_cli.core import se3
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
-from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
+from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
+from acs_cli.core.time_offset import (
+    Fit,
+    PoseInterpolator,
+    estimate_time_offset,
+    synchronisation_check,
+)
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
@@ -89,6 +95,8 @@ class RigRunConfig:
     max_dt: float | None = None
     workers: int | None = None
     bundle: bool = True
+    estimate_time_offset: bool = False
+    max_offset: float = 0.5
 
 
 def is_rig_config(doc: Any) -> bool:
@@ -117,7 +125,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         required=("output", "cameras", "joints"),
         optional=(
             "schema", "schema_version", "reference", "board", "pair_by", "max_dt", "workers",
-            "bundle",
+            "bundle", "estimate_time_offset", "max_offset",
         ),
     )  # fmt: skip
     if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
@@ -223,6 +231,10 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         max_dt=max_dt,
         workers=workers,
         bundle=c.boolean(top.get("bundle", True), "bundle"),
+        estimate_time_offset=c.boolean(
+            top.get("estimate_time_offset", False), "estimate_time_offset"
+        ),
+        max_offset=c.positive(top.get("max_offset", 0.5), "max_offset"),
     )
 
 
@@ -439,7 +451,13 @@ def run_rig(
         except InputError as exc:  # name the config key with the file
             key = f"cameras.{n}.poses" if config.cameras[n].poses is not None else f"poses of {n}"
             raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
-    tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
+    offsets: dict[str, tuple[float, float]] = {}
+    if config.estimate_time_offset:
+        offsets, warnings = rig_time_offsets(config, trajectories, priors)
+        tracks, slots, index = tracks_with_offsets(config, trajectories, offsets)
+    else:
+        tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
+        warnings += rig_synchronisation(config, trajectories, priors)
     est = estimate_rig(
         config.topology, tracks, reference_frame=config.reference_frame, priors=priors
     )
@@ -450,12 +468,18 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    if config.bundle:
+    if config.bundle and not offsets:
         est, sections, notes = rig_bundle(config, files, trajectories, index, est)
         warnings += notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     art = dataclasses.replace(rig_artifact(est, unit, warnings), bundle_adjustment=sections)
+    if offsets:
+        cams = {
+            c: dataclasses.replace(r, time_offset_s=offsets[c][0], time_offset_s_std=offsets[c][1])
+            for c, r in art.cameras.items()
+        }
+        art = dataclasses.replace(art, cameras=cams)
     out = output if output is not None else config.output / RIG_FILE
     fixed = {
         f"fixed_joint_{jn}_{c}": p
@@ -491,6 +515,136 @@ def run_rig(
     art.save(out)
     write_rig_trajectories(est, tracks, slots, out.parent / TRAJECTORY_DIR)
     return RigRun(est, art, out, warnings)
+
+
+def _edge_fit(config: RigRunConfig, j: RigJoint, priors: dict[str, EdgePrior]) -> Fit:
+    """One joint's calibration on its two cameras' paired poses: its raw residuals."""
+    p, q = j.between
+    topo = rig_topology([p, q], [(j.name, [p, q], j.type)], p)
+    prior = {j.name: priors[j.name]} if j.name in priors else {}
+
+    def fit(Tp: FloatArray, Tq: FloatArray) -> dict[str, FloatArray]:
+        ok = np.ones(Tp.shape[0], bool)
+        tracks = {
+            p: CameraTrack(Tp, ok, config.cameras[p].unknown_scale),
+            q: CameraTrack(Tq, ok, config.cameras[q].unknown_scale),
+        }
+        est = estimate_rig(topo, tracks, priors=prior, reject_outliers=False)
+        return est.edges[j.name].residual_blocks
+
+    return fit
+
+
+def _need_timestamps(config: RigRunConfig, trajectories: dict[str, Trajectory]) -> None:
+    for name, t in trajectories.items():
+        if not t.has_timestamps:
+            raise InputError(
+                f"estimate_time_offset: camera {name}'s trajectory has no timestamps "
+                f"({t.format}); give trajectories with times",
+                path=config.path,
+            )
+
+
+def rig_time_offsets(
+    config: RigRunConfig, trajectories: dict[str, Trajectory], priors: dict[str, EdgePrior]
+) -> tuple[dict[str, tuple[float, float]], list[str]]:
+    """Every camera's clock offset to the reference camera's (seconds, with its std), each
+    joint's estimated on its two cameras (:func:`acs_cli.core.time_offset.estimate_time_offset`)
+    and added along the tree; and warnings."""
+    _need_timestamps(config, trajectories)
+    ref = config.reference_camera
+    offsets = {ref: (0.0, 0.0)}
+    notes = []
+    for step in config.topology.tree_order():
+        j = step.joint
+        p, q = j.between
+        tp, tq = trajectories[p], trajectories[q]
+        try:
+            off = estimate_time_offset(
+                tp.timestamps, tp.T_world_cam, tq.timestamps, tq.T_world_cam,
+                _edge_fit(config, j, priors), config.max_offset,
+            )  # fmt: skip
+        except DegenerateMotionError as exc:
+            raise DegenerateMotionError(f"joint {j.name}: {exc.message}") from None
+        if off.at_limit:
+            notes.append(
+                f"joint {j.name}: the time offset {off.offset_s:+.4f} s lies at the edge of the "
+                f"range searched (+-{config.max_offset:g} s); set a larger max_offset"
+            )
+        d = off.offset_s if step.forward else -off.offset_s  # target's clock - source's
+        base, var = offsets[step.source]
+        offsets[step.target] = (base + d, float(np.sqrt(var**2 + off.std_s**2)))
+    notes.append(
+        "every camera's poses are interpolated (SE(3) splines) at the reference camera's "
+        "times plus its clock offset; no bundle adjustment on the corners"
+    )
+    return offsets, notes
+
+
+def tracks_with_offsets(
+    config: RigRunConfig,
+    trajectories: dict[str, Trajectory],
+    offsets: dict[str, tuple[float, float]],
+) -> tuple[dict[str, CameraTrack], np.ndarray, dict[str, np.ndarray]]:
+    """Every camera on the reference camera's timeline, interpolated at its clock's times
+    (``t + offset``): tracks, the timeline, and rows (-1: interpolated, no measured row).
+
+    The timeline is the reference camera's instants from the first to the last that every
+    camera covers (so that ``reference.frame: 0`` is the first instant all cameras share).
+    """
+    ref = trajectories[config.reference_camera]
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, t in trajectories.items():
+        if name == config.reference_camera:
+            poses[name] = (t.T_world_cam.copy(), np.ones(len(t), bool))
+            continue
+        interp = PoseInterpolator(t.timestamps, t.T_world_cam)
+        query = ref.timestamps + offsets[name][0]
+        valid = interp.valid(query)
+        T = np.broadcast_to(np.eye(4), (query.size, 4, 4)).copy()
+        T[valid] = interp(query[valid])
+        poses[name] = (T, valid)
+    every = np.flatnonzero(np.all([v for _, v in poses.values()], axis=0))
+    if every.size == 0:
+        raise DegenerateMotionError(
+            "once their clocks are aligned, the cameras share no instant: record them together"
+        )
+    span = slice(int(every[0]), int(every[-1]) + 1)
+    tracks = {
+        name: CameraTrack(T[span], v[span], config.cameras[name].unknown_scale)
+        for name, (T, v) in poses.items()
+    }
+    rows = np.arange(len(ref))[span]
+    index = {
+        name: rows - span.start if name == config.reference_camera else np.full(rows.size, -1)
+        for name in trajectories
+    }
+    return tracks, ref.timestamps[span], index
+
+
+def rig_synchronisation(
+    config: RigRunConfig, trajectories: dict[str, Trajectory], priors: dict[str, EdgePrior]
+) -> list[str]:
+    """Warnings for joints whose cameras fit clearly better with one clock shifted by a
+    frame (:func:`acs_cli.core.time_offset.synchronisation_check`; whole frames only, three
+    solves of the joint per joint, to keep it cheap)."""
+    if config.pair_by == "index" or not all(t.has_timestamps for t in trajectories.values()):
+        return []
+    out = []
+    for j in config.topology.joints:
+        p, q = j.between
+        tp, tq = trajectories[p], trajectories[q]
+        found = synchronisation_check(
+            tp.timestamps, tp.T_world_cam, tq.timestamps, tq.T_world_cam,
+            _edge_fit(config, j, priors), steps=(-1.0, 1.0),
+        )  # fmt: skip
+        if found is not None:
+            out.append(
+                f"joint {j.name}: shifting {q}'s timestamps by {1e3 * found[0]:+.1f} ms makes "
+                f"its residual {100 * (1 - found[1]):.0f}% smaller: {p} and {q} are probably "
+                "not synchronised; set estimate_time_offset: true"
+            )
+    return out
 
 
 def _priors_given(config: RigRunConfig) -> bool:

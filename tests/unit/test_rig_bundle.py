@@ -93,9 +93,9 @@ def test_joints_and_intrinsics_are_recovered(solved: tuple) -> None:
 
 
 def test_cameras_in_any_order_with_their_own_corners_and_noise() -> None:
-    """A reference that is not the first camera (tree order differs from config order), one
-    camera (cam1, second in tree order, third in config order) seeing part of its board with three times the noise: each camera's residuals
-    and RMS are its own."""
+    """A reference that is not the first camera (tree order differs from config order);
+    one camera (cam1: second in tree order, third in config order) seeing part of its board
+    with three times the noise: each camera's residuals and RMS are its own."""
     rec = rig_corner_recording(np.random.default_rng(9), 120, joints=JOINTS, reference="cam2")
     rng = np.random.default_rng(10)
     corners = dict(rec.corners)

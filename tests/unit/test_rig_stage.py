@@ -190,3 +190,45 @@ def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
     res = run_rig(config("prior.yaml", prior), output=tmp_path / "prior.yaml.out")
     assert not res.artifact.bundle_adjustment
     assert any("does not take joint priors" in w for w in res.warnings), res.warnings
+
+
+def test_rig_clock_offsets_are_estimated_and_warned_about(tmp_path: Path) -> None:
+    """Cameras on separate clocks (issue 10): with estimate_time_offset each camera's offset
+    to the reference is estimated and its poses interpolated; without it, the joints whose
+    cameras fit clearly better shifted by a frame are named."""
+    joints = (("j01", ("cam0", "cam1"), "ball"), ("r02", ("cam0", "cam2"), "rigid"))
+    rec = rig_recording(
+        np.random.default_rng(4), 150, joints=joints, smooth=True,
+        time_offsets={"cam1": 0.031}, sigma_rot_deg=0.1, sigma_trans=0.005,
+        max_rotation_deg=60.0, max_articulation_deg=40.0, translation_range=1.0,
+    )  # fmt: skip
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", 50.0 + rec.timestamps, T)
+    body = (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        + "".join(f"  {c}: {{poses: {c}.tum}}\n" for c in rec.topology.cameras)
+        + "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
+        "  r02: {between: [cam0, cam2], type: rigid}\n"
+    )
+
+    def config(name: str, text: str) -> RigRunConfig:
+        (tmp_path / name).write_text(text, encoding="utf-8")
+        return parse_rig_config(__import__("yaml").safe_load(text), tmp_path / name)
+
+    plain = run_rig(config("plain.yaml", body), output=tmp_path / "plain_rig.yaml")
+    assert any(w.startswith("joint j01: shifting cam1's timestamps by +33.3 ms") for w in
+               plain.warnings), plain.warnings  # fmt: skip
+    assert not any("joint r02" in w for w in plain.warnings)
+    run = run_rig(config("offset.yaml", body + "estimate_time_offset: true\nmax_offset: 0.06\n"))
+    cams = RigArtifact.load(tmp_path / "out" / "rig.yaml").cameras
+    assert cams["cam0"].time_offset_s == 0.0
+    off, std = cams["cam1"].time_offset_s, cams["cam1"].time_offset_s_std
+    assert off is not None and std is not None
+    assert abs(off - 0.031) < 1.5e-3 and abs(off - 0.031) < 4 * std, (off, std)
+    assert abs(cams["cam2"].time_offset_s or 0.0) < 1.5e-3
+    # the timeline starts where every camera is covered: frame 0 is the recording's first
+    truth = rec.T_cam_ref(0)
+    for c in ("cam1", "cam2"):
+        err = np.linalg.norm(run.artifact.cameras[c].T_cam_ref[:3, 3] - truth[c][:3, 3])
+        assert err < 0.05, (c, err)
+    assert any("interpolated" in w for w in run.warnings)
