@@ -56,6 +56,13 @@ def check_rotations(
         raise InputError(f"{name} must have shape (n, 3, 3), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name} contains NaN or inf")
+    # a rotation's entries lie in [-1, 1]; far larger ones would overflow the products below
+    huge = np.flatnonzero(np.abs(arr).max(axis=(1, 2)) > 1e3)
+    if huge.size:
+        raise InputError(
+            f"{name}[{huge[0]}] is not a rotation matrix (an entry of "
+            f"{np.abs(arr[huge[0]]).max():.3g}), {huge.size} such"
+        )
     err = np.abs(np.matmul(arr.transpose(0, 2, 1), arr) - np.eye(3)).max(axis=(1, 2))
     det = np.einsum("ni,ni->n", arr[:, 0], np.cross(arr[:, 1], arr[:, 2]))
     bad = np.flatnonzero((err > tol) | (det <= 0))
