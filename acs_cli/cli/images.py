@@ -144,12 +144,49 @@ def intrinsics(
     out.print(f"wrote {', '.join(written)}")
 
 
+class Matching(str, Enum):
+    auto = "auto"
+    sequential = "sequential"
+    exhaustive = "exhaustive"
+
+
+@contextmanager
+def _phase_progress() -> Iterator[Callable[[str, int, int], None]]:
+    """Progress of a run in phases on stderr: a line as each phase starts, and a bar.
+
+    Yields the ``progress(phase, done, total)`` callback. The bar is off when stderr is not
+    a terminal; the phase lines are always printed.
+    """
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
+    ) as bar:  # fmt: skip
+        task = bar.add_task("", total=None)
+        current = [""]
+
+        def update(phase: str, done: int, total: int) -> None:
+            if phase != current[0]:
+                current[0] = phase
+                err.print(f"sfm: {phase} ({total} images)")
+                bar.reset(task, description=phase, total=total, completed=done)
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
 def poses(
-    images_dir: Annotated[Path, typer.Argument(help="Folder of checkerboard images.")],
-    intrinsics_file: Annotated[
-        Path, typer.Option("--intrinsics", help="intrinsics.yaml from `acscal intrinsics`.")
+    images_dir: Annotated[
+        Path, typer.Argument(help="Folder of checkerboard images (or of any images with --sfm).")
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="poses.npz to write.")],
+    intrinsics_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--intrinsics",
+            help="intrinsics.yaml from `acscal intrinsics` (required for board poses; with "
+            "--sfm optional: without it COLMAP self-calibrates the camera).",
+        ),
+    ] = None,
     board: Annotated[
         str | None,
         typer.Option("--board", help="Inner corners, COLSxROWS (default: the intrinsics')."),
@@ -162,18 +199,126 @@ def poses(
         Path | None, typer.Option("--tum", help="Also write the trajectory as a TUM file.")
     ] = None,
     workers: WorkersOpt = None,
+    sfm: Annotated[
+        bool,
+        typer.Option(
+            "--sfm",
+            help="Markerless: structure from motion (pycolmap) on the image sequence, no "
+            "board; poses up to an unknown scale.",
+        ),
+    ] = False,
+    matching: Annotated[
+        Matching | None,
+        typer.Option(
+            "--matching",
+            help="--sfm: sequential (video: neighbouring frames, plus loop closure), "
+            "exhaustive (every pair) or auto (exhaustive up to 40 images). (default: auto)",
+        ),
+    ] = None,
+    loop_closure: Annotated[
+        bool | None,
+        typer.Option(
+            "--loop-closure/--no-loop-closure",
+            help="--sfm, sequential matching: also match frames that look alike (the sequence "
+            "returning to a place), with a vocabulary trained on its own features. "
+            "(default: on)",
+        ),
+    ] = None,
+    vocab_tree: Annotated[
+        Path | None,
+        typer.Option(
+            "--vocab-tree",
+            help="--sfm: a COLMAP 4 vocabulary-tree file for loop closure instead of training one.",
+        ),
+    ] = None,
+    refine_intrinsics: Annotated[
+        bool,
+        typer.Option(
+            "--refine-intrinsics",
+            help="--sfm: refine the --intrinsics' focal lengths and distortion (default: held "
+            "fixed).",
+        ),
+    ] = False,
+    max_image_size: Annotated[
+        int | None,
+        typer.Option(
+            "--max-image-size",
+            min=32,
+            help="--sfm: downscale larger images to this many pixels (longer side) for "
+            "feature extraction. (default: full size)",
+        ),
+    ] = None,
+    max_features: Annotated[
+        int | None,
+        typer.Option(
+            "--max-features",
+            min=30,
+            help="--sfm: most SIFT features per image (fewer is faster). (default: 8192)",
+        ),
+    ] = None,
+    workdir: Annotated[
+        Path | None,
+        typer.Option(
+            "--workdir",
+            help="--sfm: keep COLMAP's database and models in this folder (new, empty, or "
+            "from an earlier --sfm run). (default: a temporary folder)",
+        ),
+    ] = None,
 ) -> None:
-    """Each image's camera pose on the board (world = board), as a trajectory.
+    """Each image's camera pose, as a trajectory: on a board, or markerless (--sfm).
 
     Writes an acscal/poses NPZ that `acscal joint` and `acscal relpose` read directly.
+    Board poses have world = the board, in metres.
 
-    Example:
+    With --sfm, incremental structure from motion (COLMAP) poses the registered images:
+    world = the first registered camera, translations in SfM units (unknown scale: for
+    `acscal relpose --unknown-scale`); --workers sets COLMAP's threads.
+
+    Examples:
 
         acscal poses images/cam_a --intrinsics cam_a/intrinsics.yaml --board 9x6 \\
             --square 0.025 -o cam_a/poses.npz --tum cam_a/poses.txt
+
+        acscal poses video_frames/cam_a --sfm --intrinsics cam_a/intrinsics.yaml \\
+            -o cam_a/poses.npz --tum cam_a/poses.txt
     """
+    if sfm:
+        _sfm_poses(
+            images_dir,
+            intrinsics_file,
+            output,
+            tum=tum,
+            workers=workers,
+            board=board,
+            square=square,
+            matching=matching,
+            loop_closure=loop_closure,
+            vocab_tree=vocab_tree,
+            refine_intrinsics=refine_intrinsics,
+            max_image_size=max_image_size,
+            max_features=max_features,
+            workdir=workdir,
+        )
+        return
     from acs_cli.stages.poses import PosesConfig, run_poses
 
+    sfm_only = {
+        "--matching": matching is not None,
+        "--loop-closure/--no-loop-closure": loop_closure is not None,
+        "--vocab-tree": vocab_tree is not None,
+        "--refine-intrinsics": refine_intrinsics,
+        "--max-image-size": max_image_size is not None,
+        "--max-features": max_features is not None,
+        "--workdir": workdir is not None,
+    }
+    given = [k for k, v in sfm_only.items() if v]
+    if given:
+        raise InputError(f"{', '.join(given)} only apply with --sfm (markerless poses)")
+    if intrinsics_file is None:
+        raise InputError(
+            "board poses need --intrinsics (from `acscal intrinsics`); for markerless poses "
+            "without a board give --sfm"
+        )
     cols, rows = parse_board(board) if board is not None else (None, None)
     cfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=workers)
     with _progress("detecting") as progress:
@@ -184,6 +329,75 @@ def poses(
         f"{n} poses ({run.cached} detections from a cache); reprojection RMS median "
         f"{float(sorted(rms)[len(rms) // 2]):.4f} px, max {float(rms.max()):.4f} px"
     )
+    for w in run.warnings:
+        err.print(f"[yellow]warning:[/] {w}")
+    out.print(f"wrote {output}" + (f", {tum}" if tum is not None else ""))
+
+
+def _sfm_poses(
+    images_dir: Path,
+    intrinsics_file: Path | None,
+    output: Path,
+    *,
+    tum: Path | None,
+    workers: int | None,
+    board: str | None,
+    square: float | None,
+    matching: Matching | None,
+    loop_closure: bool | None,
+    vocab_tree: Path | None,
+    refine_intrinsics: bool,
+    max_image_size: int | None,
+    max_features: int | None,
+    workdir: Path | None,
+) -> None:
+    """``acscal poses --sfm``: the markerless front end."""
+    from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
+
+    board_opts = [k for k, v in {"--board": board, "--square": square}.items() if v is not None]
+    if board_opts:
+        raise InputError(
+            f"{' and '.join(board_opts)} describe a checkerboard, which --sfm does not use; "
+            "leave them out"
+        )
+    cfg = SfmPosesConfig(
+        tum=tum,
+        workers=workers,
+        matching=(matching or Matching.auto).value,
+        loop_closure=True if loop_closure is None else loop_closure,
+        vocab_tree=vocab_tree,
+        refine_intrinsics=refine_intrinsics,
+        max_image_size=max_image_size,
+        max_features=8192 if max_features is None else max_features,
+        workdir=workdir,
+    )
+    with _phase_progress() as progress:
+        run = run_sfm_poses(images_dir, intrinsics_file, output, cfg, progress)
+    res = run.result
+    n_all = len(res.image_names)
+    n = len(run.trajectory)
+    out.print(
+        f"{n} of {n_all} images registered ({100.0 * n / n_all:.0f}%); {res.num_points3d} "
+        f"points, mean track length {res.mean_track_length:.2f}, reprojection RMS "
+        f"{res.reprojection_rms:.3f} px"
+    )
+    K = res.camera.camera_matrix
+    how = (
+        "self-calibrated"
+        if res.intrinsics_source == "self-calibrated"
+        else ("given, refined" if res.intrinsics_refined else "given, held fixed")
+    )
+    out.print(
+        f"intrinsics ({how}, {res.camera.model}): fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  "
+        f"cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f} px"
+    )
+    total = res.seconds.get("total", 0.0)
+    out.print(
+        f"{res.matching} matching, loop closure: {res.loop_closure}"
+        + (f" ({res.loop_pairs} loop pairs)" if res.loop_pairs else "")
+        + f"; {total:.1f} s ({total / n_all:.2f} s per image)"
+    )
+    out.print("scale unknown: translations are in SfM units (use `acscal relpose --unknown-scale`)")
     for w in run.warnings:
         err.print(f"[yellow]warning:[/] {w}")
     out.print(f"wrote {output}" + (f", {tum}" if tum is not None else ""))

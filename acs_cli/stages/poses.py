@@ -1,13 +1,22 @@
-"""The poses stage: ``acscal poses`` (one board pose per image, as a trajectory).
+"""The poses stage: ``acscal poses`` (one pose per image, as a trajectory).
 
-Each image with a detected board gives ``T_cam_board`` (PnP); the trajectory stores its
-inverse ``T_world_cam`` with world = the board. Timestamps are the last number in each
-file name when those increase strictly, else the image indices.
+Board poses (:func:`run_poses`): each image with a detected board gives ``T_cam_board``
+(PnP); the trajectory stores its inverse ``T_world_cam`` with world = the board.
+
+Markerless poses (:func:`run_sfm_poses`, ``acscal poses --sfm``): incremental structure
+from motion on the image sequence (:mod:`acs_cli.core.sfm`, pycolmap); the registered
+images' ``T_world_cam`` with world = the first registered camera, known up to scale.
+
+Timestamps are the last number in each file name when those increase strictly, else the
+image indices.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,17 +30,27 @@ from acs_cli.core.pnp import (
     consistent_corner_order,
     reversed_order_transform,
 )
+from acs_cli.core.sfm import SfmCamera, SfmOptions, SfmProgress, SfmResult
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import cache_path_for
-from acs_cli.io.images import list_images, timestamp_from_name
+from acs_cli.io.images import list_images, read_gray, timestamp_from_name
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
-from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.poses import PosesArtifact, SfmSummary
 from acs_cli.io.trajectory import Trajectory, write_tum
 from acs_cli.stages.intrinsics import detect_folder, no_board_error
 
-__all__ = ["CameraIntrinsics", "PosesConfig", "PosesRun", "read_intrinsics", "run_poses"]
+__all__ = [
+    "CameraIntrinsics",
+    "PosesConfig",
+    "PosesRun",
+    "SfmPosesConfig",
+    "SfmPosesRun",
+    "read_intrinsics",
+    "run_poses",
+    "run_sfm_poses",
+]
 
 Progress = Callable[[int, int], None]
 
@@ -225,3 +244,387 @@ def run_poses(
     if config.tum is not None:
         write_tum(config.tum, t, T_wc)
     return PosesRun(traj, rms_arr, skipped, output, fd.cached, warnings)
+
+
+# --------------------------------------------------------------------------------------
+# markerless: structure from motion
+
+#: The file that marks a ``--workdir`` as made by ``acscal poses --sfm`` (safe to clear).
+WORKDIR_MARKER = ".acscal-sfm"
+#: What ``run_sfm_poses`` clears in a work folder it made before (COLMAP's files).
+_WORKDIR_ENTRIES = ("images", "sparse", "database.db", "vocab_tree.bin", "vocab_tree.log")
+#: Below this registered fraction the warning says the trajectory has gaps worth a look.
+POOR_REGISTRATION = 0.9
+
+
+@dataclass(frozen=True)
+class SfmPosesConfig:
+    """Options of the markerless poses stage (``acscal poses --sfm``).
+
+    Attributes
+    ----------
+    tum : Path, optional
+        Also write the trajectory as a TUM file.
+    workers : int, optional
+        Threads of COLMAP's extraction, matching and mapping (default: all cores).
+    matching : {"auto", "sequential", "exhaustive"}
+        See :class:`acs_cli.core.sfm.SfmOptions`.
+    loop_closure : bool
+        Sequential matching also looks for the sequence's returns to places it has seen.
+    vocab_tree : Path, optional
+        A COLMAP 4 vocabulary tree for loop closure (default: trained on the sequence).
+    refine_intrinsics : bool
+        Refine the given intrinsics' focal lengths and distortion (needs ``intrinsics``).
+    max_image_size : int, optional
+        Downscale larger images to this many pixels on their longer side for features.
+    max_features : int
+        Most SIFT features per image.
+    workdir : Path, optional
+        Keep COLMAP's database and models there (an empty or new folder, or one an earlier
+        ``--sfm`` run made); default: a temporary folder, removed afterwards.
+    """
+
+    tum: Path | None = None
+    workers: int | None = None
+    matching: str = "auto"
+    loop_closure: bool = True
+    vocab_tree: Path | None = None
+    refine_intrinsics: bool = False
+    max_image_size: int | None = None
+    max_features: int = 8192
+    workdir: Path | None = None
+
+
+@dataclass(frozen=True)
+class SfmPosesRun:
+    """What :func:`run_sfm_poses` did: the trajectory written, the SfM result, warnings."""
+
+    trajectory: Trajectory
+    result: SfmResult
+    output: Path
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def reprojection_rms(self) -> np.ndarray:
+        """RMS reprojection error of each posed image, pixels, shape (n,)."""
+        return self.result.reprojection_rms_per_image
+
+
+@contextlib.contextmanager
+def _sfm_workdir(path: Path | None, protected: list[Path]) -> Iterator[Path]:
+    """COLMAP's work folder: a temporary one, or ``path`` made ready (and kept).
+
+    ``path`` must be new, empty, or marked by an earlier run (whose COLMAP files are then
+    removed); a folder holding anything else is refused, and so is one of ``protected``.
+    """
+    if path is None:
+        with tempfile.TemporaryDirectory(prefix="acscal-sfm-") as tmp:
+            yield Path(tmp)
+        return
+    work = Path(path)
+    for p in protected:
+        with contextlib.suppress(OSError):
+            if work.resolve() == Path(p).resolve():
+                raise InputError(f"--workdir must not be {p}", path=work)
+    if work.exists() and not work.is_dir():
+        raise InputError("--workdir is a file, expected a folder", path=work)
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+        entries = [e.name for e in work.iterdir()]
+    except OSError as exc:
+        raise InputError(f"cannot use --workdir ({exc.strerror or exc})", path=work) from exc
+    if entries and WORKDIR_MARKER not in entries:
+        raise InputError(
+            "--workdir is not empty and was not made by `acscal poses --sfm`; give an empty "
+            "or new folder",
+            path=work,
+        )
+    try:
+        for name in entries:
+            entry = work / name
+            if name in _WORKDIR_ENTRIES or name.startswith("colmap.log"):
+                if entry.is_dir() and not entry.is_symlink():
+                    shutil.rmtree(entry)
+                else:
+                    entry.unlink()
+            elif name.startswith("database.db-"):  # SQLite's journal files
+                entry.unlink()
+        (work / WORKDIR_MARKER).write_text(
+            "COLMAP work folder of `acscal poses --sfm`; a rerun clears it\n", encoding="utf-8"
+        )
+    except OSError as exc:
+        raise InputError(f"cannot prepare --workdir ({exc.strerror or exc})", path=work) from exc
+    yield work
+
+
+def _sfm_camera(intrinsics: Path) -> SfmCamera:
+    """The camera of an intrinsics file, checked for COLMAP (an InputError names the file)."""
+    from acs_cli.core.sfm import colmap_camera
+
+    cam = read_intrinsics(intrinsics)
+    sfm_cam = SfmCamera(
+        cam.model,
+        (int(cam.image_size[0]), int(cam.image_size[1])),
+        np.asarray(cam.camera_matrix, dtype=float),
+        np.asarray(cam.distortion, dtype=float),
+    )
+    try:
+        colmap_camera(sfm_cam)
+    except InputError as exc:
+        raise InputError(exc.message, path=intrinsics) from exc
+    return sfm_cam
+
+
+def _check_images(paths: list[Path], progress: SfmProgress | None) -> tuple[int, int]:
+    """Read every image (a missing or corrupt one is an InputError naming it); one size."""
+    size: tuple[int, int] | None = None
+    for i, p in enumerate(paths):
+        if progress is not None and i % 10 == 0:
+            progress("reading images", i, len(paths))
+        img, _ = read_gray(p)
+        got = (int(img.shape[1]), int(img.shape[0]))
+        if size is None:
+            size = got
+        elif got != size:
+            raise InputError(
+                f"image size {got[0]}x{got[1]} differs from {size[0]}x{size[1]} of "
+                f"{paths[0].name}: all images must come from one camera at one resolution",
+                path=p,
+            )
+    if progress is not None:
+        progress("reading images", len(paths), len(paths))
+    if size is None:  # list_images never returns an empty list
+        raise InputError("no images", path=paths[0].parent if paths else None)
+    return size
+
+
+#: Refined intrinsics that moved more than this (relative focal length, or fx/fy ratio
+#: by a fifth of it) from the given ones get a warning.
+REFINED_DRIFT = 0.1
+
+
+def _sfm_warnings(result: SfmResult, given: SfmCamera | None = None) -> list[str]:
+    """Self-calibration, intrinsics that drifted when refined, unregistered and dropped
+    images, notes of the reconstruction."""
+    warnings: list[str] = []
+    n = len(result.image_names)
+    cam = result.camera
+    if given is not None and result.intrinsics_refined:
+        f0 = np.diag(given.camera_matrix)[:2]
+        f1 = np.diag(cam.camera_matrix)[:2]
+        change = np.abs(f1 / f0 - 1.0)
+        aspect = abs((f1[0] / f1[1]) / (f0[0] / f0[1]) - 1.0)
+        if change.max() > REFINED_DRIFT or aspect > REFINED_DRIFT / 5:
+            warnings.append(
+                f"the refined intrinsics moved far from the given ones (fx {f0[0]:.1f} -> "
+                f"{f1[0]:.1f}, fy {f0[1]:.1f} -> {f1[1]:.1f} px): this motion does not "
+                "determine them (e.g. a camera turning about one axis only), and the "
+                "trajectory may be distorted with them; rerun without --refine-intrinsics"
+            )
+    if result.intrinsics_source == "self-calibrated":
+        K = cam.camera_matrix
+        warnings.append(
+            "no --intrinsics: COLMAP self-calibrated one camera for the whole folder "
+            f"({result.colmap_model}: f {K[0, 0]:.1f} px, cx {K[0, 2]:.1f}, cy {K[1, 2]:.1f} "
+            f"px, k1 {cam.distortion[0]:+.4f}; recorded in the NPZ); poses are more reliable "
+            "with a calibration: `acscal intrinsics` (--model fisheye for a wide-angle "
+            "action camera), then --intrinsics"
+        )
+    unregistered = result.unregistered_names
+    missing = [x for x in unregistered if x not in set(result.dropped_images)]
+    if missing:
+        frac = 1.0 - len(unregistered) / n
+        gaps = " (the trajectory has gaps)" if frac < POOR_REGISTRATION else ""
+        warnings.append(
+            f"{len(missing)} of {n} images were not registered and have no pose{gaps}: "
+            f"{', '.join(missing[:10])}" + (", ..." if len(missing) > 10 else "")
+        )
+    if result.num_models > 1:
+        dropped = result.dropped_images
+        warnings.append(
+            f"the reconstruction split into {result.num_models} models (registered images: "
+            f"{', '.join(map(str, result.model_sizes))}); kept the largest and dropped "
+            f"{len(dropped)} image(s) of the others"
+            + (f": {', '.join(dropped[:10])}" if dropped else "")
+            + (", ..." if len(dropped) > 10 else "")
+            + "; frames between the models probably lack overlap (fast motion, blur, a "
+            "blank view)"
+        )
+    warnings += result.notes
+    return warnings
+
+
+def run_sfm_poses(
+    images_dir: Path,
+    intrinsics: Path | None,
+    output: Path,
+    config: SfmPosesConfig,
+    progress: SfmProgress | None = None,
+) -> SfmPosesRun:
+    """Structure from motion on an image sequence; write the ``acscal/poses`` NPZ.
+
+    Parameters
+    ----------
+    images_dir : Path
+        The folder of the sequence (natural order of file names = time order).
+    intrinsics : Path, optional
+        An ``acscal/intrinsics`` file (held fixed unless ``config.refine_intrinsics``);
+        ``None``: COLMAP self-calibrates the camera (with a warning).
+    output : Path
+        The poses NPZ: ``T_world_cam`` (n, 4, 4) of the registered images, world = the
+        first registered camera's frame, translations in SfM units (unknown scale), and
+        the ``sfm_*`` arrays (:class:`acs_cli.io.poses.SfmSummary`).
+    config : SfmPosesConfig
+    progress : callable, optional
+        ``progress(phase, done, total)``.
+
+    Returns
+    -------
+    SfmPosesRun
+
+    Raises
+    ------
+    InputError
+        A missing, empty or corrupt image folder or image, images of several sizes, a bad
+        intrinsics file (or one of another image size, or a model COLMAP cannot use),
+        ``refine_intrinsics`` without intrinsics, an unusable ``--workdir`` or output.
+    DegenerateMotionError
+        A sequence SfM cannot reconstruct (too few images, blank or textureless frames,
+        nothing registered); nothing is written.
+    """
+    from acs_cli.core.sfm import pycolmap_version, run_sfm
+
+    if config.refine_intrinsics and intrinsics is None:
+        raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
+    paths = list_images(images_dir)
+    camera = _sfm_camera(intrinsics) if intrinsics is not None else None
+    opts = SfmOptions(
+        matching=config.matching,
+        loop_closure=config.loop_closure,
+        vocab_tree=config.vocab_tree,
+        refine_intrinsics=config.refine_intrinsics,
+        max_image_size=config.max_image_size,
+        max_features=config.max_features,
+        threads=config.workers,
+    )
+    outputs = [output] + ([config.tum] if config.tum is not None else [])
+    inputs = [images_dir, *paths] + ([intrinsics] if intrinsics is not None else [])
+    for o in outputs:
+        check_distinct_output(o, inputs)
+    if config.tum is not None and Path(config.tum).resolve() == output.resolve():
+        raise InputError("--tum and -o name the same file", path=output)
+    for o in outputs:
+        check_writable(o)
+    size = _check_images(paths, progress)
+    if camera is not None and size != camera.image_size:
+        raise InputError(
+            f"images are {size[0]}x{size[1]} but {intrinsics} was calibrated at "
+            f"{camera.image_size[0]}x{camera.image_size[1]}",
+            path=images_dir,
+        )
+    all_names = [p.name for p in paths]
+    with _sfm_workdir(config.workdir, [images_dir, output.parent]) as work:
+        result = run_sfm(images_dir, all_names, work, camera, opts, progress)
+
+    names = list(result.registered_names)
+    t, has_t = _timestamps(names, all_names)
+    traj = Trajectory(
+        t,
+        result.T_world_cam,
+        source=str(output),
+        format="npz",
+        has_timestamps=has_t,
+        names=tuple(names),
+    )
+    warnings = _sfm_warnings(result, camera)
+    cam = result.camera
+    given = "given (" + ("refined" if result.intrinsics_refined else "held fixed") + ")"
+    n_images = len(all_names)
+    header = make_header(
+        "poses",
+        {"images": images_dir} | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
+        method=(
+            f"incremental structure from motion ({pycolmap_version()}): SIFT features, "
+            f"{result.matching} matching"
+            + (f" with loop closure ({result.loop_closure})" if result.loop_pairs else "")
+            + ", COLMAP's incremental mapper with one shared "
+            f"{result.colmap_model} camera, intrinsics "
+            + (given if result.intrinsics_source == "given" else "self-calibrated")
+            + "; the largest model kept; T_world_cam = inverse of cam_from_world, world = the "
+            "first registered camera, unit = mean distance between consecutive registered "
+            "camera centres"
+        ),
+        units={
+            "length": "SfM units (unknown scale: mean distance between consecutive registered "
+            "camera centres = 1)",
+            "reprojection_rms": "px",
+            "camera_matrix": "px",
+            "timestamps": "s or frame number",
+        },
+        frames={
+            "world": "the first registered image's camera frame (SfM fixes the world only up "
+            "to a similarity)",
+            "cam": "the camera's optical frame",
+        },
+    )
+    if intrinsics is not None:
+        header["intrinsics_file"] = str(intrinsics)
+    header["timestamps_from"] = "file names" if has_t else "image indices"
+    header["front_end"] = "sfm"
+    feats = result.features_per_image
+    header["sfm"] = {
+        "method": "incremental",
+        "software": pycolmap_version(),
+        "matching": result.matching,
+        "loop_closure": result.loop_closure,
+        "loop_pairs": result.loop_pairs,
+        "verified_pairs": result.verified_pairs,
+        "parallax_deg": round(result.parallax_deg, 4),
+        "options": result.options,
+        "camera": {
+            "colmap_model": result.colmap_model,
+            "colmap_params": list(result.colmap_params),
+            "colmap_pixel_convention": "centre of the top-left pixel at (0.5, 0.5)",
+            "model": cam.model,
+            "source": result.intrinsics_source,
+            "refined": result.intrinsics_refined,
+        },
+        "registered": int(result.registered.sum()),
+        "images": n_images,
+        "model_sizes": list(result.model_sizes),
+        "features_per_image": {
+            "min": int(feats.min()),
+            "median": float(np.median(feats)),
+            "max": int(feats.max()),
+        },
+        "seconds": {k: round(v, 3) for k, v in result.seconds.items()},
+        "seconds_per_image": round(result.seconds.get("total", 0.0) / n_images, 4),
+        "workdir": None if config.workdir is None else str(config.workdir),
+    }
+    header["warnings"] = warnings
+    summary = SfmSummary(
+        images=tuple(all_names),
+        registered=result.registered,
+        dropped_images=result.dropped_images,
+        num_models=result.num_models,
+        num_points3d=result.num_points3d,
+        mean_track_length=result.mean_track_length,
+        reprojection_rms=result.reprojection_rms,
+        camera_matrix=cam.camera_matrix,
+        distortion=cam.distortion,
+        intrinsics_model=cam.model,
+        intrinsics_source=result.intrinsics_source,
+        intrinsics_refined=result.intrinsics_refined,
+        image_size=cam.image_size,
+    )
+    PosesArtifact(
+        trajectory=traj,
+        reprojection_rms=result.reprojection_rms_per_image,
+        skipped_images=result.unregistered_names,
+        metric_scale=False,
+        sfm=summary,
+        header=header,
+    ).save(output)
+    if config.tum is not None:
+        write_tum(config.tum, t, result.T_world_cam)
+    return SfmPosesRun(traj, result, output, warnings)
