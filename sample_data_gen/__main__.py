@@ -3,15 +3,19 @@
 Without ``--scenario`` it writes the sample set (one rig: ``fixed_joint``, ``overlap``,
 ``general``, ``general_scaled``, ``fixed_joint_scaled``); with it, one scenario into
 ``OUT_DIR``. With ``--rig`` it writes the five-camera rig (``cam0.tum`` .. ``cam4.tum``,
-``truth.yaml``, ``config.yaml``) into ``OUT_DIR``.
+``truth.yaml``, ``config.yaml``) into ``OUT_DIR``. With ``--markerless`` it renders the
+markerless sample (:mod:`sample_data_gen.textured`: two cameras of a rig filming a textured
+room, 640x480 at 30 fps, images and truth) into ``OUT_DIR/markerless``.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 
+from sample_data_gen.textured import render_markerless
 from sample_data_gen.writer import (
     RIG_NOISE,
     SCENARIOS,
@@ -38,12 +42,27 @@ def _parser() -> argparse.ArgumentParser:
         help="write the five-camera rig (cam0-cam4: rigid, ball, hinge, rigid joints; cam4 of "
         "unknown scale) with its truth.yaml and a run config config.yaml into OUT_DIR",
     )
+    p.add_argument(
+        "--markerless",
+        action="store_true",
+        help="render the markerless sample into OUT_DIR/markerless: images of the two cameras "
+        "of a rig moving through a textured room (no board), for structure-from-motion, with "
+        "truth.yaml and the true trajectories truth_a.tum, truth_b.tum",
+    )
+    p.add_argument(
+        "--time-offset",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="with --markerless: camera B's image stamped t shows the rig at t + SECONDS "
+        "(default 0)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--frames",
         type=int,
         default=None,
-        help="poses per camera (default 30; 100 with --rig)",
+        help="poses per camera (default 30; 100 with --rig; 60 images with --markerless)",
     )
     p.add_argument(
         "--rot-noise",
@@ -80,6 +99,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         value = getattr(args, name)
         if value is not None and not value > 0:
             parser.error(f"--{name.replace('_', '-')} must be positive")
+    if args.time_offset is not None and not args.markerless:
+        parser.error("--time-offset needs --markerless")
+    if args.time_offset is not None and not math.isfinite(args.time_offset):
+        parser.error("--time-offset must be a finite number of seconds")
+    if args.markerless:
+        others = ("scenario", "rot_noise", "trans_noise", "mu_a", "mu_b")
+        if args.rig or args.hinge or any(getattr(args, name) is not None for name in others):
+            parser.error(
+                "--markerless takes only --seed, --frames and --time-offset "
+                "(not --rig, --scenario, noise, scales or --hinge)"
+            )
+        path = render_markerless(
+            args.out_dir,
+            seed=args.seed,
+            frames=60 if args.frames is None else args.frames,
+            time_offset_s=0.0 if args.time_offset is None else args.time_offset,
+        )
+        print(f"markerless: {path}")
+        return 0
     if args.rig:
         if args.scenario is not None:
             parser.error("--rig and --scenario exclude each other")
