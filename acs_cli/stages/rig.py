@@ -51,6 +51,8 @@ from acs_cli.stages.bundle import CornerViews, bundle_frames, bundle_section, co
 
 RIG_CONFIG_VERSION = 2
 SCALES = ("known", "unknown")
+FRONT_ENDS = ("board", "sfm")
+SFM_MATCHING = ("auto", "sequential", "exhaustive")
 TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
 RIG_FILE = "rig.yaml"
 
@@ -65,6 +67,11 @@ class RigCameraSpec:
     images: Path | None = None
     model: str = "pinhole"
     unknown_scale: bool = False
+    #: how an image folder becomes poses: ``board`` (checkerboard intrinsics and PnP) or
+    #: ``sfm`` (structure from motion on natural images: up to scale)
+    front_end: str = "board"
+    #: for ``front_end: sfm``: an intrinsics file (else COLMAP self-calibrates)
+    intrinsics: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,8 @@ class RigRunConfig:
     bundle: bool = True
     estimate_time_offset: bool = False
     max_offset: float = 0.5
+    #: options of the cameras with ``front_end: sfm`` (``acscal poses --sfm``'s)
+    sfm: dict[str, Any] = field(default_factory=dict)
 
 
 def is_rig_config(doc: Any) -> bool:
@@ -125,7 +134,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         required=("output", "cameras", "joints"),
         optional=(
             "schema", "schema_version", "reference", "board", "pair_by", "max_dt", "workers",
-            "bundle", "estimate_time_offset", "max_offset",
+            "bundle", "estimate_time_offset", "max_offset", "sfm",
         ),
     )  # fmt: skip
     if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
@@ -146,11 +155,21 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         cam = c.mapping(
             cam if cam is not None else {},
             key,
-            optional=("poses", "format", "images", "model", "scale"),
+            optional=("poses", "format", "images", "model", "scale", "front_end", "intrinsics"),
         )
         if ("poses" in cam) == ("images" in cam):
             raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
-        scale = c.choice(cam.get("scale", "known"), f"{key}.scale", SCALES)
+        front_end = c.choice(cam.get("front_end", "board"), f"{key}.front_end", FRONT_ENDS)
+        if "images" not in cam and ("front_end" in cam or "intrinsics" in cam):
+            raise c.fail(key, "'front_end' and 'intrinsics' go with 'images'")
+        if front_end == "board" and "intrinsics" in cam:
+            raise c.fail(f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)")
+        default_scale = "unknown" if front_end == "sfm" else "known"
+        scale = c.choice(cam.get("scale", default_scale), f"{key}.scale", SCALES)
+        if front_end == "sfm" and scale == "known":
+            raise c.fail(
+                f"{key}.scale", "structure from motion gives trajectories up to scale: unknown"
+            )
         cameras[name] = RigCameraSpec(
             name=name,
             poses=c.path(cam["poses"], f"{key}.poses") if "poses" in cam else None,
@@ -158,6 +177,10 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
             images=c.path(cam["images"], f"{key}.images") if "images" in cam else None,
             model=c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS),
             unknown_scale=scale == "unknown",
+            front_end=front_end,
+            intrinsics=c.path(cam["intrinsics"], f"{key}.intrinsics")
+            if "intrinsics" in cam
+            else None,
         )
     ref = c.mapping(top.get("reference", {}), "reference", optional=("camera", "frame"))
     ref_cam = ref.get("camera", next(iter(cameras)))
@@ -209,7 +232,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
     board = None if top.get("board") is None else c.board(top["board"])
-    image_cams = [n for n, s in cameras.items() if s.images is not None]
+    image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
     if image_cams and board is None:
         raise c.fail("board", f"missing (camera {image_cams[0]} has images)")
     max_dt = None
@@ -235,7 +258,30 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
             top.get("estimate_time_offset", False), "estimate_time_offset"
         ),
         max_offset=c.positive(top.get("max_offset", 0.5), "max_offset"),
+        sfm=_sfm_options(c, top.get("sfm")),
     )
+
+
+def _sfm_options(c: Any, doc: Any) -> dict[str, Any]:
+    """The ``sfm`` mapping of a rig config: options of the ``front_end: sfm`` cameras."""
+    if doc is None:
+        return {}
+    d = c.mapping(
+        doc,
+        "sfm",
+        optional=("matching", "loop_closure", "refine_intrinsics", "max_features",
+                  "max_image_size"),
+    )  # fmt: skip
+    out: dict[str, Any] = {}
+    if "matching" in d:
+        out["matching"] = c.choice(d["matching"], "sfm.matching", SFM_MATCHING)
+    for key in ("loop_closure", "refine_intrinsics"):
+        if key in d:
+            out[key] = c.boolean(d[key], f"sfm.{key}")
+    for key in ("max_features", "max_image_size"):
+        if key in d:
+            out[key] = c.integer(d[key], f"sfm.{key}", 16)
+    return out
 
 
 # --------------------------------------------------------------------------- stage

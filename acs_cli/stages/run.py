@@ -690,6 +690,25 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     return stages, intrinsics
 
 
+def _sfm_stage(
+    name: str, images: Path, intrinsics: Path | None, out: Path, config: RigRunConfig
+) -> tuple[_Stage, Path]:
+    """A camera's markerless poses stage (``front_end: sfm``) and the NPZ it writes."""
+    from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
+
+    npz = out / f"cam_{name}" / "poses.npz"
+    cfg = SfmPosesConfig(workers=config.workers, tum=npz.with_suffix(".tum"), **config.sfm)
+
+    def do_sfm() -> list[str]:
+        return run_sfm_poses(images, intrinsics, npz, cfg).warnings
+
+    inputs: dict[str, Path] = {"images": images}
+    if intrinsics is not None:
+        inputs["intrinsics"] = intrinsics
+    options = {"front_end": "sfm", **config.sfm}
+    return _Stage(f"sfm {name}", "poses", inputs, options, [npz], do_sfm), npz
+
+
 def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
     from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
@@ -700,6 +719,10 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     intrinsics: dict[str, Path] = {}
     poses: dict[str, Path] = {}
     for name, cam in config.cameras.items():
+        if cam.images is not None and cam.front_end == "sfm":
+            stage, poses[name] = _sfm_stage(name, cam.images, cam.intrinsics, out, config)
+            stages.append(stage)
+            continue
         if cam.images is None or config.board is None:
             continue
         cols, rows, square = config.board

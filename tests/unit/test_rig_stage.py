@@ -232,3 +232,44 @@ def test_rig_clock_offsets_are_estimated_and_warned_about(tmp_path: Path) -> Non
         err = np.linalg.norm(run.artifact.cameras[c].T_cam_ref[:3, 3] - truth[c][:3, 3])
         assert err < 0.05, (c, err)
     assert any("interpolated" in w for w in run.warnings)
+
+
+_SFM_RIG = (
+    "schema_version: 2\noutput: out\n{extra}cameras:\n"
+    "  a: {{images: imgs/a, front_end: sfm{a}}}\n  b: {{poses: b.tum}}\n"
+    "joints:\n  j: {{between: [a, b], type: ball}}\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("a", "extra", "key"),
+    [
+        (", scale: known", "", "cameras.a.scale"),
+        (", front_end: slam", "", "cameras.a.front_end"),
+        ("", "sfm: {matching: fuzzy}\n", "sfm.matching"),
+        ("", "sfm: {max_features: 3}\n", "sfm.max_features"),
+        ("", "sfm: {colour: true}\n", "sfm"),
+    ],
+)
+def test_markerless_cameras_are_checked(tmp_path: Path, a: str, extra: str, key: str) -> None:
+    doc = __import__("yaml").safe_load(_SFM_RIG.format(a=a, extra=extra))
+    with pytest.raises(InputError, match=key.replace(".", r"\.")):
+        parse_rig_config(doc, tmp_path / "rig.yaml")
+
+
+def test_markerless_cameras_plan_an_sfm_stage(tmp_path: Path) -> None:
+    from acs_cli.stages.run import _plan_rig
+
+    text = _SFM_RIG.format(a=", intrinsics: a.yaml", extra="sfm: {max_features: 2048}\n")
+    cfg = parse_rig_config(__import__("yaml").safe_load(text), tmp_path / "rig.yaml")
+    spec = cfg.cameras["a"]
+    assert spec.front_end == "sfm" and spec.unknown_scale  # SfM is up to scale
+    assert spec.intrinsics == tmp_path / "a.yaml" and cfg.board is None  # no board needed
+    stages, _intrinsics = _plan_rig(cfg)
+    sfm = [s for s in stages if s.stage == "sfm a"]
+    assert len(sfm) == 1 and sfm[0].options == {"front_end": "sfm", "max_features": 2048}
+    assert sfm[0].inputs == {"images": tmp_path / "imgs/a", "intrinsics": tmp_path / "a.yaml"}
+    assert sfm[0].outputs == [tmp_path / "out" / "cam_a" / "poses.npz"]
+    board = text.replace(", front_end: sfm, intrinsics: a.yaml", ", intrinsics: a.yaml")
+    with pytest.raises(InputError, match=r"cameras\.a\.intrinsics"):
+        parse_rig_config(__import__("yaml").safe_load(board), tmp_path / "rig.yaml")
