@@ -10,6 +10,13 @@ Then it calibrates from images: it renders the checkerboard image sample set int
 ``demo_out``, copies of the configs pointing at ``OUT_DIR`` are written to
 ``OUT_DIR/configs``) and prints the joint and the relative pose beside the rendered truth,
 and the path of each run's HTML report (``acscal run`` writes ``report.html`` at its end).
+
+Last, markerless: it renders two cameras of a rig moving through a textured room into
+``OUT_DIR/markerless`` (when missing), builds each camera's trajectory by structure from
+motion (``acscal poses --sfm``, intrinsics from a calibration: here the renderer's, written
+as ``acscal intrinsics`` files), calibrates the pair with ``acscal relpose
+--self-calibrate --unknown-scale`` and prints the scale factor and the relative pose beside
+the truth.
 """
 
 from __future__ import annotations
@@ -73,13 +80,100 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=20, help="rendered images per camera")
     ap.add_argument("--size", type=_size, default=(640, 480), metavar="WxH", help="image size")
     ap.add_argument("--no-images", action="store_true", help="skip the image-chain part")
+    ap.add_argument("--no-markerless", action="store_true", help="skip the markerless (SfM) part")
     args = ap.parse_args(argv)
     out: Path = args.out_dir
     _trajectory_demo(out, args.seed)
     _rig_demo(out, args.seed)
     if not args.no_images:
         _image_demo(out, args.seed, args.frames, args.size)
+    if not args.no_markerless:
+        _markerless_demo(out, args.seed)
     return 0
+
+
+#: Frames per camera of the markerless demo (30 Hz, 640x480).
+MARKERLESS_FRAMES = 60
+
+
+def _markerless_demo(out: Path, seed: int) -> None:
+    """Rendered textured video -> SfM trajectories -> relative pose and scale factor."""
+    import dataclasses
+
+    from acs_cli.io.artifacts import make_header
+    from acs_cli.io.intrinsics import IntrinsicsArtifact
+    from acs_cli.io.poses import PosesArtifact
+    from acs_cli.io.relpose import RelposeArtifact
+    from acs_cli.io.trajectory import read_tum
+    from sample_data_gen.textured import render_markerless
+
+    console.rule("Markerless: structure from motion, then acscal relpose --unknown-scale")
+    data = out / "markerless"
+    done = (data / "truth.yaml").is_file() and int(
+        _load(data / "truth.yaml").get("n_frames", 0)
+    ) == MARKERLESS_FRAMES
+    if not done:
+        console.print(f"rendering two cameras in a textured room into {data}")
+        render_markerless(out, seed=seed, frames=MARKERLESS_FRAMES)
+    truth = _load(data / "truth.yaml")
+    run = out / "run_markerless"
+    run.mkdir(parents=True, exist_ok=True)
+    for cam in ("a", "b"):
+        t = truth[f"cam_{cam}"]
+        intr = IntrinsicsArtifact(
+            model="pinhole",
+            image_size=(int(t["image_size"][0]), int(t["image_size"][1])),
+            camera_matrix=np.asarray(t["K"], dtype=float),
+            distortion=np.asarray(t["dist"], dtype=float),
+        )
+        header = make_header(
+            "intrinsics", {}, "the renderer's camera (a stand-in for acscal intrinsics)", {}, {}
+        )
+        dataclasses.replace(intr, header=header).save(run / f"intrinsics_{cam}.yaml")
+        _run(
+            "poses", _show(data / f"cam_{cam}"), "--sfm", "--intrinsics",
+            _show(run / f"intrinsics_{cam}.yaml"), "--max-features", "2048",
+            "-o", _show(run / f"poses_{cam}.npz"),
+        )  # fmt: skip
+    _run(
+        "relpose", "--self-calibrate", "--unknown-scale", "--poses-a", _show(run / "poses_a.npz"),
+        "--poses-b", _show(run / "poses_b.npz"), "-o", _show(run / "relpose.yaml"),
+    )  # fmt: skip
+    rel = RelposeArtifact.load(run / "relpose.yaml")
+    truth_a, truth_b = read_tum(data / "truth_a.tum"), read_tum(data / "truth_b.tum")
+    reg = {c: PosesArtifact.load(run / f"poses_{c}.npz") for c in ("a", "b")}
+    # SfM units: the mean distance between consecutive camera centres (of the registered
+    # images); the truth's own, in metres, over the same images
+    unit = {}
+    for c, tr in (("a", truth_a), ("b", truth_b)):
+        names = list(reg[c].trajectory.names)
+        idx = [int("".join(ch for ch in n if ch.isdigit())) for n in names]
+        centres = tr.T_world_cam[idx, :3, 3]
+        unit[c] = float(np.mean(np.linalg.norm(np.diff(centres, axis=0), axis=1)))
+    # the reference pair's frame: image names carry the frame index (the poses' time)
+    k = round(float(rel.relative_pose.reference_timestamp_a or 0.0))
+    T_b_a = se3.invert_transforms(truth_b.T_world_cam[k]) @ truth_a.T_world_cam[k]
+    est = rel.relative_pose.T_b_a
+    table = Table(title="markerless: estimate beside the truth", title_justify="left")
+    for col in ("quantity", "acscal", "truth", "error"):
+        table.add_column(col)
+    for c in ("a", "b"):
+        n_reg, n_all = len(reg[c]), len(reg[c].trajectory) + len(reg[c].skipped_images)
+        table.add_row(f"camera {c.upper()} frames registered by SfM", f"{n_reg}/{n_all}", "", "")
+    phi_true = unit["a"] / unit["b"]
+    if rel.scale is None:
+        raise SystemExit("demo: relpose --unknown-scale wrote no scale")
+    phi = rel.scale.phi_ba
+    table.add_row("phi_ba = mu_b / mu_a", f"{phi:.5f}", f"{phi_true:.5f}",
+                  f"{100 * abs(phi / phi_true - 1):.2f}%")  # fmt: skip
+    dR = float(se3.rotation_angle_deg(T_b_a[:3, :3].T @ est[:3, :3]))
+    table.add_row("R_a_b roll, pitch, yaw (deg)", _v(rel.relative_pose.rpy_deg, 2),
+                  _v(se3.rpy_deg_from_matrix(T_b_a[:3, :3].T), 2), f"{dR:.3f} deg")  # fmt: skip
+    t_m = est[:3, 3] * unit["b"]  # B units to metres
+    table.add_row("t_b_a (m, via the truth's B unit)", _v(t_m, 4), _v(T_b_a[:3, 3], 4),
+                  f"{1000 * float(np.linalg.norm(t_m - T_b_a[:3, 3])):.1f} mm")  # fmt: skip
+    console.print(table)
+    console.print(f"relpose written to {_show(run / 'relpose.yaml')}")
 
 
 def _trajectory_demo(out: Path, seed: int) -> None:

@@ -41,7 +41,12 @@ from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
-from acs_cli.core.relpose import SINGLE_AXIS_RATIO, UNDETERMINED_STD_FRACTION, _initial_lifted
+from acs_cli.core.relpose import (
+    SINGLE_AXIS_RATIO,
+    UNDETERMINED_STD_FRACTION,
+    _initial_lifted,
+    estimate_relpose,
+)
 from acs_cli.core.rig import RigJoint, RigTopology
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
@@ -579,7 +584,7 @@ def _initial(
         Gs = se3.transforms_from_rt(np.matmul(RXs, Ts[:, :3, :3]), ss * Ts[:, :3, 3] @ RXs.T + tXs)
         Tt = tracks[t_name].T_w_c[f]
         # j_t = phi R j_s + t  (target units, target world)
-        R, tt, phi, o_s, o_t = _initial_lifted(Gs, Tt, None)
+        R, tt, phi, o_s, o_t = _edge_start(Gs, Tt, j.type)
         phi = max(phi, 1e-9)
         RXt = R.T
         st_ = 1.0 / phi
@@ -619,6 +624,24 @@ def _initial(
             R0rig[j.name] = Rqp
             x[e] = np.concatenate([np.zeros(3), tqp])
     return x, R0X, R0rig, u0
+
+
+def _edge_start(
+    Gs: FloatArray, Tt: FloatArray, joint_type: str
+) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
+    """One edge's starting similarity and joint: for a ball, the pairwise refined
+    self-calibration (:func:`acs_cli.core.relpose.estimate_relpose`), which converges from
+    the linear lifted solution where the rig solve may not (a short, narrow motion leaves
+    the linear solution far off); otherwise, or when that refuses, the linear solution."""
+    if joint_type == "ball":
+        try:
+            e = estimate_relpose(Gs, Tt, unknown_scale=True, reject_outliers=False)
+        except DegenerateMotionError:
+            pass
+        else:
+            X = e.T_wb_wa
+            return X[:3, :3], X[:3, 3], float(e.phi_ba), e.position_in_a, e.position_in_b
+    return _initial_lifted(Gs, Tt, None)
 
 
 # --------------------------------------------------------------------------- weights

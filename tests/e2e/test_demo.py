@@ -22,7 +22,15 @@ def test_demo_prints_both_tables(tmp_path: Path) -> None:
     out = tmp_path / "demo"
     env = dict(os.environ, COLUMNS="120", NO_COLOR="1")
     res = subprocess.run(
-        [sys.executable, "-m", "sample_data_gen.demo", str(out), "--frames", "12"],
+        [
+            sys.executable,
+            "-m",
+            "sample_data_gen.demo",
+            str(out),
+            "--frames",
+            "12",
+            "--no-markerless",
+        ],
         capture_output=True,
         text=True,
         cwd=REPO,
