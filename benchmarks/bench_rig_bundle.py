@@ -37,8 +37,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.rig_bundle import CameraViews, bundle_adjust_rig
-from acs_cli.core.rig_solve import CameraTrack, RigEstimate, estimate_rig
+from acs_cli.core.rig_bundle import bundle_adjust_rig
+from acs_cli.core.rig_solve import RigEstimate, estimate_rig
 from acs_cli.errors import DegenerateMotionError
 from sample_data_gen.rig_sim import CornerRecording, rig_corner_recording
 
@@ -52,12 +52,8 @@ JOINTS = (
 def _solve(rec: CornerRecording, frames: np.ndarray | None = None) -> tuple:
     common = rec.common
     ref = int(np.flatnonzero(common)[0])
-    tracks = {c: CameraTrack(T, rec.valid[c].all(axis=1)) for c, T in rec.T_board_cam.items()}
-    est = estimate_rig(rec.rig.topology, tracks, reference_frame=ref)
-    views = {
-        c: CameraViews(rec.corners[c], rec.valid[c], rec.board_points, rec.intrinsics0[c])
-        for c in rec.rig.topology.cameras
-    }
+    est = estimate_rig(rec.rig.topology, rec.tracks(), reference_frame=ref)
+    views = rec.views()
     use = np.flatnonzero(common) if frames is None else frames
     t0 = time.perf_counter()
     ba = bundle_adjust_rig(rec.rig.topology, views, est, use)

@@ -23,6 +23,8 @@ import numpy as np
 
 from acs_cli.core import se3
 from acs_cli.core.rig import RigTopology, rig_topology
+from acs_cli.core.rig_bundle import CameraViews
+from acs_cli.core.rig_solve import CameraTrack
 from sample_data_gen.acs_sim import (
     add_pose_noise,
     random_rotations,
@@ -198,16 +200,8 @@ def rig_recording(
         T_W[step.target] = T_W[step.source] @ (
             T_p_q if step.forward else se3.invert_transforms(T_p_q)
         )
-    T_wc: dict[str, FloatArray] = {}
-    mu: dict[str, float] = {}
-    for c in cams:
-        T = random_transform(rng) @ T_W[c]
-        if sigma_rot_deg > 0 or sigma_trans > 0:
-            T = add_pose_noise(rng, T, sigma_rot_deg, sigma_trans)
-        mu[c] = float(rng.uniform(0.3, 3.0)) if c in unknown_scale else 1.0
-        T = T.copy()
-        T[:, :3, 3] *= mu[c]
-        T_wc[c] = T
+    in_order = {c: T_W[c] for c in cams}  # the config's order (the draws' order)
+    T_wc, mu = _trajectory_files(rng, in_order, unknown_scale, sigma_rot_deg, sigma_trans)
     return RigRecording(
         topology=topo,
         edges=edges,
@@ -217,6 +211,28 @@ def rig_recording(
         unknown_scale={c: c in unknown_scale for c in cams},
         timestamps=np.arange(n) / fps,
     )
+
+
+def _trajectory_files(
+    rng: np.random.Generator,
+    T_W: dict[str, FloatArray],
+    unknown_scale: tuple[str, ...],
+    sigma_rot_deg: float,
+    sigma_trans: float,
+) -> tuple[dict[str, FloatArray], dict[str, float]]:
+    """What each camera's trajectory file holds (its own world, noise, its own scale) and
+    each camera's units per metre."""
+    T_wc: dict[str, FloatArray] = {}
+    mu: dict[str, float] = {}
+    for c, T_true in T_W.items():
+        T = random_transform(rng) @ T_true
+        if sigma_rot_deg > 0 or sigma_trans > 0:
+            T = add_pose_noise(rng, T, sigma_rot_deg, sigma_trans)
+        mu[c] = float(rng.uniform(0.3, 3.0)) if c in unknown_scale else 1.0
+        T = T.copy()
+        T[:, :3, 3] *= mu[c]
+        T_wc[c] = T
+    return T_wc, mu
 
 
 def _smooth_recording(
@@ -256,17 +272,9 @@ def _smooth_recording(
         return T_W
 
     T_W = chain(t)
-    T_wc: dict[str, FloatArray] = {}
-    mu: dict[str, float] = {}
-    for c in topo.cameras:
-        sampled = chain(t - offsets.get(c, 0.0))[c] if offsets.get(c) else T_W[c]
-        T = random_transform(rng) @ sampled
-        if sigma_rot_deg > 0 or sigma_trans > 0:
-            T = add_pose_noise(rng, T, sigma_rot_deg, sigma_trans)
-        mu[c] = float(rng.uniform(0.3, 3.0)) if c in unknown_scale else 1.0
-        T = T.copy()
-        T[:, :3, 3] *= mu[c]
-        T_wc[c] = T
+    # each camera sampled on its own clock
+    sampled = {c: chain(t - offsets[c])[c] if offsets.get(c) else T_W[c] for c in topo.cameras}
+    T_wc, mu = _trajectory_files(rng, sampled, unknown_scale, sigma_rot_deg, sigma_trans)
     return RigRecording(
         topology=topo,
         edges=edges,
@@ -310,6 +318,19 @@ class CornerRecording:
     def common(self) -> np.ndarray:
         """Frames where every camera sees its board."""
         return np.all([v.all(axis=1) for v in self.valid.values()], axis=0)
+
+    def tracks(self) -> dict[str, CameraTrack]:
+        """The PnP poses as the rig solve's tracks (metric)."""
+        return {c: CameraTrack(T, self.valid[c].all(axis=1)) for c, T in self.T_board_cam.items()}
+
+    def views(self, corners: dict[str, FloatArray] | None = None) -> dict[str, CameraViews]:
+        """The corners (or ``corners`` instead) as the rig bundle's views, with the initial
+        intrinsics."""
+        got = self.corners if corners is None else corners
+        return {
+            c: CameraViews(got[c], self.valid[c], self.board_points, self.intrinsics0[c])
+            for c in self.rig.topology.cameras
+        }
 
 
 def rig_corner_recording(

@@ -10,7 +10,7 @@ import pytest
 
 from acs_cli.core import lsq, se3
 from acs_cli.core.rig_bundle import CameraViews, RigBundle, bundle_adjust_rig
-from acs_cli.core.rig_solve import CameraTrack, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import RigEstimate, estimate_rig
 from acs_cli.errors import InputError
 from sample_data_gen.rig_sim import CornerRecording, rig_corner_recording
 
@@ -27,13 +27,8 @@ def solved() -> tuple[CornerRecording, RigEstimate, RigBundle, int]:
     rec = rig_corner_recording(np.random.default_rng(7), 120, joints=JOINTS, noise_px=NOISE_PX)
     common = rec.common
     ref = int(np.flatnonzero(common)[0])
-    tracks = {c: CameraTrack(T, rec.valid[c].all(axis=1)) for c, T in rec.T_board_cam.items()}
-    est = estimate_rig(rec.rig.topology, tracks, reference_frame=ref)
-    views = {
-        c: CameraViews(rec.corners[c], rec.valid[c], rec.board_points, rec.intrinsics0[c])
-        for c in rec.rig.topology.cameras
-    }
-    ba = bundle_adjust_rig(rec.rig.topology, views, est, np.flatnonzero(common))
+    est = estimate_rig(rec.rig.topology, rec.tracks(), reference_frame=ref)
+    ba = bundle_adjust_rig(rec.rig.topology, rec.views(), est, np.flatnonzero(common))
     return rec, est, ba, ref
 
 
@@ -105,7 +100,7 @@ def test_cameras_in_any_order_with_their_own_corners_and_noise() -> None:
     valid["cam1"][:, 30:] = False
     common = rec.common
     ref = int(np.flatnonzero(common)[0])
-    tracks = {c: CameraTrack(T, rec.valid[c].all(axis=1)) for c, T in rec.T_board_cam.items()}
+    tracks = rec.tracks()
     topo = rec.rig.topology
     assert [s.target for s in topo.tree_order()] != [c for c in topo.cameras if c != "cam2"]
     est = estimate_rig(topo, tracks, reference_frame=ref)
@@ -130,10 +125,7 @@ def test_cameras_in_any_order_with_their_own_corners_and_noise() -> None:
 
 def test_bad_views_are_refused(solved: tuple) -> None:
     rec, est, _ba, ref = solved
-    views = {
-        c: CameraViews(rec.corners[c], rec.valid[c], rec.board_points, rec.intrinsics0[c])
-        for c in rec.rig.topology.cameras
-    }
+    views = rec.views()
     frames = np.flatnonzero(rec.common)
     topo = rec.rig.topology
     with pytest.raises(InputError, match="no corners for camera"):
