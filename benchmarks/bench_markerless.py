@@ -64,11 +64,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--self-calibrated", action="store_true")
+    ap.add_argument("--keep", type=Path, help="keep each seed's files under this folder")
     args = ap.parse_args(argv)
     rows = []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
-            root = Path(tmp)
+            root = Path(tmp) if args.keep is None else args.keep / f"seed{seed}"
             data = render_markerless(root, seed=seed, frames=60)
             truth = yaml.safe_load((data / "truth.yaml").read_text())
             poses, registered, n_all, sec = {}, 0, 0, 0.0
