@@ -770,7 +770,8 @@ def estimate_hinge_fixed(
     cov_y: np.ndarray
     if method == "paper":
         r_ax, J_ax = axis_problem.residuals(np.zeros(4), True)
-        assert J_ax is not None
+        if J_ax is None:
+            raise ValueError("the axis problem gave no Jacobian")
         Jf = J_ax[:, :2].reshape(-1, 4)
         theta_r = float(np.sum(r_ax**2) / max(2 * n - 4, 1))
         cov_axis = axis_problem.axis_covariance(np.zeros(4), theta_r * np.linalg.inv(Jf.T @ Jf))

@@ -100,7 +100,8 @@ class _Chart:
         return self.fun(self.point(d))
 
     def j(self, d: FloatArray) -> Jacobian:
-        assert self.jac is not None
+        if self.jac is None:
+            raise ValueError("no analytic Jacobian was given: scipy differences f instead")
         return self.jac(self.point(d))
 
 

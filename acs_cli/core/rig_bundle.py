@@ -398,11 +398,21 @@ def bundle_adjust_rig(
     L = model.L
     row_frame = model.row_frames()
 
-    def jac(x: FloatArray) -> object:
-        return lsq.block_jacobian(model.residuals, x, model.residuals(x), L.n_shared, L.block,
-                                  row_frame)  # fmt: skip
+    last: dict[bytes, FloatArray] = {}
 
-    sol = lsq.solve(model.residuals, x0, jac=jac, method="normal")
+    def fun(x: FloatArray) -> FloatArray:
+        """The residuals, remembered at the last point (the solver asks for the Jacobian
+        where it has just evaluated them, and the differences start from them)."""
+        key = x.tobytes()
+        if key not in last:
+            last.clear()
+            last[key] = model.residuals(x)
+        return last[key]
+
+    def jac(x: FloatArray) -> object:
+        return lsq.block_jacobian(model.residuals, x, fun(x), L.n_shared, L.block, row_frame)
+
+    sol = lsq.solve(fun, x0, jac=jac, method="normal")
     x = sol.x
     r = sol.fun.reshape(-1, 2)
     dof = max(sol.fun.size - x.size, 1)

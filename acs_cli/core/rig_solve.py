@@ -297,6 +297,14 @@ def joint_geometry(
     return o_p, e[2:5], up, uq
 
 
+def hinge_axes(st: _State, x: FloatArray, j: RigJoint) -> tuple[FloatArray, FloatArray]:
+    """A hinge's unit axes ``u_p, u_q`` (see :func:`joint_geometry`)."""
+    _, _, u_p, u_q = joint_geometry(st, x, j)
+    if u_p is None or u_q is None:
+        raise ValueError(f"joint {j.name} is a {j.type}, not a hinge: it has no axis")
+    return u_p, u_q
+
+
 def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, FloatArray]:
     """Raw (unwhitened) residuals of one edge over its frames: ``pos`` ``(m, 3)``, and
     ``rot`` ``(m, 3)`` (axis or rigid rotation) and ``trans`` ``(m, 3)`` where they apply."""
@@ -336,7 +344,8 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
         parts.append(x[st.L.delta[c]] * st.w_delta[c])
     for name, at, value, W in st.priors:
         g = joint_geometry(st, x, st.topo.joint(name))[at // 3]
-        assert g is not None  # a prior is only given where the joint has this part
+        if g is None:  # estimate_rig refuses such priors; this guards other callers
+            raise InputError(f"joints.{name}: a prior on an axis the joint does not have")
         parts.append(W @ (g - value))
     return np.concatenate(parts)
 
@@ -457,7 +466,8 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
                     put(blk[None], list(range(L.delta[c].start, L.delta[c].stop)), row0 + 3 * i)
             row0 += 3 * m
             if j.type == "hinge":
-                assert u_p is not None and u_q is not None
+                if u_p is None or u_q is None:
+                    raise ValueError(f"hinge {j.name} without axes")
                 w = st.w_rot[j.name] * mask
                 for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
                     B, cols = cam_block(c, se3.rotate(P[c]["R"][f], u), sign, False)
@@ -745,17 +755,15 @@ def _reject(st: _State, x: FloatArray) -> int:
 
 
 def _check_tracks(topo: RigTopology, tracks: dict[str, CameraTrack], ref_frame: int) -> int:
-    n = None
     for c in topo.cameras:
         if c not in tracks:
             raise InputError(f"cameras.{c}: no poses given")
+        se3.check_transforms(tracks[c].T_w_c, name=f"cameras.{c} poses")
+    n = tracks[topo.cameras[0]].T_w_c.shape[0]
+    for c in topo.cameras:
         tr = tracks[c]
-        se3.check_transforms(tr.T_w_c, name=f"cameras.{c} poses")
-        if n is None:
-            n = tr.T_w_c.shape[0]
         if tr.T_w_c.shape[0] != n or tr.valid.shape != (n,):
             raise InputError(f"cameras.{c}: poses are not on the rig's common timeline")
-    assert n is not None
     if not -n <= ref_frame < n:
         raise InputError(f"reference.frame: {ref_frame} is outside the {n} frames")
     k = ref_frame % n
@@ -896,7 +904,6 @@ def estimate_rig(
     x = x0
     nfev = 0
     noise: dict[str, dict[str, float]] = {}
-    sol = None
     for _ in range(REWEIGHT_ROUNDS):
         before = noise
         noise = _refit_weights(st, x, L.size)
@@ -919,7 +926,6 @@ def estimate_rig(
         st.gain[j.name] = np.where(frames[j.name] == k, REFERENCE_GAIN, 1.0)
     x, nf, sol = run(x)
     nfev += nf
-    assert sol is not None
     J = sol.jac
     H = np.asarray((J.T @ J).toarray() if hasattr(J, "toarray") else J.T @ J)
     cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
@@ -1124,8 +1130,7 @@ def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
         return ""
     cos = np.cos(np.radians(PARALLEL_AXES_DEG))
     if j.type == "hinge":
-        u_p = joint_geometry(st, x, j)[2]
-        assert u_p is not None
+        u_p = hinge_axes(st, x, j)[0]
         if abs(float(np.mean(se3.rotate(Rp, u_p), axis=0) @ a)) < cos:
             return ""
         return (
