@@ -26,7 +26,7 @@ probability about ``OUTLIER_ALPHA``) are dropped and the fit repeated, at most
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -377,10 +377,27 @@ LEAVE_OUT_SHARE = 0.1
 LEAVE_ONE_OUT_FACTOR = 2.5  # calibrated: <= 1% of clean 30-frame recordings lose a frame
 
 
+def negative_log_likelihood(
+    problem: LeastSquaresProblem, x: FloatArray, W: FloatArray, mask: NDArrayBool
+) -> float:
+    """``0.5 sum_i (r_i^T W_i r_i - log det W_i)`` over the kept frames, plus the prior
+    rows' ``0.5 r_p^T W_p r_p``: the Gaussian negative log-likelihood (up to a constant) of
+    ``x`` with the information matrices ``W`` ``(n, 3, 3)`` (its noise levels)."""
+    r, _ = problem.residuals(x, False)
+    Wk = _rows(W, mask)
+    _, logdet = np.linalg.slogdet(Wk)
+    out = 0.5 * float(np.sum(mahalanobis_sq(_rows(r, mask), Wk)) - np.sum(logdet))
+    if problem.priors is not None:
+        rp, _, Wp = problem.priors(x)
+        out += 0.5 * float(rp @ Wp @ rp)
+    return out
+
+
 def solve(
     problem: LeastSquaresProblem,
     x0: FloatArray,
     *,
+    alternatives: Sequence[FloatArray] = (),
     theta: FloatArray | None = None,
     reject_outliers: bool = True,
     max_outer: int = 30,
@@ -399,6 +416,10 @@ def solve(
     problem : LeastSquaresProblem
     x0 : ndarray, shape (p,)
         Initial parameters.
+    alternatives : sequence of ndarray, shape (p,)
+        Other starting points. Each start is fitted on every frame, and the fit of the
+        smallest :func:`negative_log_likelihood` goes on to the outlier rejection: a
+        guard against a start in the basin of a wrong minimum.
     theta : ndarray, shape (2,), optional
         Fixed noise levels ``(theta_t, theta_r)``; estimated when ``None``.
     reject_outliers : bool
@@ -410,6 +431,14 @@ def solve(
     th0 = None if theta is None else np.asarray(theta, dtype=float)
     fit = _fit(problem, x0, th0, mask, fixed_theta, max_outer)
     iterations = fit.iterations
+    if alternatives:
+        best = negative_log_likelihood(problem, fit.x, fit.W, mask)
+        for start in alternatives:
+            other = _fit(problem, np.asarray(start, dtype=float), th0, mask, fixed_theta, max_outer)
+            iterations += other.iterations
+            value = negative_log_likelihood(problem, other.x, other.W, mask)
+            if np.isfinite(value) and value < best:
+                fit, best = other, value
     max_reject = int(np.floor(MAX_OUTLIER_FRACTION * n))
     threshold = outlier_threshold(n)
     batch_rounds = 0

@@ -25,6 +25,7 @@ reference poses by the joint constraint before composing ``T_b_a``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -325,6 +326,25 @@ def _initial_lifted(
     return R_X, t_X, float(np.mean(s)), np.asarray(o_a), o_b
 
 
+def _self_calibration_starts(
+    Ta: FloatArray, Tb: FloatArray, unknown_scale: bool, pack: Callable[..., FloatArray]
+) -> list[FloatArray]:
+    """Starting points of the self-calibration besides the lifted one: the linear solution
+    with the joint at camera A's centre, and the same from B's side (A and B swapped, the
+    similarity inverted)."""
+    zero = np.zeros(3)
+    R_X, t_X, phi, o_a, o_b = _initial_lifted(Ta, Tb, zero)
+    starts = [pack(R_X, t_X, phi, o_a, o_b)]
+    R_Y, t_Y, psi, o_b, o_a = _initial_lifted(Tb, Ta, zero)  # j_a = psi R_Y j_b + t_Y
+    phi = 1.0 / max(psi, 1e-9) if unknown_scale else 1.0
+    starts.append(pack(R_Y.T, -phi * R_Y.T @ t_Y, phi, o_a, o_b))
+    return starts
+
+
+#: Bound on the log of a scale factor inside the solver (phi within 1e-30..1e30).
+_LOG_SCALE_BOUND = 69.0
+
+
 class _Layout:
     """Index layout of the refined parameter vector."""
 
@@ -573,20 +593,41 @@ def _estimate_refined(
             o_a = mu0 * pa
         if pb is not None:
             o_b = phi * mu0 * pb
-    x0 = np.zeros(L.size)
-    x0[L.rot] = se3.rotvec_from_matrix(R_X)
-    x0[L.t], x0[L.oa], x0[L.ob] = t_X, o_a, o_b
-    if L.logphi is not None:
-        x0[L.logphi] = np.log(max(phi, 1e-9))
-    if L.logmu is not None:
-        x0[L.logmu] = np.log(mu0)
+
+    def pack(
+        R_X: FloatArray, t_X: FloatArray, phi: float, o_a: FloatArray, o_b: FloatArray
+    ) -> FloatArray:
+        x = np.zeros(L.size)
+        x[L.rot] = se3.rotvec_from_matrix(R_X)
+        x[L.t], x[L.oa], x[L.ob] = t_X, o_a, o_b
+        if L.logphi is not None:
+            x[L.logphi] = np.log(max(phi if unknown_scale else 1.0, 1e-9))
+        if L.logmu is not None:
+            x[L.logmu] = np.log(mu0)
+        return x
+
+    x0 = pack(R_X, t_X, phi, o_a, o_b)
+    # the lifted start can fall in a wrong minimum's basin on narrow motion (a joint
+    # hundreds of units away, the rotation noise fitted at zero): without a joint, also
+    # start from a joint at either camera's centre, and keep the most likely fit
+    alternatives = _self_calibration_starts(Ta, Tb, unknown_scale, pack) if self_cal else []
 
     def unpack(
         x: FloatArray,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float, float]:
         R = se3.matrix_from_rotvec(x[L.rot])
-        ph = float(np.exp(x[L.logphi])) if L.logphi is not None else 1.0
-        mu = float(np.exp(x[L.logmu])) if L.logmu is not None else 1.0
+        # log scales clipped far beyond any real ratio: a start that wanders off must not
+        # overflow (it then loses on likelihood)
+        ph = (
+            float(np.exp(np.clip(x[L.logphi], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
+            if L.logphi is not None
+            else 1.0
+        )
+        mu = (
+            float(np.exp(np.clip(x[L.logmu], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
+            if L.logmu is not None
+            else 1.0
+        )
         return R, x[L.t], x[L.oa], x[L.ob], ph, mu
 
     def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
@@ -620,7 +661,7 @@ def _estimate_refined(
 
     prior_rows = _prior_rows(prior, L, metric)
     problem = estimation.LeastSquaresProblem(residuals, noise_shapes, prior_rows, retract)
-    sol = estimation.solve(problem, x0, reject_outliers=reject_outliers)
+    sol = estimation.solve(problem, x0, alternatives=alternatives, reject_outliers=reject_outliers)
     R_X, t_X, o_a, o_b, phi, mu = unpack(sol.x)
     j_a = se3.transform_points(Ta, o_a)
     _check_spread(j_a[sol.inliers])
@@ -691,8 +732,18 @@ def _prior_rows(prior: JointPrior, L: _Layout, metric: bool):
 
     def rows(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         rs, Js, Ws = [], [], []
-        ph = float(np.exp(x[L.logphi])) if L.logphi is not None else 1.0
-        mu = float(np.exp(x[L.logmu])) if L.logmu is not None else 1.0
+        # log scales clipped far beyond any real ratio: a start that wanders off must not
+        # overflow (it then loses on likelihood)
+        ph = (
+            float(np.exp(np.clip(x[L.logphi], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
+            if L.logphi is not None
+            else 1.0
+        )
+        mu = (
+            float(np.exp(np.clip(x[L.logmu], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
+            if L.logmu is not None
+            else 1.0
+        )
         for pos, W, sl in items:
             J = np.zeros((3, L.size))
             if metric:
