@@ -5,7 +5,11 @@ Without ``--scenario`` it writes the sample set (one rig: ``fixed_joint``, ``ove
 ``OUT_DIR``. With ``--rig`` it writes the five-camera rig (``cam0.tum`` .. ``cam4.tum``,
 ``truth.yaml``, ``config.yaml``) into ``OUT_DIR``. With ``--markerless`` it renders the
 markerless sample (:mod:`sample_data_gen.textured`: two cameras of a rig filming a textured
-room, 640x480 at 30 fps, images and truth) into ``OUT_DIR/markerless``.
+room, 640x480 at 30 fps, images and truth) into ``OUT_DIR/markerless``. With ``--aprilgrid``
+or ``--charuco`` it renders one camera filming Kalibr's AprilGrid or a ChArUco board
+(:mod:`sample_data_gen.target_render`: half the frames show 30-70 % of the target; images,
+``target.yaml``, ``truth.yaml`` and the true corner projections) into ``OUT_DIR/aprilgrid``
+or ``OUT_DIR/charuco``.
 """
 
 from __future__ import annotations
@@ -14,7 +18,9 @@ import argparse
 import math
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
+from sample_data_gen.target_render import default_target, render_target_sequence
 from sample_data_gen.textured import render_markerless
 from sample_data_gen.writer import (
     RIG_NOISE,
@@ -49,6 +55,13 @@ def _parser() -> argparse.ArgumentParser:
         "of a rig moving through a textured room (no board), for structure-from-motion, with "
         "truth.yaml and the true trajectories truth_a.tum, truth_b.tum",
     )
+    for kind, what in (("aprilgrid", "Kalibr's 6x6 AprilGrid"), ("charuco", "an 11x8 ChArUco")):
+        p.add_argument(
+            f"--{kind}",
+            action="store_true",
+            help=f"render one camera filming {what} into OUT_DIR/{kind} (half the frames show "
+            "30-70%% of it), with target.yaml, truth.yaml and truth_corners.npz",
+        )
     p.add_argument(
         "--time-offset",
         type=float,
@@ -62,7 +75,8 @@ def _parser() -> argparse.ArgumentParser:
         "--frames",
         type=int,
         default=None,
-        help="poses per camera (default 30; 100 with --rig; 60 images with --markerless)",
+        help="poses per camera (default 30; 100 with --rig; 60 images with --markerless; 30 "
+        "images with --aprilgrid, --charuco)",
     )
     p.add_argument(
         "--rot-noise",
@@ -103,6 +117,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--time-offset needs --markerless")
     if args.time_offset is not None and not math.isfinite(args.time_offset):
         parser.error("--time-offset must be a finite number of seconds")
+    targets = [k for k in ("aprilgrid", "charuco") if getattr(args, k)]
+    if targets:
+        others = ("scenario", "rot_noise", "trans_noise", "mu_a", "mu_b", "time_offset")
+        given = [name for name in others if getattr(args, name) is not None]
+        if args.rig or args.hinge or args.markerless or given:
+            parser.error("--aprilgrid and --charuco take only --seed and --frames")
+        for kind in targets:
+            path = render_target_sequence(
+                Path(args.out_dir) / kind,
+                default_target(kind),
+                seed=args.seed,
+                frames=30 if args.frames is None else args.frames,
+            )
+            print(f"{kind}: {path}")
+        return 0
     if args.markerless:
         others = ("scenario", "rot_noise", "trans_noise", "mu_a", "mu_b")
         if args.rig or args.hinge or any(getattr(args, name) is not None for name in others):

@@ -427,7 +427,15 @@ def render_view(
         alb = _albedo_chunk(chunk, T_cam_world, T_cam_board, board or Board(1, 1, 1.0), cam, env)
         m = alb.shape[0] // s
         rows.append(alb.reshape(m, s, w, s).mean(axis=(1, 3)))
-    albedo = np.concatenate(rows, axis=0)
+    return apply_photometry(np.concatenate(rows, axis=0), photometry, rng)
+
+
+def apply_photometry(
+    albedo: np.ndarray, photometry: Photometry, rng: np.random.Generator
+) -> np.ndarray:
+    """The 8-bit image ``(H, W)`` of an albedo map ``(H, W)`` (0-1): lighting (gain, offset,
+    gradient), Gaussian blur, Gaussian noise and quantisation."""
+    h, w = albedo.shape
     xs = (np.arange(w) - (w - 1) / 2) / w
     ys = (np.arange(h) - (h - 1) / 2) / h
     gx, gy = photometry.gradient

@@ -11,13 +11,16 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from acs_cli.errors import InputError
+
+if TYPE_CHECKING:
+    from acs_cli.core.targets import MarkerTarget
 
 __all__ = ["intrinsics", "parse_board", "poses", "register"]
 
@@ -75,11 +78,57 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
 
 
 BoardOpt = Annotated[
-    str, typer.Option("--board", help="Inner corners of the checkerboard, COLSxROWS (e.g. 9x6).")
+    str | None,
+    typer.Option(
+        "--board", help="Inner corners of the checkerboard, COLSxROWS (e.g. 9x6). (default: 9x6)"
+    ),
 ]
 SquareOpt = Annotated[
-    float, typer.Option("--square", help="Side of a board square, metres.", min=0.0)
+    float | None,
+    typer.Option("--square", help="Side of a board square, metres. (default: 0.025)", min=0.0),
 ]
+TargetOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--target",
+        help="An AprilGrid or ChArUco target instead of the checkerboard: a target YAML "
+        "(Kalibr's aprilgrid file as it is, or target_type: charuco with OpenCV's names) or "
+        "a short form, aprilgrid:6x6:0.088:0.3 (tags, tag size m, spacing ratio) or "
+        "charuco:11x8:0.03:0.022:DICT_5X5_100 (squares, square m, marker m, dictionary).",
+    ),
+]
+
+
+def parse_target_option(
+    target: str | None, board: str | None, square: float | None
+) -> tuple[int | None, int | None, float | None, MarkerTarget | None]:
+    """``--target`` and ``--board``/``--square`` (which exclude each other) as
+    ``(cols, rows, square, target)``: a checkerboard (given either way) as its corners and
+    square, an AprilGrid or ChArUco as ``target``; what was not given is None.
+
+    Raises
+    ------
+    InputError
+        ``--target`` with ``--board`` or ``--square``, or a bad target or board.
+    """
+    if target is None:
+        cols, rows = parse_board(board) if board is not None else (None, None)
+        return cols, rows, square, None
+    given = [k for k, v in {"--board": board, "--square": square}.items() if v is not None]
+    if given:
+        raise InputError(
+            f"{' and '.join(given)} {'describe' if len(given) > 1 else 'describes'} a "
+            "checkerboard and --target replaces them: give one or the other"
+        )
+    from acs_cli.core.targets import Checkerboard
+    from acs_cli.io.target import parse_target
+
+    tgt = parse_target(target)
+    if isinstance(tgt, Checkerboard):
+        return tgt.cols, tgt.rows, tgt.square, None
+    return None, None, None, tgt
+
+
 WorkersOpt = Annotated[
     int | None,
     typer.Option("--workers", min=1, help="Detection processes (default: all CPU cores)."),
@@ -89,8 +138,9 @@ WorkersOpt = Annotated[
 def intrinsics(
     images_dir: Annotated[Path, typer.Argument(help="Folder of checkerboard images.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="intrinsics.yaml to write.")],
-    board: BoardOpt = "9x6",
-    square: SquareOpt = 0.025,
+    board: BoardOpt = None,
+    square: SquareOpt = None,
+    target: TargetOpt = None,
     model: Annotated[
         CameraModel,
         typer.Option(
@@ -104,25 +154,32 @@ def intrinsics(
     ] = None,
     workers: WorkersOpt = None,
 ) -> None:
-    """Calibrate a camera's intrinsics from checkerboard images.
+    """Calibrate a camera's intrinsics from checkerboard (or AprilGrid, ChArUco) images.
+
+    With --target, every identified corner counts: a view showing part of the target is
+    used when it has at least 8 corners not on one line.
 
     Detections are cached in <output stem>.detections.npz, so a rerun (or `acscal poses`)
     reuses them and an interrupted run resumes.
 
-    Example:
+    Examples:
 
         acscal intrinsics images/cam_a --board 9x6 --square 0.025 -o cam_a/intrinsics.yaml
+
+        acscal intrinsics images/cam_a --target april_6x6.yaml -o cam_a/intrinsics.yaml
     """
     from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
 
-    cols, rows = parse_board(board)
+    cols, rows, sq, tgt = parse_target_option(target, board, square)
+    defaults = IntrinsicsConfig()
     cfg = IntrinsicsConfig(
-        cols=cols,
-        rows=rows,
-        square=square,
+        cols=defaults.cols if cols is None else cols,
+        rows=defaults.rows if rows is None else rows,
+        square=defaults.square if sq is None else sq,
         model=model.value,
         export=tuple(dict.fromkeys(e.value for e in (export or []))),
         workers=workers,
+        target=tgt,
     )
     with _progress("detecting") as progress:
         run = run_intrinsics(images_dir, output, cfg, progress)
@@ -195,6 +252,14 @@ def poses(
         float | None,
         typer.Option("--square", min=0.0, help="Square side, metres (default: the intrinsics')."),
     ] = None,
+    target: Annotated[
+        str | None,
+        typer.Option(
+            "--target",
+            help="An AprilGrid or ChArUco target (a target YAML or a short form, as for "
+            "`acscal intrinsics`); default: the intrinsics' target, when it records one.",
+        ),
+    ] = None,
     tum: Annotated[
         Path | None, typer.Option("--tum", help="Also write the trajectory as a TUM file.")
     ] = None,
@@ -264,11 +329,31 @@ def poses(
             "from an earlier --sfm run). (default: a temporary folder)",
         ),
     ] = None,
+    timestamps: Annotated[
+        Path | None,
+        typer.Option(
+            "--timestamps",
+            help="A CSV of image name and time in seconds (or nanoseconds under a '[ns]' "
+            "header, as EuRoC's data.csv), instead of the times in the file names.",
+        ),
+    ] = None,
+    fps: Annotated[
+        float | None,
+        typer.Option(
+            "--fps",
+            help="Frame rate: turns frame numbers in the file names (img_00010.png) into "
+            "seconds. Without it (or --timestamps) such times stay frame numbers.",
+        ),
+    ] = None,
 ) -> None:
     """Each image's camera pose, as a trajectory: on a board, or markerless (--sfm).
 
     Writes an acscal/poses NPZ that `acscal joint` and `acscal relpose` read directly.
     Board poses have world = the board, in metres.
+
+    Times come from the file names: a decimal number is seconds, an integer of 18 or more
+    digits nanoseconds (ROS, EuRoC), of 9-17 digits seconds, ms or us of Unix time, and a
+    shorter integer a frame number (give --fps, or --timestamps FILE).
 
     With --sfm, incremental structure from motion (COLMAP) poses the registered images:
     world = the first registered camera, translations in SfM units (unknown scale: for
@@ -283,6 +368,10 @@ def poses(
             -o cam_a/poses.npz --tum cam_a/poses.txt
     """
     if sfm:
+        if target is not None:
+            raise InputError(
+                "--target describes a calibration target, which --sfm does not use; leave it out"
+            )
         _sfm_poses(
             images_dir,
             intrinsics_file,
@@ -298,6 +387,8 @@ def poses(
             max_image_size=max_image_size,
             max_features=max_features,
             workdir=workdir,
+            timestamps=timestamps,
+            fps=fps,
         )
         return
     from acs_cli.stages.poses import PosesConfig, run_poses
@@ -319,8 +410,17 @@ def poses(
             "board poses need --intrinsics (from `acscal intrinsics`); for markerless poses "
             "without a board give --sfm"
         )
-    cols, rows = parse_board(board) if board is not None else (None, None)
-    cfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=workers)
+    cols, rows, sq, tgt = parse_target_option(target, board, square)
+    cfg = PosesConfig(
+        cols=cols,
+        rows=rows,
+        square=sq,
+        target=tgt,
+        tum=tum,
+        workers=workers,
+        timestamps=timestamps,
+        fps=fps,
+    )
     with _progress("detecting") as progress:
         run = run_poses(images_dir, intrinsics_file, output, cfg, progress)
     n = len(run.trajectory)
@@ -350,6 +450,8 @@ def _sfm_poses(
     max_image_size: int | None,
     max_features: int | None,
     workdir: Path | None,
+    timestamps: Path | None,
+    fps: float | None,
 ) -> None:
     """``acscal poses --sfm``: the markerless front end."""
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
@@ -370,6 +472,8 @@ def _sfm_poses(
         max_image_size=max_image_size,
         max_features=8192 if max_features is None else max_features,
         workdir=workdir,
+        timestamps=timestamps,
+        fps=fps,
     )
     with _phase_progress() as progress:
         run = run_sfm_poses(images_dir, intrinsics_file, output, cfg, progress)

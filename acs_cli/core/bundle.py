@@ -9,12 +9,15 @@ camera's frame and at ``p_w`` in the board's (world) frame, frame ``i``'s pose i
 in the camera. Fitting the intrinsics, ``o``, ``p_w`` and the rotations directly to the
 detected corners (pixels) is the maximum-likelihood calibration under pixel noise: the
 motion constraint also pins down the intrinsics, which a separate ``calibrateCamera``
-cannot use. The camera model is OpenCV's pinhole with radial-tangential distortion
-``(k1, k2, p1, p2, k3)``.
+cannot use. The camera model is any of :mod:`acs_cli.core.camera_models` (OpenCV's pinhole
+and rational models, and its equidistant fisheye), the intrinsic vector's length following
+it. A corner not seen in a frame is NaN (or False in ``valid``): each frame may see a
+different set of the target's corners (a partial view of an AprilGrid or ChArUco board).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,76 +25,47 @@ import numpy as np
 from scipy import sparse
 
 from acs_cli.core import lsq, se3
+from acs_cli.core.camera_models import camera_model
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 
-#: Intrinsic parameters in the order they are optimised.
-INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+#: Fewest corners of each frame a bundle adjustment takes (a frame's pose, or rotation, is
+#: then overdetermined; PnP needs as many).
+MIN_FRAME_CORNERS = 4
 
 
-def project_points(x_cam: FloatArray, intrinsics: FloatArray) -> FloatArray:
-    """Pinhole + radial-tangential projection of camera-frame points.
+def project_points(x_cam: FloatArray, intrinsics: FloatArray, model: str = "pinhole") -> FloatArray:
+    """Projection of camera-frame points (:meth:`CameraModel.project` of ``model``).
 
     Parameters
     ----------
     x_cam : ndarray, shape (..., 3)
         Points in the camera's frame (metres), ``z > 0``.
-    intrinsics : ndarray, shape (9,)
-        ``fx, fy, cx, cy`` (pixels) and ``k1, k2, p1, p2, k3`` (OpenCV's order).
+    intrinsics : ndarray, shape (p,)
+        ``fx, fy, cx, cy`` (pixels) and the model's distortion (OpenCV's order); ``p = 9``
+        for the pinhole model (``k1, k2, p1, p2, k3``).
+    model : {"pinhole", "rational", "fisheye"}
 
     Returns
     -------
     ndarray, shape (..., 2)
-        Pixel coordinates (as ``cv2.projectPoints``).
+        Pixel coordinates (as OpenCV's ``projectPoints`` of the model).
     """
-    fx, fy, cx, cy, k1, k2, p1, p2, k3 = intrinsics
-    x = x_cam[..., 0] / x_cam[..., 2]
-    y = x_cam[..., 1] / x_cam[..., 2]
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    return np.stack([fx * xd + cx, fy * yd + cy], axis=-1)
+    return camera_model(model).project(x_cam, intrinsics)
 
 
 def projection_jacobians(
-    x_cam: FloatArray, intrinsics: FloatArray
+    x_cam: FloatArray, intrinsics: FloatArray, model: str = "pinhole"
 ) -> tuple[FloatArray, FloatArray]:
     """Derivatives of :func:`project_points` for ``(k, 3)`` points.
 
     Returns
     -------
-    d_intrinsics : ndarray, shape (k, 2, 9)
+    d_intrinsics : ndarray, shape (k, 2, p)
     d_point : ndarray, shape (k, 2, 3)
         With respect to the camera-frame point.
     """
-    fx, fy, _cx, _cy, k1, k2, p1, p2, k3 = intrinsics
-    X, Y, Z = x_cam[:, 0], x_cam[:, 1], x_cam[:, 2]
-    x, y = X / Z, Y / Z
-    r2 = x * x + y * y
-    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    drad = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d rad / d r2
-    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    k = x.size
-    Di = np.zeros((k, 2, 9))
-    Di[:, 0, 0], Di[:, 1, 1] = xd, yd
-    Di[:, 0, 2], Di[:, 1, 3] = 1.0, 1.0
-    for j, power in ((4, 1), (5, 2), (8, 3)):  # k1, k2, k3
-        Di[:, 0, j] = fx * x * r2**power
-        Di[:, 1, j] = fy * y * r2**power
-    Di[:, 0, 6], Di[:, 1, 6] = fx * 2.0 * x * y, fy * (r2 + 2.0 * y * y)  # p1
-    Di[:, 0, 7], Di[:, 1, 7] = fx * (r2 + 2.0 * x * x), fy * 2.0 * x * y  # p2
-    # d(xd, yd) / d(x, y)
-    a = rad + 2.0 * x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x
-    b = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y
-    d = rad + 2.0 * y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x
-    Dd = np.stack([np.stack([fx * a, fx * b], -1), np.stack([fy * b, fy * d], -1)], axis=1)
-    # d(x, y) / d(X, Y, Z)
-    Dn = np.zeros((k, 2, 3))
-    Dn[:, 0, 0] = Dn[:, 1, 1] = 1.0 / Z
-    Dn[:, 0, 2], Dn[:, 1, 2] = -x / Z, -y / Z
-    return Di, np.matmul(Dd, Dn)
+    return camera_model(model).jacobians(x_cam, intrinsics)
 
 
 def right_jacobians(rotvec: FloatArray) -> FloatArray:
@@ -105,20 +79,14 @@ def right_jacobians(rotvec: FloatArray) -> FloatArray:
     return np.eye(3) - a[:, None, None] * S + b[:, None, None] * np.matmul(S, S)
 
 
-def intrinsics_vector(K: FloatArray, dist: FloatArray) -> FloatArray:
-    """``(9,)`` vector from a camera matrix ``(3, 3)`` and 5 distortion coefficients."""
-    d = np.zeros(5)
-    dist = np.asarray(dist, dtype=float).ravel()
-    if dist.size not in (4, 5):
-        raise InputError(
-            f"expected 4 or 5 distortion coefficients (k1 k2 p1 p2 [k3]), got {dist.size}"
-        )
-    d[: dist.size] = dist
-    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d])
+def intrinsics_vector(K: FloatArray, dist: FloatArray, model: str = "pinhole") -> FloatArray:
+    """The model's intrinsic vector from a camera matrix ``(3, 3)`` and its distortion
+    coefficients (:meth:`CameraModel.vector`; ``(9,)`` for the pinhole model's 4 or 5)."""
+    return camera_model(model).vector(K, dist)
 
 
 def camera_matrix(intrinsics: FloatArray) -> FloatArray:
-    """``(3, 3)`` camera matrix from the ``(9,)`` vector."""
+    """``(3, 3)`` camera matrix from an intrinsic vector ``(p,)`` (``fx fy cx cy ...``)."""
     fx, fy, cx, cy = intrinsics[:4]
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
@@ -174,16 +142,19 @@ class FixedJointBundle:
 
     Attributes
     ----------
-    intrinsics : ndarray, shape (9,)
-        ``fx fy cx cy k1 k2 p1 p2 k3``.
+    model : str
+        The camera model (:data:`acs_cli.core.camera_models.CAMERA_MODELS`).
+    intrinsics : ndarray, shape (p,)
+        Named by the model's ``names`` (``fx fy cx cy k1 k2 p1 p2 k3`` for pinhole).
     joint_in_cam : ndarray, shape (3,)
         The joint in the camera's frame (metres, the board's unit).
     joint_in_world : ndarray, shape (3,)
         The joint in the board's frame.
     T_world_cam : ndarray, shape (n, 4, 4)
         Refined poses of the frames.
-    covariance : ndarray, shape (15, 15)
-        Of ``(intrinsics, joint_in_cam, joint_in_world)`` (pixel noise estimated).
+    covariance : ndarray, shape (p + 6, p + 6)
+        Of ``(intrinsics, joint_in_cam, joint_in_world)`` (pixel noise estimated; 0 rows
+        and columns for held intrinsics).
     rms_px : float
         Reprojection RMS over the corners used.
     per_frame_rms_px : ndarray, shape (n,)
@@ -191,6 +162,7 @@ class FixedJointBundle:
         Estimated standard deviation of a corner coordinate.
     """
 
+    model: str
     intrinsics: FloatArray
     joint_in_cam: FloatArray
     joint_in_world: FloatArray
@@ -202,72 +174,152 @@ class FixedJointBundle:
     success: bool
 
     @property
+    def intrinsics_covariance(self) -> FloatArray:
+        """``(p, p)`` covariance of the intrinsics."""
+        p = self.intrinsics.size
+        return self.covariance[:p, :p]
+
+    @property
+    def intrinsics_std(self) -> FloatArray:
+        """``(p,)`` standard deviations of the intrinsics (0 for held ones)."""
+        return np.sqrt(np.clip(np.diag(self.intrinsics_covariance), 0.0, None))
+
+    @property
+    def joint_covariance(self) -> FloatArray:
+        """``(3, 3)`` covariance of ``joint_in_cam`` (metres squared)."""
+        p = self.intrinsics.size
+        return self.covariance[p : p + 3, p : p + 3]
+
+    @property
     def joint_std(self) -> FloatArray:
-        return np.sqrt(np.diag(self.covariance)[9:12])
+        return np.sqrt(np.diag(self.joint_covariance))
 
 
-def _check_observations(corners: FloatArray, valid: FloatArray, board: FloatArray) -> None:
+def observed(
+    corners: FloatArray, valid: FloatArray | None, board: FloatArray, what: str = "corners"
+) -> np.ndarray:
+    """The corners to fit: ``valid`` (all when None) where the corner is finite.
+
+    A corner a frame did not see is NaN in ``corners`` (column ``j`` is the target's corner
+    ``j``, ``board`` holds them all), so each frame may see a different set.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (n, m, 2)
+        Pixels; NaN where not seen.
+    valid : ndarray of bool, shape (n, m), or None
+    board : ndarray, shape (m, 3)
+        The target's corners in its frame (metres), all finite.
+    what : str
+        How messages name the corners (``"camera B's corners"``).
+
+    Returns
+    -------
+    ndarray of bool, shape (n, m)
+
+    Raises
+    ------
+    InputError
+        Shapes that do not fit, or board points that are not finite.
+    """
     if corners.ndim != 3 or corners.shape[2] != 2:
-        raise InputError(f"corners must have shape (n, m, 2), got {corners.shape}")
-    if valid.shape != corners.shape[:2]:
-        raise InputError(f"valid must have shape {corners.shape[:2]}, got {valid.shape}")
+        raise InputError(f"{what} must have shape (n, m, 2), got {corners.shape}")
+    seen = np.asarray(np.isfinite(corners).all(axis=2))
+    if valid is not None:
+        v = np.asarray(valid, dtype=bool)
+        if v.shape != corners.shape[:2]:
+            raise InputError(f"valid must have shape {corners.shape[:2]}, got {v.shape}")
+        seen &= v
     if board.shape != (corners.shape[1], 3):
         raise InputError(f"board points must have shape ({corners.shape[1]}, 3), got {board.shape}")
+    if not np.all(np.isfinite(board)):
+        raise InputError("board points must be finite")
+    return seen
+
+
+def check_frame_corners(
+    seen: np.ndarray, what: str = "a camera", frames: np.ndarray | None = None
+) -> None:
+    """``InputError`` naming the frames (rows of ``seen`` ``(n, m)``, numbered by
+    ``frames`` ``(n,)`` when given) with fewer than :data:`MIN_FRAME_CORNERS` corners."""
+    few = np.flatnonzero(seen.sum(axis=1) < MIN_FRAME_CORNERS)
+    if few.size:
+        names = few if frames is None else np.asarray(frames)[few]
+        raise InputError(
+            f"{what} sees fewer than {MIN_FRAME_CORNERS} corners at frame(s) "
+            f"{', '.join(map(str, names[:5]))}{' ...' if few.size > 5 else ''}: a bundle "
+            "adjustment takes frames where every camera sees its board"
+        )
 
 
 def bundle_adjust_fixed_joint(
     corners: FloatArray,
-    valid: FloatArray,
+    valid: FloatArray | None,
     board_points: FloatArray,
     intrinsics0: FloatArray,
     T_world_cam0: FloatArray,
     joint_in_cam0: FloatArray,
     joint_in_world0: FloatArray,
     *,
-    fix_k3: bool = True,
+    model: str = "pinhole",
+    held: Sequence[str] | None = None,
 ) -> FixedJointBundle:
     """Maximum-likelihood fixed-joint calibration of one camera from its corners.
 
     Parameters
     ----------
     corners : ndarray, shape (n, m, 2)
-        Detected corners of ``n`` frames (pixels), in board-point order.
-    valid : ndarray of bool, shape (n, m)
-        Which corners were detected.
+        Detected corners of ``n`` frames (pixels), in board-point order; NaN where a
+        frame did not see the corner.
+    valid : ndarray of bool, shape (n, m), or None
+        Which corners to use (besides the finite ones); None: every finite corner.
     board_points : ndarray, shape (m, 3)
         The corners in the board's frame (metres).
-    intrinsics0 : ndarray, shape (9,)
-        Initial intrinsics (e.g. from ``cv2.calibrateCamera``).
+    intrinsics0 : ndarray, shape (p,)
+        Initial intrinsics of ``model`` (e.g. from ``cv2.calibrateCamera``).
     T_world_cam0 : ndarray, shape (n, 4, 4)
         Initial poses (e.g. from PnP); only their rotations are used.
     joint_in_cam0, joint_in_world0 : ndarray, shape (3,)
         Initial joint (e.g. from :func:`acs_cli.core.joint.estimate_joint_fixed`).
-    fix_k3 : bool
-        Keep ``k3`` at its initial value (as OpenCV's default five-parameter fits often
-        should for moderate lenses).
+    model : {"pinhole", "rational", "fisheye"}
+        The camera model of the intrinsics.
+    held : sequence of str, optional
+        Intrinsics held at their initial values; default the model's ``held`` (``k3`` of
+        the pinhole model, as OpenCV's five-parameter fits often should for moderate
+        lenses).
 
     Returns
     -------
     FixedJointBundle
+
+    Raises
+    ------
+    InputError
+        Shapes that do not fit, or a frame with fewer than :data:`MIN_FRAME_CORNERS`
+        corners.
     """
+    cam = camera_model(model)
     corners = np.asarray(corners, dtype=float)
-    valid = np.asarray(valid, dtype=bool)
     board = np.asarray(board_points, dtype=float)
-    _check_observations(corners, valid, board)
+    seen = observed(corners, valid, board)
+    check_frame_corners(seen)
+    intrinsics0 = np.asarray(intrinsics0, dtype=float)
+    if intrinsics0.shape != (cam.size,):
+        raise InputError(f"the {model} model takes {cam.size} intrinsics, got {intrinsics0.shape}")
     T0 = se3.check_transforms(T_world_cam0, "initial poses")
-    n = valid.shape[0]
+    n = seen.shape[0]
     if T0.shape[0] != n:
         raise InputError(f"{T0.shape[0]} initial poses for {n} frames")
-    free_intr = [k for k in range(9) if not (fix_k3 and k == 8)]
+    free_intr = cam.free(held)
     ni = len(free_intr)
     rot0 = se3.rotvec_from_matrix(T0[:, :3, :3])
     p0 = np.concatenate([intrinsics0[free_intr], joint_in_cam0, joint_in_world0, rot0.ravel()])
-    frame_idx, corner_idx = np.nonzero(valid)
+    frame_idx, corner_idx = np.nonzero(seen)
     obs = corners[frame_idx, corner_idx]
     rel = board[corner_idx]  # (k, 3)
 
     def unpack(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        intr = np.asarray(intrinsics0, dtype=float).copy()
+        intr = intrinsics0.copy()
         intr[free_intr] = p[:ni]
         o = p[ni : ni + 3]
         pw = p[ni + 3 : ni + 6]
@@ -279,7 +331,7 @@ def bundle_adjust_fixed_joint(
         # x_cam = R_i^T (X - p_w) + o, for every observed corner at once
         d = rel - pw
         x_cam = np.einsum("kji,kj->ki", R[frame_idx], d) + o
-        return (project_points(x_cam, intr) - obs).ravel()
+        return (cam.project(x_cam, intr) - obs).ravel()
 
     n_shared = ni + 6
     n_obs = obs.shape[0]
@@ -287,7 +339,7 @@ def bundle_adjust_fixed_joint(
     def jacobian(p: FloatArray) -> sparse.csr_array:
         intr, o, pw, R = unpack(p)
         v = np.einsum("kji,kj->ki", R[frame_idx], rel - pw)  # R_i^T (X - p_w)
-        Di, Dp = projection_jacobians(v + o, intr)
+        Di, Dp = cam.jacobians(v + o, intr)
         Jr = right_jacobians(p[ni + 6 :].reshape(n, 3))[frame_idx]
         Jac = _SparseRows((2 * n_obs, n_shared + 3 * n))
         Jac.add(0, Di[:, :, free_intr], np.arange(ni))
@@ -304,8 +356,8 @@ def bundle_adjust_fixed_joint(
     dof = max(r.size - sol.x.size, 1)
     sigma2 = float(np.sum(r**2) / dof)
     cov_full = sigma2 * np.linalg.pinv(information(sol.jac), hermitian=True)
-    cov = np.zeros((15, 15))
-    idx = [*free_intr, *range(9, 15)]
+    cov = np.zeros((cam.size + 6, cam.size + 6))
+    idx = [*free_intr, *range(cam.size, cam.size + 6)]
     cov[np.ix_(idx, idx)] = cov_full[:n_shared, :n_shared]
     t = pw - se3.rotate(R, o)
     per_frame = np.sqrt(
@@ -313,6 +365,7 @@ def bundle_adjust_fixed_joint(
         / np.maximum(np.bincount(frame_idx, minlength=n), 1)
     )
     return FixedJointBundle(
+        model=model,
         intrinsics=intr,
         joint_in_cam=o,
         joint_in_world=pw,
@@ -334,8 +387,10 @@ class ArticulatedBundle:
 
     Attributes
     ----------
-    intrinsics_a, intrinsics_b : ndarray, shape (9,)
-        ``fx fy cx cy k1 k2 p1 p2 k3`` of each camera.
+    model_a, model_b : str
+        Each camera's model.
+    intrinsics_a, intrinsics_b : ndarray, shape (p_a,) and (p_b,)
+        Each camera's intrinsics, named by its model's ``names``.
     position_in_a, position_in_b : ndarray, shape (3,)
         The joint in each camera's frame (the boards' unit).
     covariance_a, covariance_b : ndarray, shape (3, 3)
@@ -348,8 +403,10 @@ class ArticulatedBundle:
         World A into world B (the identity for one shared board).
     pose_covariances : ndarray, shape (n, 6, 6)
         Of ``T_b_a`` per frame: ``(rotation perturbation on the right (rad), t_b_a)``.
-    intrinsics_std_a, intrinsics_std_b : ndarray, shape (9,)
+    intrinsics_std_a, intrinsics_std_b : ndarray, shape (p_a,) and (p_b,)
         Standard deviations of the intrinsics (0 for held ones).
+    intrinsics_covariance_a, intrinsics_covariance_b : ndarray, shape (p_a, p_a) and (p_b, p_b)
+        Their covariances (0 rows and columns for held ones).
     rms_px : dict
         Reprojection RMS of each camera (``"a"``, ``"b"``).
     sigma_px : float
@@ -357,6 +414,8 @@ class ArticulatedBundle:
     success : bool
     """
 
+    model_a: str
+    model_b: str
     intrinsics_a: FloatArray
     intrinsics_b: FloatArray
     position_in_a: FloatArray
@@ -370,6 +429,8 @@ class ArticulatedBundle:
     pose_covariances: FloatArray
     intrinsics_std_a: FloatArray
     intrinsics_std_b: FloatArray
+    intrinsics_covariance_a: FloatArray
+    intrinsics_covariance_b: FloatArray
     rms_px: dict[str, float]
     sigma_px: float
     success: bool
@@ -380,21 +441,22 @@ class _Art:
     """Layout of the articulated bundle's parameter vector."""
 
     n: int
-    free: list[int]
+    free_a: list[int]
+    free_b: list[int]
     shared_world: bool
 
     @property
-    def ni(self) -> int:
-        return len(self.free)
+    def k_oa(self) -> int:
+        """Column of ``o_a`` (after both cameras' free intrinsics)."""
+        return len(self.free_a) + len(self.free_b)
 
     @property
     def n_shared(self) -> int:
-        return 2 * self.ni + 6 + (0 if self.shared_world else 6)
+        return self.k_oa + 6 + (0 if self.shared_world else 6)
 
     def split(self, p: FloatArray) -> dict[str, FloatArray]:
-        ni, n = self.ni, self.n
-        k = 2 * ni
-        out = {"ia": p[:ni], "ib": p[ni:k], "oa": p[k : k + 3], "ob": p[k + 3 : k + 6]}
+        na, n, k = len(self.free_a), self.n, self.k_oa
+        out = {"ia": p[:na], "ib": p[na:k], "oa": p[k : k + 3], "ob": p[k + 3 : k + 6]}
         k += 6
         if not self.shared_world:
             out["w"] = p[k : k + 6]
@@ -413,10 +475,10 @@ def _whitener(cov: FloatArray) -> FloatArray:
 
 def bundle_adjust_articulated(
     corners_a: FloatArray,
-    valid_a: FloatArray,
+    valid_a: FloatArray | None,
     board_a: FloatArray,
     corners_b: FloatArray,
-    valid_b: FloatArray,
+    valid_b: FloatArray | None,
     board_b: FloatArray,
     intrinsics_a0: FloatArray,
     intrinsics_b0: FloatArray,
@@ -428,7 +490,8 @@ def bundle_adjust_articulated(
     T_wb_wa0: FloatArray | None = None,
     prior_a: tuple[FloatArray, FloatArray] | None = None,
     prior_b: tuple[FloatArray, FloatArray] | None = None,
-    fix_k3: bool = True,
+    models: tuple[str, str] = ("pinhole", "pinhole"),
+    held: tuple[Sequence[str] | None, Sequence[str] | None] = (None, None),
 ) -> ArticulatedBundle:
     """Maximum-likelihood calibration of two cameras joined by a ball joint, from corners.
 
@@ -444,12 +507,14 @@ def bundle_adjust_articulated(
     Parameters
     ----------
     corners_a, corners_b : ndarray, shape (n, m_a, 2) and (n, m_b, 2)
-        Detected corners of the ``n`` paired frames (pixels), in board-point order.
-    valid_a, valid_b : ndarray of bool, shape (n, m_a) and (n, m_b)
+        Detected corners of the ``n`` paired frames (pixels), in board-point order; NaN
+        where a frame did not see the corner.
+    valid_a, valid_b : ndarray of bool, shape (n, m_a) and (n, m_b), or None
+        Which corners to use (besides the finite ones); None: every finite corner.
     board_a, board_b : ndarray, shape (m_a, 3) and (m_b, 3)
         The corners in each board's frame (metres).
-    intrinsics_a0, intrinsics_b0 : ndarray, shape (9,)
-        Initial intrinsics.
+    intrinsics_a0, intrinsics_b0 : ndarray, shape (p_a,) and (p_b,)
+        Initial intrinsics of each camera's model.
     T_wa_a0, T_wb_b0 : ndarray, shape (n, 4, 4)
         Initial poses (e.g. from PnP), each camera in its board's frame.
     position_in_a0, position_in_b0 : ndarray, shape (3,)
@@ -459,18 +524,29 @@ def bundle_adjust_articulated(
     prior_a, prior_b : (mean (3,), covariance (3, 3)), optional
         Independent estimates of the joint (e.g. from a fixed-joint session), fused with
         the corners.
-    fix_k3 : bool
-        Keep ``k3`` at its initial value.
+    models : (str, str)
+        Camera A's and B's models (:data:`acs_cli.core.camera_models.CAMERA_MODELS`).
+    held : (sequence of str or None, sequence of str or None)
+        Intrinsics of A and B held at their initial values; None: the model's default
+        (``k3`` of the pinhole model).
 
     Returns
     -------
     ArticulatedBundle
+
+    Raises
+    ------
+    InputError
+        Shapes that do not fit, or a frame where a camera sees fewer than
+        :data:`MIN_FRAME_CORNERS` corners.
     """
+    cam_a, cam_b = camera_model(models[0]), camera_model(models[1])
     ca, cb = np.asarray(corners_a, float), np.asarray(corners_b, float)
-    va, vb = np.asarray(valid_a, bool), np.asarray(valid_b, bool)
     Xa, Xb = np.asarray(board_a, float), np.asarray(board_b, float)
-    _check_observations(ca, va, Xa)
-    _check_observations(cb, vb, Xb)
+    va = observed(ca, valid_a, Xa, "camera A's corners")
+    vb = observed(cb, valid_b, Xb, "camera B's corners")
+    check_frame_corners(va, "camera A")
+    check_frame_corners(vb, "camera B")
     Ta0 = se3.check_transforms(T_wa_a0, "initial poses of A")
     Tb0 = se3.check_transforms(T_wb_b0, "initial poses of B")
     n = ca.shape[0]
@@ -483,15 +559,20 @@ def bundle_adjust_articulated(
     W0 = np.eye(4)
     if T_wb_wa0 is not None:
         W0 = se3.check_transforms(T_wb_wa0, "initial T_wb_wa")[0]
-    L = _Art(n=n, free=[k for k in range(9) if not (fix_k3 and k == 8)], shared_world=shared)
+    L = _Art(n=n, free_a=cam_a.free(held[0]), free_b=cam_b.free(held[1]), shared_world=shared)
     ia0, ib0 = np.asarray(intrinsics_a0, float), np.asarray(intrinsics_b0, float)
+    for cam, i0, c in ((cam_a, ia0, "A"), (cam_b, ib0, "B")):
+        if i0.shape != (cam.size,):
+            raise InputError(
+                f"camera {c}'s {cam.name} model takes {cam.size} intrinsics, got {i0.shape}"
+            )
     # initial relative rotations from the initial poses: T_a_b = T_a_wa T_wa_wb T_wb_b
     T_a_b0 = np.matmul(se3.invert_transforms(Ta0), np.linalg.inv(W0) @ Tb0)
     Ra0, Rab0, Rw0 = Ta0[:, :3, :3], T_a_b0[:, :3, :3], W0[:3, :3]
     p0 = np.concatenate(
         [
-            ia0[L.free],
-            ib0[L.free],
+            ia0[L.free_a],
+            ib0[L.free_b],
             np.asarray(position_in_a0, float),
             np.asarray(position_in_b0, float),
             [] if shared else np.concatenate([np.zeros(3), W0[:3, 3]]),
@@ -511,7 +592,7 @@ def bundle_adjust_articulated(
     def model(p: FloatArray) -> dict[str, Any]:
         s = L.split(p)
         ia, ib = ia0.copy(), ib0.copy()
-        ia[L.free], ib[L.free] = s["ia"], s["ib"]
+        ia[L.free_a], ib[L.free_b] = s["ia"], s["ib"]
         R = np.matmul(Ra0, se3.matrix_from_rotvec(s["r"]))
         Rab = np.matmul(Rab0, se3.matrix_from_rotvec(s["q"]))
         Rw: FloatArray = np.eye(3)
@@ -541,7 +622,7 @@ def bundle_adjust_articulated(
     def project_all(m: dict[str, Any]) -> FloatArray:
         xa = np.einsum("kji,kj->ki", m["R"][fa], Xa[ka] - m["t"][fa])
         xb = np.einsum("kji,kj->ki", m["R_wb_b"][fb], Xb[kb] - m["t_wb_b"][fb])
-        return np.concatenate([project_points(xa, m["ia"]), project_points(xb, m["ib"])])
+        return np.concatenate([cam_a.project(xa, m["ia"]), cam_b.project(xb, m["ib"])])
 
     prior_scale = [1.0]
 
@@ -556,7 +637,7 @@ def bundle_adjust_articulated(
     n_obs_a, n_obs_b = fa.size, fb.size
     n_px = 2 * (n_obs_a + n_obs_b)
     n_par = L.n_shared + 9 * n
-    ni, k_oa = L.ni, 2 * L.ni
+    na, nb, k_oa = len(L.free_a), len(L.free_b), L.k_oa
 
     def jacobian(p: FloatArray) -> sparse.csr_array:
         s = L.split(p)
@@ -565,8 +646,8 @@ def bundle_adjust_articulated(
         R, Rab = m["R"], m["Rab"]
         # camera A: x_a = R_i^T (X - t_i), R_i = R0_i Exp(r_i)
         xa = np.einsum("kji,kj->ki", R[fa], Xa[ka] - m["t"][fa])
-        Di, Dp = projection_jacobians(xa, m["ia"])
-        J.add(0, Di[:, :, L.free], np.arange(ni))
+        Di, Dp = cam_a.jacobians(xa, m["ia"])
+        J.add(0, Di[:, :, L.free_a], np.arange(na))
         col = L.n_shared + 9 * fa[:, None] + np.arange(3)
         Jr_r = right_jacobians(s["r"])
         J.add(0, np.matmul(np.matmul(Dp, se3.skew(xa)), Jr_r[fa]), col)
@@ -579,9 +660,9 @@ def bundle_adjust_articulated(
         u = np.einsum("kji,kj->ki", R[fb], y - m["t"][fb])
         RabT = np.swapaxes(Rab[fb], 1, 2)
         xb = np.einsum("kij,kj->ki", RabT, u - m["oa"]) + m["ob"]
-        Di, Dp = projection_jacobians(xb, m["ib"])
+        Di, Dp = cam_b.jacobians(xb, m["ib"])
         DpR = np.matmul(Dp, RabT)  # d pixels / d u
-        J.add(b0, Di[:, :, L.free], ni + np.arange(ni))
+        J.add(b0, Di[:, :, L.free_b], na + np.arange(nb))
         J.add(b0, -DpR, k_oa + np.arange(3))
         J.add(b0, Dp, k_oa + 3 + np.arange(3))
         col = L.n_shared + 9 * fb[:, None] + np.arange(3)
@@ -632,12 +713,14 @@ def bundle_adjust_articulated(
     C = cov[for_cols[:, :, None], for_cols[:, None, :]]  # (n, 9, 9)
     pose_cov[:] = np.matmul(np.matmul(G, C), np.swapaxes(G, 1, 2))
     r = sol.fun[:n_px].reshape(-1, 2)
-    std_a, std_b = np.zeros(9), np.zeros(9)
-    dcov = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    std_a[L.free], std_b[L.free] = dcov[:ni], dcov[ni : 2 * ni]
+    cov_a, cov_b = np.zeros((cam_a.size, cam_a.size)), np.zeros((cam_b.size, cam_b.size))
+    cov_a[np.ix_(L.free_a, L.free_a)] = cov[:na, :na]
+    cov_b[np.ix_(L.free_b, L.free_b)] = cov[na:k_oa, na:k_oa]
     T_wb_wa = np.eye(4)
     T_wb_wa[:3, :3], T_wb_wa[:3, 3] = m["Rw"], m["tw"]
     return ArticulatedBundle(
+        model_a=cam_a.name,
+        model_b=cam_b.name,
         intrinsics_a=m["ia"],
         intrinsics_b=m["ib"],
         position_in_a=m["oa"],
@@ -649,8 +732,10 @@ def bundle_adjust_articulated(
         T_b_a=T_b_a,
         T_wb_wa=T_wb_wa,
         pose_covariances=pose_cov,
-        intrinsics_std_a=std_a,
-        intrinsics_std_b=std_b,
+        intrinsics_std_a=np.sqrt(np.clip(np.diag(cov_a), 0.0, None)),
+        intrinsics_std_b=np.sqrt(np.clip(np.diag(cov_b), 0.0, None)),
+        intrinsics_covariance_a=cov_a,
+        intrinsics_covariance_b=cov_b,
         rms_px={
             "a": float(np.sqrt(np.mean(np.sum(r[:n_obs_a] ** 2, 1)))) if n_obs_a else 0.0,
             "b": float(np.sqrt(np.mean(np.sum(r[n_obs_a:] ** 2, 1)))) if n_obs_b else 0.0,

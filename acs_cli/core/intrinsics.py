@@ -16,6 +16,16 @@ Models:
 Outlier rule (:func:`outlier_views`): a view is dropped when its reprojection RMS exceeds
 both ``median + 3 * 1.4826 * MAD`` and ``2 * median`` of all views' RMS, and the camera is
 calibrated again without it (one round). Pixels are OpenCV's (top-left pixel centre at 0).
+
+Degenerate distortion (:func:`degenerate_distortion`): a fit can reach a low RMS with
+coefficients the views do not determine (``rational`` on a nearly pinhole lens gave
+``k1 = 19, k2 = -593, k3 = 3274``: numerator and denominator cancel). From the covariance of
+the intrinsics (:func:`intrinsics_covariance`, the Jacobian of the reprojection residuals
+with every view's pose marginalised out; OpenCV gives only standard deviations, and none for
+the fisheye model), a distortion is degenerate when a coefficient larger than
+:data:`HUGE_COEFFICIENT` has a standard deviation larger than itself, or when two such
+coefficients are correlated beyond :data:`DEGENERATE_CORRELATION` (they trade off against
+each other, as a rational model's numerator and denominator do).
 """
 
 from __future__ import annotations
@@ -27,16 +37,22 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from acs_cli.core import se3
+from acs_cli.core.camera_models import camera_model
 from acs_cli.errors import DegenerateMotionError
 
 __all__ = [
+    "DEGENERATE_CORRELATION",
     "DISTORTION_NAMES",
+    "HUGE_COEFFICIENT",
     "MIN_VIEWS",
     "MODELS",
     "CalibrationResult",
     "board_points",
     "calibrate",
     "calibrate_robust",
+    "degenerate_distortion",
+    "intrinsics_covariance",
     "outlier_views",
 ]
 
@@ -49,6 +65,15 @@ DISTORTION_NAMES = {
 }
 #: Fewest board views a calibration accepts.
 MIN_VIEWS = 3
+#: The coefficients :func:`calibrate` holds for each model (``CALIB_FIX_K3`` for pinhole).
+CALIBRATION_HELD = {"pinhole": ("k3",), "rational": (), "fisheye": ()}
+#: A distortion coefficient above this magnitude (unitless) whose standard deviation exceeds
+#: it is not determined by the views (real lenses need |k| well below 1 in the pinhole model;
+#: larger values come from terms that cancel).
+HUGE_COEFFICIENT = 1.0
+#: Two distortion coefficients above :data:`HUGE_COEFFICIENT` correlated beyond this
+#: (absolute value) are not separated by the views.
+DEGENERATE_CORRELATION = 0.999
 
 FloatArray = NDArray[np.float64]
 
@@ -305,4 +330,120 @@ def calibrate_robust(
         dropped=tuple(int(i) for i in bad),
         used=tuple(keep),
         first_pass_per_view_rms=first.per_view_rms,
+    )
+
+
+def intrinsics_covariance(
+    result: CalibrationResult,
+    object_points: Sequence[NDArray[np.floating]],
+    image_points: Sequence[NDArray[np.floating]],
+) -> FloatArray:
+    """Covariance of a calibration's intrinsics, from the Jacobian of its residuals.
+
+    Every view's pose (6 unknowns) is marginalised out (Schur complement of the
+    information), the corner noise is the fit's (residual sum of squares over the degrees
+    of freedom), and the intrinsics the calibration held (``k3`` of the pinhole model,
+    ``CALIB_FIX_K3``) have zero rows and columns.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        From :func:`calibrate` or :func:`calibrate_robust` on the views below.
+    object_points, image_points : sequence of ndarray, shape (m_i, 3) and (m_i, 2)
+        The views given to the calibration (metres, pixels); ``result.used`` picks the
+        ones it used, in the order of its poses.
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+        Of the intrinsic vector ``fx fy cx cy`` (px) and the model's distortion
+        (:attr:`acs_cli.core.camera_models.CameraModel.names`).
+    """
+    cam = camera_model(result.model)
+    intr = cam.vector(result.camera_matrix, result.distortion)
+    used = list(result.used) if result.used else list(range(len(image_points)))
+    if len(used) != result.rvecs.shape[0]:
+        raise ValueError(f"{len(used)} views used but {result.rvecs.shape[0]} poses")
+    X = [np.asarray(object_points[i], dtype=float).reshape(-1, 3) for i in used]
+    view = np.repeat(np.arange(len(used)), [x.shape[0] for x in X])
+    obj = np.concatenate(X)
+    px = np.concatenate([np.asarray(image_points[i], dtype=float).reshape(-1, 2) for i in used])
+    R = se3.matrix_from_rotvec(result.rvecs)[view]
+    Rx = np.einsum("kij,kj->ki", R, obj)
+    x_cam = Rx + result.tvecs[view]
+    res = cam.project(x_cam, intr) - px
+    free = cam.free(CALIBRATION_HELD[result.model])
+    Di, Dp = cam.jacobians(x_cam, intr)
+    Di = Di[:, :, free]
+    # pose perturbation Exp(d) R, t + e: d x_cam = -[R X]x d + e
+    Jp = np.concatenate([-np.matmul(Dp, se3.skew(Rx)), Dp], axis=2)  # (k, 2, 6)
+    n_views, p = len(used), len(free)
+    H_ii = np.einsum("kai,kaj->ij", Di, Di)
+    H_ip = np.zeros((n_views, p, 6))
+    H_pp = np.zeros((n_views, 6, 6))
+    np.add.at(H_ip, view, np.einsum("kai,kaj->kij", Di, Jp))
+    np.add.at(H_pp, view, np.einsum("kai,kaj->kij", Jp, Jp))
+    S = H_ii - np.einsum("vij,vjk->ik", H_ip, np.linalg.solve(H_pp, np.swapaxes(H_ip, 1, 2)))
+    dof = max(res.size - p - 6 * n_views, 1)
+    sigma2 = float(np.sum(res**2) / dof)
+    d = 1.0 / np.sqrt(np.maximum(np.diag(S), 1e-300))  # unit diagonal: far better conditioned
+    Sn = S * np.outer(d, d)
+    try:
+        inv = np.linalg.inv(Sn)
+    except np.linalg.LinAlgError:
+        inv = np.linalg.pinv(Sn, hermitian=True)
+    cov = np.zeros((cam.size, cam.size))
+    cov[np.ix_(free, free)] = sigma2 * 0.5 * (inv + inv.T) * np.outer(d, d)
+    return cov
+
+
+def degenerate_distortion(
+    model: str, distortion: NDArray[np.floating], covariance: NDArray[np.floating]
+) -> str | None:
+    """Why a fitted distortion is not determined by its data, or None when it is.
+
+    Parameters
+    ----------
+    model : {"pinhole", "rational", "fisheye"}
+    distortion : ndarray, shape (m,)
+        The coefficients, named by ``DISTORTION_NAMES[model]`` (unitless).
+    covariance : ndarray, shape (m, m)
+        Their covariance (zero rows and columns for coefficients held fixed).
+
+    Returns
+    -------
+    str or None
+        A warning naming each coefficient larger than :data:`HUGE_COEFFICIENT` whose
+        standard deviation exceeds it, and each pair of such large coefficients correlated
+        beyond :data:`DEGENERATE_CORRELATION` (the first four findings, then their count).
+    """
+    names = DISTORTION_NAMES[model]
+    v = np.asarray(distortion, dtype=float).ravel()
+    C = np.asarray(covariance, dtype=float)
+    if v.shape != (len(names),) or C.shape != (v.size, v.size):
+        raise ValueError(
+            f"{model}: {len(names)} coefficients and their covariance expected, got "
+            f"{v.shape} and {C.shape}"
+        )
+    std = np.sqrt(np.clip(np.diag(C), 0.0, None))
+    problems = [
+        f"{names[i]} = {v[i]:.4g} +- {std[i]:.2g}"
+        for i in np.flatnonzero((np.abs(v) > HUGE_COEFFICIENT) & (std > np.abs(v)))
+    ]
+    large = np.flatnonzero((std > 0) & (np.abs(v) > HUGE_COEFFICIENT))
+    corr = C[np.ix_(large, large)] / np.outer(std[large], std[large])
+    i, j = np.nonzero(np.triu(np.abs(corr) > DEGENERATE_CORRELATION, k=1))
+    problems += [
+        f"{names[large[a]]} = {v[large[a]]:.4g} and {names[large[b]]} = {v[large[b]]:.4g} "
+        f"correlated at {corr[a, b]:+.4f}"
+        for a, b in zip(i, j, strict=True)
+    ]
+    if not problems:
+        return None
+    more = f"; and {len(problems) - 4} more" if len(problems) > 4 else ""
+    return (
+        f"the {model} distortion is degenerate ({'; '.join(problems[:4])}{more}): the views do not "
+        "determine these coefficients, so the model may extrapolate wildly beyond the corners "
+        "seen; use a model with fewer coefficients (pinhole), or views whose corners reach the "
+        "image's edges and corners"
     )

@@ -231,6 +231,13 @@ def pair_trajectories(
                 f"has no timestamps ({traj.format} file); pair by index instead",
                 path=traj.source,
             )
+    if traj_a.time_unit != traj_b.time_unit:
+        frames = traj_a if traj_a.time_unit == "frame" else traj_b
+        raise InputError(
+            "has frame numbers for times, the other trajectory seconds: give the poses "
+            "stage --fps or --timestamps so both are in seconds",
+            path=frames.source,
+        )
     result = pair_by_timestamp(traj_a.timestamps, traj_b.timestamps, max_dt)
     if result.n_pairs == 0:
         ta, tb = traj_a.timestamps, traj_b.timestamps

@@ -13,14 +13,16 @@ them. The model is the kinematic tree itself:
   axis, with ``R_p_q[i] = A Rz(theta[i]) B``; a rigid joint's ``T_p_q``;
 - every camera but the reference sees its own board, whose frame is ``W_c = T_wref_wc`` in
   the reference board's frame (6 unknowns);
-- every camera has its intrinsics (pinhole with ``k1 k2 p1 p2``; ``k3`` held).
+- every camera has its intrinsics in its own model (:mod:`acs_cli.core.camera_models`:
+  pinhole with ``k3`` held, rational or fisheye).
 
 Camera ``c``'s pose is chained along the tree, ``T_ref_c[i]`` (as
 :func:`acs_cli.core.rig.chain_transforms`), so a corner ``X`` of its board is at
 
     x_c = (G[i] T_ref_c[i])^-1 W_c X
 
-and the residual is its projection minus the detected corner. Gauges are fixed in the
+and the residual is its projection minus the detected corner (a corner a frame did not see
+is NaN, so each frame may see a different part of its board). Gauges are fixed in the
 parametrisation: a hinge's frames turn only across its axis, and its point moves only
 across the axis (the point nearest camera ``p``'s centre is reported, as
 :mod:`acs_cli.core.rig_solve` does). The solve starts from the pose-based rig estimate
@@ -40,20 +42,17 @@ import numpy as np
 import scipy.linalg
 
 from acs_cli.core import lsq, se3
-from acs_cli.core.bundle import information, project_points
+from acs_cli.core.bundle import check_frame_corners, information, observed
+from acs_cli.core.camera_models import camera_model
 from acs_cli.core.rig import RigJoint, RigTopology
 from acs_cli.core.rig_solve import CameraEstimate, RigEstimate, tangent_basis
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
-__all__ = ["FREE_INTRINSICS", "MIN_RIG_BUNDLE_FRAMES", "CameraViews", "RigBundle",
-           "bundle_adjust_rig"]  # fmt: skip
+__all__ = ["MIN_RIG_BUNDLE_FRAMES", "CameraViews", "RigBundle", "bundle_adjust_rig"]
 
 #: Fewest frames (every camera seeing its board) a rig's bundle adjustment takes.
 MIN_RIG_BUNDLE_FRAMES = 6
-#: The intrinsics refined, by index into ``fx fy cx cy k1 k2 p1 p2 k3`` (``k3`` held, as
-#: in the two-camera bundles).
-FREE_INTRINSICS = (0, 1, 2, 3, 4, 5, 6, 7)
 #: Unknowns per frame of each joint type's articulation.
 ARTICULATION_DOF = {"ball": 3, "hinge": 1, "rigid": 0}
 #: Unknowns of each joint type's fixed geometry.
@@ -67,19 +66,24 @@ class CameraViews:
     Attributes
     ----------
     corners : ndarray, shape (n, m, 2)
-        Pixels, one row per instant of the timeline.
+        Pixels, one row per instant of the timeline; NaN where a corner was not seen.
     valid : ndarray of bool, shape (n, m)
-        Which corners were detected (rows of instants without a pose: all False).
+        Which corners were detected (rows of instants without a pose: all False); only
+        finite corners are used whatever it says.
     board_points : ndarray, shape (m, 3)
         The corners in the camera's board frame (metres).
-    intrinsics : ndarray, shape (9,)
-        Initial ``fx fy cx cy k1 k2 p1 p2 k3``.
+    intrinsics : ndarray, shape (p,)
+        Initial intrinsics, named by the model's ``names``.
+    model : str
+        The camera model (:data:`acs_cli.core.camera_models.CAMERA_MODELS`); its default
+        held parameters are held (``k3`` of the pinhole model).
     """
 
     corners: FloatArray
     valid: np.ndarray
     board_points: FloatArray
     intrinsics: FloatArray
+    model: str = "pinhole"
 
 
 @dataclass(frozen=True)
@@ -93,8 +97,11 @@ class RigBundle:
         frames; each camera's measured poses mapped by its refined board frame, and at the
         reference instant the bundle's pose. The joints' ``residual_rms``, frame counts,
         inliers and noise stay those of the pose-based solve.
-    intrinsics, intrinsics_std : dict of camera to ndarray (9,)
-        Refined ``fx fy cx cy k1 k2 p1 p2 k3`` and their standard deviations (0 if held).
+    intrinsics, intrinsics_std : dict of camera to ndarray (p,)
+        Refined intrinsics (named by the camera's model) and their standard deviations (0
+        if held).
+    intrinsics_covariance : dict of camera to ndarray (p, p)
+        Their covariances (0 rows and columns for held ones).
     rms_px : dict of camera to float
         Reprojection RMS per camera.
     sigma_px : float
@@ -108,6 +115,7 @@ class RigBundle:
     estimate: RigEstimate
     intrinsics: dict[str, FloatArray]
     intrinsics_std: dict[str, FloatArray]
+    intrinsics_covariance: dict[str, FloatArray]
     rms_px: dict[str, float]
     sigma_px: float
     frames: np.ndarray
@@ -117,13 +125,13 @@ class RigBundle:
 class _Layout:
     """Where each unknown lives: shared ones first, then one block per frame."""
 
-    def __init__(self, topo: RigTopology, n: int) -> None:
+    def __init__(self, topo: RigTopology, n: int, free: dict[str, list[int]]) -> None:
         k = 0
-        ni = len(FREE_INTRINSICS)
+        self.free = free  # per camera: indices of its refined intrinsics
         self.intr = {}
         for c in topo.cameras:
-            self.intr[c] = slice(k, k + ni)
-            k += ni
+            self.intr[c] = slice(k, k + len(free[c]))
+            k += len(free[c])
         self.world = {}
         for c in topo.cameras:
             if c != topo.reference:
@@ -183,7 +191,7 @@ class _Model:
 
     def intrinsics(self, x: FloatArray, c: str) -> FloatArray:
         out = np.asarray(self.views[c].intrinsics, dtype=float).copy()
-        out[list(FREE_INTRINSICS)] = x[self.L.intr[c]]
+        out[self.L.free[c]] = x[self.L.intr[c]]
         return out
 
     def hinge(self, x: FloatArray, name: str) -> dict[str, FloatArray]:
@@ -254,7 +262,8 @@ class _Model:
             Rw, tw = self.board(x, c)
             Xw = self.views[c].board_points[ki] @ Rw.T + tw
             x_cam = np.einsum("kji,kj->ki", R[fi], Xw - t[fi])  # R^T (W X - t)
-            out.append((project_points(x_cam, self.intrinsics(x, c)) - px).ravel())
+            cam = camera_model(self.views[c].model)
+            out.append((cam.project(x_cam, self.intrinsics(x, c)) - px).ravel())
         return np.concatenate(out)
 
     def row_frames(self) -> np.ndarray:
@@ -277,8 +286,9 @@ def _check(topo: RigTopology, views: dict[str, CameraViews], est: RigEstimate) -
             raise InputError(f"camera {c}: valid must have shape {v.corners.shape[:2]}")
         if v.board_points.shape != (v.corners.shape[1], 3):
             raise InputError(f"camera {c}: board points must have shape ({v.corners.shape[1]}, 3)")
-        if np.asarray(v.intrinsics).shape != (9,):
-            raise InputError(f"camera {c}: intrinsics must have shape (9,)")
+        size = camera_model(v.model).size
+        if np.asarray(v.intrinsics).shape != (size,):
+            raise InputError(f"camera {c}: its {v.model} model's intrinsics have shape ({size},)")
         if v.corners.shape[0] != n:
             raise InputError(f"camera {c}: {v.corners.shape[0]} instants, the reference {n}")
     if est.cameras[topo.reference].poses_in_reference_world.shape[0] != n:
@@ -290,7 +300,7 @@ def _initial(
     topo: RigTopology, views: dict[str, CameraViews], est: RigEstimate, frames: np.ndarray
 ) -> tuple[_Model, FloatArray]:
     """The model and its starting unknowns, from the pose-based estimate."""
-    L = _Layout(topo, frames.size)
+    L = _Layout(topo, frames.size, {c: camera_model(views[c].model).free() for c in topo.cameras})
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
     x = np.zeros(L.size)
     blocks = np.zeros((frames.size, L.block))
@@ -320,13 +330,14 @@ def _initial(
             geom0[j.name] = {"A": A, "B": B, "o_p": e.position_in[p], "o_q": e.position_in[q]}
     intr = np.zeros(L.n_shared)
     for c in topo.cameras:
-        intr[L.intr[c]] = np.asarray(views[c].intrinsics, float)[list(FREE_INTRINSICS)]
+        intr[L.intr[c]] = np.asarray(views[c].intrinsics, float)[L.free[c]]
     x[: L.n_shared] += intr
     x[L.n_shared :] = blocks.ravel()
     obs = {}
     for c in topo.cameras:
-        fi, ki = np.nonzero(views[c].valid[frames])
-        obs[c] = (fi, ki, views[c].corners[frames][fi, ki])
+        v = views[c]
+        fi, ki = np.nonzero(observed(v.corners, v.valid, v.board_points)[frames])
+        obs[c] = (fi, ki, v.corners[frames][fi, ki])
     model = _Model(
         topo=topo,
         L=L,
@@ -383,12 +394,8 @@ def bundle_adjust_rig(
     if frames[0] < 0 or frames[-1] >= n_total or initial.reference_frame not in frames:
         raise InputError("the frames must be on the timeline and include the reference instant")
     for c, v in views.items():
-        blind = frames[~v.valid[frames].any(axis=1)]
-        if blind.size:
-            raise InputError(
-                f"camera {c} sees no corner at frame(s) {', '.join(map(str, blind[:5]))}: the "
-                "bundle adjustment takes frames where every camera sees its board"
-            )
+        seen = observed(v.corners, v.valid, v.board_points, f"camera {c}'s corners")
+        check_frame_corners(seen[frames], f"camera {c}", frames)
     unknown = [c for c, e in initial.cameras.items() if e.scale_std is not None]
     if unknown:
         raise InputError(
@@ -424,18 +431,20 @@ def bundle_adjust_rig(
     est = _assemble(model, x, cov, where, k_ref, initial)
     intr = {c: model.intrinsics(x, c) for c in topology.cameras}
     std: dict[str, FloatArray] = {}
+    icov: dict[str, FloatArray] = {}
     for c in topology.cameras:
-        s = np.zeros(9)
+        ci = np.zeros((intr[c].size, intr[c].size))
         idx = [where[i] for i in range(L.intr[c].start, L.intr[c].stop)]
-        s[list(FREE_INTRINSICS)] = np.sqrt(np.maximum(np.diag(cov)[idx], 0.0))
-        std[c] = s
+        ci[np.ix_(L.free[c], L.free[c])] = cov[np.ix_(idx, idx)]
+        icov[c] = ci
+        std[c] = np.sqrt(np.maximum(np.diag(ci), 0.0))
     rms, start = {}, 0
     for c in topology.cameras:
         m = model.obs[c][0].size
         rc = r[start : start + m]
         rms[c] = float(np.sqrt(np.mean(np.sum(rc**2, axis=1)))) if m else 0.0
         start += m
-    return RigBundle(est, intr, std, rms, float(np.sqrt(sigma2)), frames, bool(sol.success))
+    return RigBundle(est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success))
 
 
 def _inverse_columns(J: object, cols: list[int]) -> FloatArray:

@@ -65,7 +65,11 @@ class Detection:
 
 
 def detection_key(sha256: str, cols: int, rows: int, detector_version: str) -> str:
-    """The cache key of one image's detection of a ``cols x rows`` board."""
+    """The cache key of one image's detection of a ``cols x rows`` board.
+
+    A target of identified corners (AprilGrid, ChArUco) is keyed ``sha:<target>#<m>:version``
+    instead, with ``m`` its corner count (see ``acs_cli.stages.intrinsics``).
+    """
     return f"{sha256}:{cols}x{rows}:{detector_version}"
 
 
@@ -123,15 +127,27 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
             if k != _corner_count(key) or k > corners.shape[1]:
                 continue
             c = np.array(corners[i, :k], dtype=np.float64)
-            if not np.all(np.isfinite(c)):
+            # a target of identified corners (see detection_key) has NaN rows for unseen ones
+            if np.any(np.isinf(c)) or not (np.all(np.isfinite(c)) or _identified(key)):
                 continue
         out[key] = Detection(names[i], bool(found[i]), (w, h), c)
     return out
 
 
-def _corner_count(key: str) -> int:
-    """``cols * rows`` of a :func:`detection_key` (``sha:COLSxROWS:version``), or -1."""
+def _identified(key: str) -> bool:
+    """Whether a key's target has identified corners (label ``<target>#<m>``): its
+    corners are ``(m, 2)`` with NaN rows for the corners not seen."""
     parts = key.split(":")
+    return len(parts) >= 3 and "#" in parts[1]
+
+
+def _corner_count(key: str) -> int:
+    """``cols * rows`` of a :func:`detection_key` (``sha:COLSxROWS:version``), or the
+    ``m`` of a target's label ``<target>#<m>``, or -1."""
+    parts = key.split(":")
+    if _identified(key):
+        m = parts[1].rpartition("#")[2]
+        return int(m) if m.isdigit() else -1
     cols, _, rows = parts[1].partition("x") if len(parts) >= 3 else ("", "", "")
     if not (cols.isdigit() and rows.isdigit()):
         return -1

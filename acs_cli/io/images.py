@@ -20,14 +20,12 @@ __all__ = [
     "list_images",
     "natural_key",
     "read_gray",
-    "timestamp_from_name",
 ]
 
 #: File suffixes (lower case) taken as images.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 _DIGITS = re.compile(r"(\d+)")
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
 
 
 def natural_key(name: str) -> tuple[tuple[int, int | str], ...]:
@@ -129,14 +127,3 @@ def read_gray(path: str | Path) -> tuple[NDArray[np.uint8], str]:
         scaled = (f - lo) * (255.0 / (hi - lo)) if hi > lo else np.zeros(f.shape)
         img = np.clip(np.round(scaled), 0, 255).astype(np.uint8)
     return np.ascontiguousarray(img), sha
-
-
-def timestamp_from_name(name: str) -> float | None:
-    """The last number in a file name's stem, as a timestamp (seconds or a frame number).
-
-    ``img_00012.png`` gives 12.0, ``frame_1623456789.123.png`` gives 1623456789.123,
-    ``board.png`` gives None.
-    """
-    stem = Path(name).stem if Path(name).suffix.lower() in IMAGE_SUFFIXES else name
-    found = _NUMBER.findall(stem)
-    return float(found[-1]) if found else None

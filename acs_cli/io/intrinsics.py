@@ -5,7 +5,8 @@ Keys (after the header of :func:`acs_cli.io.artifacts.make_header`), as
 ``docs/formats.md`` lists them: ``model``, ``image_size`` ``[w, h]`` (px),
 ``camera_matrix`` 3x3 (px), ``distortion`` (OpenCV order, ``distortion_names``),
 ``rms_px``, ``per_view_rms_px`` ``{image: px}``, ``std`` (``fx fy cx cy`` px and
-``distortion``, or null), ``board`` ``{cols, rows, square, units}``, ``images`` ``{total,
+``distortion``, or null), ``board`` ``{cols, rows, square, units}`` (or ``target``, an
+AprilGrid or ChArUco as its target YAML maps it), ``images`` ``{total,
 used, skipped_no_board, dropped_outliers}``, ``detector``, ``detections_cache``,
 ``exports`` and ``warnings``. Only ``camera_matrix``, ``distortion`` and ``image_size`` are
 required on reading (a hand-written file works); the rest takes defaults.
@@ -22,6 +23,7 @@ import numpy as np
 from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.target import target_from_mapping, target_to_mapping
 from acs_cli.io.validate import (
     FloatArray,
     as_int,
@@ -142,6 +144,14 @@ def _std(value: Any, path: Path | None) -> dict[str, Any] | None:
     return out
 
 
+def _target(value: Any, path: Path | None) -> dict[str, Any] | None:
+    """``target``: a target mapping (checked by :func:`acs_cli.io.target.target_from_mapping`)
+    or None."""
+    if value is None:
+        return None
+    return target_to_mapping(target_from_mapping(value, path, "target"))
+
+
 @dataclass(frozen=True, eq=False)
 class IntrinsicsArtifact(YamlArtifact):
     """One camera's intrinsic calibration (``acscal/intrinsics``).
@@ -163,6 +173,9 @@ class IntrinsicsArtifact(YamlArtifact):
     std : dict or None
         One-sigma ``fx fy cx cy`` (px) and ``distortion`` (list), or None.
     board : BoardSpec or None
+    target : dict or None
+        The AprilGrid or ChArUco target calibrated on, as a target YAML maps it
+        (:func:`acs_cli.io.target.target_to_mapping`); None for a checkerboard.
     images : ImagesUsed or None
     detector : str or None
     detections_cache : str or None
@@ -186,6 +199,7 @@ class IntrinsicsArtifact(YamlArtifact):
     per_view_rms_px: dict[str, float] = field(default_factory=dict)
     std: dict[str, Any] | None = None
     board: BoardSpec | None = None
+    target: dict[str, Any] | None = None
     images: ImagesUsed | None = None
     detector: str | None = None
     detections_cache: str | None = None
@@ -255,6 +269,7 @@ class IntrinsicsArtifact(YamlArtifact):
             },
             std=_std(doc.get("std"), path),
             board=None if not isinstance(board, dict) else BoardSpec.parse(board, "board", path),
+            target=_target(doc.get("target"), path),
             images=None if images is None else ImagesUsed.parse(images, "images", path),
             detector=None if doc.get("detector") is None else str(doc["detector"]),
             detections_cache=None
@@ -278,6 +293,7 @@ class IntrinsicsArtifact(YamlArtifact):
             "per_view_rms_px": dict(self.per_view_rms_px),
             "std": self.std if self.std else None,
             "board": None if self.board is None else self.board.to_plain(),
+            "target": None if self.target is None else dict(self.target),
             "images": None if self.images is None else self.images.to_plain(),
             "detector": self.detector,
             "detections_cache": self.detections_cache,

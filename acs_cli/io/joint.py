@@ -17,6 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from acs_cli.core.intrinsics import DISTORTION_NAMES
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.validate import (
@@ -174,10 +175,6 @@ class PoseNoise:
         return {"sigma_trans": self.sigma_trans, "sigma_rot_deg": self.sigma_rot_deg}
 
 
-#: The intrinsics a bundle adjustment refines, in its order.
-BUNDLE_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
-
-
 @dataclass(frozen=True)
 class BundleSection:
     """``quality.bundle_adjustment.<cam>``: one camera's bundle adjustment on its corners.
@@ -192,10 +189,12 @@ class BundleSection:
         Frames adjusted.
     camera_matrix : ndarray, shape (3, 3)
         Refined ``K``, pixels.
-    distortion : ndarray, shape (5,)
-        Refined ``k1 k2 p1 p2 k3``.
+    distortion : ndarray, shape (m,)
+        Refined coefficients of ``model`` (``k1 k2 p1 p2 k3`` for pinhole).
     intrinsics_std : dict of str to float
-        One sigma of ``fx fy cx cy k1 k2 p1 p2 k3``.
+        One sigma of ``fx fy cx cy`` and the coefficients, by name.
+    model : str
+        The camera model (``pinhole`` when the file does not say).
     """
 
     intrinsics_file: str
@@ -205,10 +204,14 @@ class BundleSection:
     camera_matrix: FloatArray
     distortion: FloatArray
     intrinsics_std: dict[str, float] = field(default_factory=dict)
+    model: str = "pinhole"
 
     @classmethod
     def parse(cls, value: Any, key: str, path: Source) -> BundleSection:
         d = as_mapping(value, key, path)
+        model = str(d.get("model", "pinhole"))
+        if model not in DISTORTION_NAMES:
+            raise InputError(f"'{key}.model' is not a camera model: {model!r}", path=path)
         dist = d.get("distortion") or []
         if not isinstance(dist, list):
             raise InputError(f"'{key}.distortion' must be a list of numbers", path=path)
@@ -225,6 +228,7 @@ class BundleSection:
                 k: as_number(v, f"{key}.intrinsics_std.{k}", path, allow_nan=True)
                 for k, v in std.items()
             },
+            model,
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -236,13 +240,14 @@ class BundleSection:
             "camera_matrix": self.camera_matrix,
             "distortion": self.distortion,
             "intrinsics_std": dict(self.intrinsics_std),
+            "model": self.model,
         }
 
     def values(self) -> dict[str, float]:
         """``fx fy cx cy`` and the distortion coefficients by name."""
         K = self.camera_matrix
         vals = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
-        for name, v in zip(BUNDLE_INTRINSICS[4:], self.distortion, strict=False):
+        for name, v in zip(DISTORTION_NAMES[self.model], self.distortion, strict=False):
             vals[name] = v
         return {k: float(v) for k, v in vals.items()}
 

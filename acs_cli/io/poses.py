@@ -461,7 +461,13 @@ class PosesArtifact(Artifact):
         lines = [
             f"poses: {len(t)} posed images"
             + (f", {len(self.skipped_images)} {without}" if self.skipped_images else "")
-            + (", timestamps from file names" if t.has_timestamps else ", image indices")
+            + ", times from "
+            + str(
+                self.header.get(
+                    "timestamps_from", "file names" if t.has_timestamps else "image indices"
+                )
+            )
+            + ("" if t.time_unit == "s" else " (frame numbers, not seconds)")
         ]
         rms = np.asarray(self.reprojection_rms)
         if rms.size:

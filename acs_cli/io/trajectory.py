@@ -17,19 +17,22 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.atomic import atomic_path, atomic_write_text
+from acs_cli.io.timestamps import image_times
 
 __all__ = [
     "FORMATS",
+    "FRAME_NUMBERS_NOTE",
     "KITTI_ORTHONORMAL_TOL",
     "NPZ_SCHEMA",
     "NPZ_SCHEMA_VERSION",
     "QUAT_NORM_TOL",
+    "TIME_UNITS",
     "Trajectory",
     "read_colmap",
     "read_kitti",
@@ -46,6 +49,10 @@ FloatArray = se3.FloatArray
 
 #: Formats :func:`read_trajectory` accepts.
 FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
+#: Units of a trajectory's times: seconds, or frame numbers (see :mod:`acs_cli.io.timestamps`).
+TIME_UNITS = ("s", "frame")
+#: How a TUM file's comment says that its times are frame numbers (read back as such).
+FRAME_NUMBERS_NOTE = "times are frame numbers"
 #: Largest accepted ``|norm(q) - 1|`` of a quaternion in a TUM or COLMAP file.
 QUAT_NORM_TOL = 1e-3
 #: Largest accepted ``|R^T R - I|`` entry of a rotation block in a KITTI or NPZ file.
@@ -63,6 +70,8 @@ _NPZ_RESERVED = (
     "has_timestamps",
     "image_names",
     "header_json",
+    "timestamps_ns",
+    "time_unit",
 )
 
 
@@ -86,6 +95,12 @@ class Trajectory:
         Whether ``timestamps`` are times (pair by timestamp) or indices (pair by index).
     names : tuple of str
         Image names, one per pose, when known; else empty.
+    timestamps_ns : ndarray of int64, shape (n,), or None
+        The same times as exact integer nanoseconds, when the source gave them (nanosecond
+        image names, a TUM file's digits); TUM files are written from them.
+    time_unit : str
+        ``"s"`` (seconds) or ``"frame"`` (frame numbers: pairable with other frame numbers,
+        but not times; see :mod:`acs_cli.io.timestamps`).
 
     Raises
     ------
@@ -101,6 +116,8 @@ class Trajectory:
     format: str
     has_timestamps: bool
     names: tuple[str, ...] = ()
+    timestamps_ns: NDArray[np.int64] | None = None
+    time_unit: str = "s"
 
     def __post_init__(self) -> None:
         src = self.source
@@ -139,6 +156,20 @@ class Trajectory:
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "names", tuple(str(s) for s in self.names))
         object.__setattr__(self, "has_timestamps", bool(self.has_timestamps))
+        if self.time_unit not in TIME_UNITS:
+            raise InputError(
+                f"time unit {self.time_unit!r} is not one of {', '.join(TIME_UNITS)}", path=src
+            )
+        if self.timestamps_ns is not None:
+            ns = np.asarray(self.timestamps_ns)
+            if ns.shape != (n,) or ns.dtype.kind not in "iu":
+                raise InputError(
+                    f"timestamps_ns must be {n} integers, got {ns.dtype} {ns.shape}", path=src
+                )
+            ns = ns.astype(np.int64)
+            if np.any(np.abs(ns / 1e9 - t) > 1e-6 * np.maximum(1.0, np.abs(t))):
+                raise InputError("timestamps_ns disagree with timestamps (seconds)", path=src)
+            object.__setattr__(self, "timestamps_ns", ns)
 
     def __len__(self) -> int:
         return int(self.T_world_cam.shape[0])
@@ -154,6 +185,8 @@ class Trajectory:
             format=self.format,
             has_timestamps=self.has_timestamps,
             names=names,
+            timestamps_ns=None if self.timestamps_ns is None else self.timestamps_ns[ii],
+            time_unit=self.time_unit,
         )
 
 
@@ -293,7 +326,10 @@ def read_tum(path: str | Path) -> Trajectory:
     Returns
     -------
     Trajectory
-        ``timestamps`` (n,) in seconds, ``T_world_cam`` (n, 4, 4), ``has_timestamps=True``.
+        ``timestamps`` (n,) in seconds, ``T_world_cam`` (n, 4, 4), ``has_timestamps=True``;
+        frame numbers (``time_unit="frame"``) when a comment line says
+        :data:`FRAME_NUMBERS_NOTE` (as acscal writes them), and ``timestamps_ns`` exactly
+        when every time is a plain decimal of at most 9 places.
 
     Raises
     ------
@@ -303,7 +339,8 @@ def read_tum(path: str | Path) -> Trajectory:
         timestamp not after the previous one (the message names the line).
     """
     p = Path(path)
-    lines, numbers = _data_lines(_read_text(p))
+    text = _read_text(p)
+    lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty TUM file)", path=p)
     table = _parse_table(lines, numbers, 8, "timestamp tx ty tz qx qy qz qw", p)
@@ -312,7 +349,33 @@ def read_tum(path: str | Path) -> Trajectory:
     q = _check_quaternions(table[:, 4:8], numbers, p)
     R = np.asarray(Rotation.from_quat(q).as_matrix(), dtype=float)
     T = se3.transforms_from_rt(R, table[:, 1:4]).reshape(-1, 4, 4)
-    return Trajectory(t, T, source=str(p), format="tum", has_timestamps=True)
+    return Trajectory(
+        t,
+        T,
+        source=str(p),
+        format="tum",
+        has_timestamps=True,
+        timestamps_ns=_exact_nanoseconds([s.split()[0] for s in lines]),
+        time_unit="frame" if _FRAME_NOTE.search(text) else "s",
+    )
+
+
+_FRAME_NOTE = re.compile(r"^#\s*" + FRAME_NUMBERS_NOTE, re.MULTILINE)
+_PLAIN_DECIMAL = re.compile(r"^\d+(?:\.\d{0,9})?$")
+
+
+def _exact_nanoseconds(tokens: list[str]) -> NDArray[np.int64] | None:
+    """Integer nanoseconds of plain decimal seconds (at most 9 decimals, below ~292 years
+    of int64), exactly; None when any token is not of that form (e.g. ``1.5e9``)."""
+    if not all(_PLAIN_DECIMAL.match(tok) for tok in tokens):
+        return None
+    out = []
+    for tok in tokens:
+        whole, _, frac = tok.partition(".")
+        out.append(int(whole) * 10**9 + int((frac + "000000000")[:9]))
+    if max(out) >= 2**63:
+        return None
+    return np.array(out, dtype=np.int64)
 
 
 def _check_poses(T_world_cam: ArrayLike, n_expected: int | None = None) -> FloatArray:
@@ -322,7 +385,14 @@ def _check_poses(T_world_cam: ArrayLike, n_expected: int | None = None) -> Float
     return T
 
 
-def write_tum(path: str | Path, timestamps: ArrayLike, T_world_cam: ArrayLike) -> None:
+def write_tum(
+    path: str | Path,
+    timestamps: ArrayLike,
+    T_world_cam: ArrayLike,
+    *,
+    timestamps_ns: ArrayLike | None = None,
+    note: str | None = None,
+) -> None:
     """Write a TUM trajectory atomically.
 
     Parameters
@@ -331,6 +401,10 @@ def write_tum(path: str | Path, timestamps: ArrayLike, T_world_cam: ArrayLike) -
         Destination file.
     timestamps : array_like, shape (n,)
         Seconds; written with ``%.9f``.
+    timestamps_ns : array_like of int, shape (n,), optional
+        The same times in integer nanoseconds: written from them, digit for digit.
+    note : str, optional
+        A comment line written under the header (e.g. that the times are frame numbers).
     T_world_cam : array_like, shape (n, 4, 4)
         Camera poses in the world frame. Written as ``tx ty tz qx qy qz qw`` with 15
         significant digits and ``qw >= 0``, so :func:`read_tum` gives them back to ~1e-12.
@@ -348,11 +422,23 @@ def write_tum(path: str | Path, timestamps: ArrayLike, T_world_cam: ArrayLike) -
     buf = io.StringIO()
     np.savetxt(
         buf,
-        np.column_stack([t, T[:, :3, 3], q]),
-        fmt=["%.9f"] + ["%.15g"] * 7,
-        header="timestamp tx ty tz qx qy qz qw",
+        np.column_stack([T[:, :3, 3], q]),
+        fmt=["%.15g"] * 7,
+        header="timestamp tx ty tz qx qy qz qw" + ("" if note is None else "\n" + note),
     )
-    atomic_write_text(path, buf.getvalue())
+    if timestamps_ns is None:
+        stamps = [f"{v:.9f}" for v in t]
+    else:
+        ns = np.asarray(timestamps_ns, dtype=np.int64).reshape(-1)
+        if ns.shape != t.shape:
+            raise InputError(f"{ns.size} nanosecond timestamps for {t.size} poses", path=path)
+        stamps = [
+            f"{'-' if v < 0 else ''}{abs(v) // 10**9}.{abs(v) % 10**9:09d}" for v in ns.tolist()
+        ]
+    head, *rows = buf.getvalue().splitlines(keepends=True)
+    if note is not None:
+        head, rows = head + rows[0], rows[1:]
+    atomic_write_text(path, head + "".join(f"{a} {b}" for a, b in zip(stamps, rows, strict=True)))
 
 
 # --------------------------------------------------------------------------------------
@@ -405,7 +491,6 @@ def write_kitti(path: str | Path, T_world_cam: ArrayLike) -> None:
 # --------------------------------------------------------------------------------------
 # COLMAP
 
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
 _DIGITS = re.compile(r"(\d+)")
 
 
@@ -525,21 +610,17 @@ def read_colmap(path: str | Path) -> Trajectory:
     order = sorted(range(len(names)), key=lambda k: _natural_key(names[k]))
     names_sorted = tuple(names[k] for k in order)
     T_sorted = T_world_cam[order]
-    stamps: list[float] = []
-    for name in names_sorted:
-        found = _NUMBER.findall(PurePosixPath(name.replace("\\", "/")).stem)
-        if not found:
-            break
-        stamps.append(float(found[-1]))
-    t = np.asarray(stamps, dtype=float)
-    has_t = len(stamps) == len(names_sorted) and bool(np.all(np.isfinite(t)))
-    if has_t:
-        with np.errstate(all="ignore"):
-            has_t = bool(np.all(np.diff(t) > 0))
-    if not has_t:
-        t = np.arange(len(names_sorted), dtype=float)
+    base = [PurePosixPath(name.replace("\\", "/")).name for name in names_sorted]
+    times = image_times(base, base)
     return Trajectory(
-        t, T_sorted, source=str(p), format="colmap", has_timestamps=has_t, names=names_sorted
+        times.seconds,
+        T_sorted,
+        source=str(p),
+        format="colmap",
+        has_timestamps=times.has_timestamps,
+        names=names_sorted,
+        timestamps_ns=times.nanoseconds,
+        time_unit=times.unit,
     )
 
 
@@ -689,11 +770,26 @@ def parse_npz_poses(arrays: Mapping[str, np.ndarray], p: Path) -> Trajectory:
         decoded = [v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v) for v in a]
         if any(decoded):
             names = tuple(decoded)
+    ns = None
+    if "timestamps_ns" in arrays:
+        ns = arrays["timestamps_ns"]
+        if ns.dtype.kind not in "iu" or ns.shape != (n,):
+            raise InputError(f"'timestamps_ns' must be {n} integers, got {ns.shape}", path=p)
+    unit = _npz_scalar_str(arrays, "time_unit", p) if "time_unit" in arrays else "s"
     if "reprojection_rms" in arrays:
         rms = arrays["reprojection_rms"]
         if rms.dtype.kind not in "biuf" or rms.shape != (n,):
             raise InputError(f"'reprojection_rms' must be {n} numbers, got {rms.shape}", path=p)
-    return Trajectory(t, T, source=str(p), format="npz", has_timestamps=has_t, names=names)
+    return Trajectory(
+        t,
+        T,
+        source=str(p),
+        format="npz",
+        has_timestamps=has_t,
+        names=names,
+        timestamps_ns=ns,
+        time_unit=unit,
+    )
 
 
 def read_npz_header(path: str | Path) -> dict[str, Any]:
@@ -737,10 +833,14 @@ class BoardObservations:
 def read_npz_observations(path: str | Path) -> BoardObservations | None:
     """The corners stored by ``acscal poses``, or ``None`` for an NPZ without them.
 
+    ``corners`` ``(n, m, 2)`` holds NaN where a view did not see the target's corner ``j``
+    (``board_points`` ``(m, 3)`` holds every corner of the target).
+
     Raises
     ------
     InputError
-        Corners or board points of the wrong shape or not finite.
+        Corners or board points of the wrong shape, infinite corners, or board points
+        that are not finite.
     """
     p = Path(path)
     arrays = _load_npz(p)
@@ -755,8 +855,9 @@ def parse_npz_observations(
         return None
     corners = _npz_numeric(arrays, "corners", p)
     board = _npz_numeric(arrays, "board_points", p)
-    if not (np.all(np.isfinite(corners)) and np.all(np.isfinite(board))):
-        raise InputError("'corners' or 'board_points' contain NaN or inf", path=p)
+    # a corner a view did not see is NaN (a partial view of an AprilGrid or ChArUco target)
+    if np.any(np.isinf(corners)) or not np.all(np.isfinite(board)):
+        raise InputError("'corners' contain inf, or 'board_points' NaN or inf", path=p)
     if corners.ndim != 3 or corners.shape[2] != 2 or board.shape != (corners.shape[1], 3):
         raise InputError(
             f"'corners' {corners.shape} and 'board_points' {board.shape} do not match "
@@ -828,7 +929,10 @@ def write_npz_poses(
         "timestamps": np.asarray(traj.timestamps, dtype=float),
         "has_timestamps": np.array(bool(traj.has_timestamps)),
         "image_names": np.array(list(traj.names) if traj.names else [""] * n, dtype=str),
+        "time_unit": np.array(traj.time_unit),
     }
+    if traj.timestamps_ns is not None:
+        arrays["timestamps_ns"] = np.asarray(traj.timestamps_ns, dtype=np.int64)
     if header is not None:
         from acs_cli.io.artifacts import to_plain
 

@@ -6,6 +6,11 @@ maximum-likelihood fit on the pixels (:mod:`acs_cli.core.bundle`): the fixed-joi
 per camera, the overlap and general motions for the two cameras together. Each function
 returns the refined quantities, the artifact's ``bundle_adjustment`` section, and warnings;
 a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
+
+Each camera keeps the model its intrinsics file was calibrated with (pinhole, rational or
+fisheye); a corner a frame did not see is NaN, so a partial view of a target counts. A
+refined distortion the corners do not determine is warned about
+(:func:`acs_cli.core.intrinsics.degenerate_distortion`).
 """
 
 from __future__ import annotations
@@ -17,18 +22,19 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core.bundle import (
-    INTRINSIC_NAMES,
     ArticulatedBundle,
     bundle_adjust_articulated,
     bundle_adjust_fixed_joint,
     camera_matrix,
     intrinsics_vector,
 )
+from acs_cli.core.camera_models import camera_model
+from acs_cli.core.intrinsics import degenerate_distortion
 from acs_cli.core.joint import JointEstimate
 from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.trajectory import read_npz_observations
+from acs_cli.io.trajectory import read_npz_header, read_npz_observations
 from acs_cli.stages.common import PairedTrajectories
 
 __all__ = [
@@ -39,6 +45,7 @@ __all__ = [
     "bundle_overlap",
     "bundle_section",
     "corner_views",
+    "degenerate_warning",
     "shared_board_flip",
 ]
 
@@ -72,18 +79,21 @@ class CornerViews:
     Attributes
     ----------
     corners : ndarray, shape (n, m, 2)
-        Pixels, one row of corners per pose of the trajectory.
+        Pixels, one row of corners per pose of the trajectory; NaN where not seen.
     board_points : ndarray, shape (m, 3)
-        Metres, in the board's frame.
-    intrinsics : ndarray, shape (9,)
-        ``fx fy cx cy k1 k2 p1 p2 k3``.
+        Metres, in the board's frame (every corner of the target).
+    intrinsics : ndarray, shape (p,)
+        Named by the model's ``names`` (``fx fy cx cy k1 k2 p1 p2 k3`` for pinhole).
     intrinsics_file : Path
+    model : str
+        The intrinsics file's camera model.
     """
 
     corners: np.ndarray
     board_points: np.ndarray
     intrinsics: np.ndarray
     intrinsics_file: Path
+    model: str = "pinhole"
 
 
 def _resolve(recorded: str, poses: Path) -> Path | None:
@@ -109,15 +119,15 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
     if path is None:
         return None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
     intr = IntrinsicsArtifact.load(path)
-    if intr.model != "pinhole":
-        return None, f"bundle adjustment supports the pinhole model, not {intr.model}"
-    vec = intrinsics_vector(intr.camera_matrix, intr.distortion)
-    return CornerViews(obs.corners, obs.board_points, vec, path), None
+    vec = intrinsics_vector(intr.camera_matrix, intr.distortion, intr.model)
+    return CornerViews(obs.corners, obs.board_points, vec, path, intr.model), None
 
 
 def bundle_section(
     views: CornerViews, intr: np.ndarray, std: np.ndarray, rms: float, sigma: float, n: int
 ) -> BundleSection:
+    """The artifact's section of one camera's bundle adjustment (parameters named by its
+    model)."""
     return BundleSection(
         intrinsics_file=str(views.intrinsics_file),
         rms_px=float(rms),
@@ -125,8 +135,19 @@ def bundle_section(
         frames=n,
         camera_matrix=camera_matrix(intr),
         distortion=np.asarray(intr[4:], dtype=float),
-        intrinsics_std=dict(zip(INTRINSIC_NAMES, std.tolist(), strict=True)),
+        intrinsics_std=dict(zip(camera_model(views.model).names, std.tolist(), strict=True)),
+        model=views.model,
     )
+
+
+def degenerate_warning(
+    cam: str, model: str, intrinsics: np.ndarray, covariance: np.ndarray
+) -> list[str]:
+    """``[warning]`` when the bundle's refined distortion of camera ``cam`` is degenerate
+    (:func:`acs_cli.core.intrinsics.degenerate_distortion` on the intrinsics ``(p,)`` and
+    their covariance ``(p, p)``), else ``[]``."""
+    found = degenerate_distortion(model, intrinsics[4:], covariance[4:, 4:])
+    return [f"camera {cam} after the bundle adjustment: {found}"] if found else []
 
 
 def bundle_fixed_joint(
@@ -139,28 +160,30 @@ def bundle_fixed_joint(
         return est, None, [warning] if warning else []
     inl, thinned = bundle_frames(est.inliers[cam])
     notes = [thinned] if thinned else []
-    corners = views.corners[inl]
     ba = bundle_adjust_fixed_joint(
-        corners,
-        np.ones(corners.shape[:2], dtype=bool),
+        views.corners[inl],
+        None,  # every corner seen (NaN: not seen)
         views.board_points,
         views.intrinsics,
         T_w_c[inl],
         o0,
         est.position_in_world[cam],
+        model=views.model,
     )
     if not ba.success:
         return est, None, [*notes, f"camera {cam.upper()}: the bundle adjustment did not "
                            "converge; the pose-based estimate is kept"]  # fmt: skip
-    cov = ba.covariance[9:12, 9:12]
+    notes += degenerate_warning(cam.upper(), ba.model, ba.intrinsics, ba.intrinsics_covariance)
+    cov = ba.joint_covariance
     refined = (
         replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
         if cam == "a"
         else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov)
     )
     refined.position_in_world[cam] = ba.joint_in_world
-    std = np.sqrt(np.clip(np.diag(ba.covariance)[:9], 0.0, None))
-    section = bundle_section(views, ba.intrinsics, std, ba.rms_px, ba.sigma_px, int(inl.sum()))
+    section = bundle_section(
+        views, ba.intrinsics, ba.intrinsics_std, ba.rms_px, ba.sigma_px, int(inl.sum())
+    )
     return refined, section, notes
 
 
@@ -171,11 +194,13 @@ def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:
     can be labelled in two orders; two cameras that see it at very different rolls may
     pick different ones, and then their "one world" differs by this transform (see
     :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both files are poses
-    NPZs of the same, symmetric board.
+    NPZs of the same, symmetric checkerboard (a target's corners are identified).
     """
     obs = [read_npz_observations(p) if p.suffix.lower() == ".npz" else None for p in poses]
     if obs[0] is None or obs[1] is None:
         return None
+    if any("target" in read_npz_header(p) for p in poses):
+        return None  # an AprilGrid or ChArUco: every corner identified, one labelling only
     X = obs[0].board_points
     if X.shape != obs[1].board_points.shape or not np.allclose(X, obs[1].board_points):
         return None
@@ -219,17 +244,19 @@ def _articulated(
     used, thinned = bundle_frames(inliers, keep)
     inliers[:] = used
     notes = [thinned] if thinned else []
-    ca, cb = views[0].corners[inliers], views[1].corners[inliers]
     ba = bundle_adjust_articulated(
-        ca, np.ones(ca.shape[:2], bool), views[0].board_points,
-        cb, np.ones(cb.shape[:2], bool), views[1].board_points,
+        views[0].corners[inliers], None, views[0].board_points,  # NaN: not seen
+        views[1].corners[inliers], None, views[1].board_points,
         views[0].intrinsics, views[1].intrinsics,
-        pair.a.T_world_cam[inliers], pair.b.T_world_cam[inliers], o_a, o_b, **kwargs,
+        pair.a.T_world_cam[inliers], pair.b.T_world_cam[inliers], o_a, o_b,
+        models=(views[0].model, views[1].model), **kwargs,
     )  # fmt: skip
     if not ba.success:
         return None, None, [*notes, "the bundle adjustment did not converge; the pose-based "
                             "estimate is kept"]  # fmt: skip
     n = int(inliers.sum())
+    notes += degenerate_warning("A", ba.model_a, ba.intrinsics_a, ba.intrinsics_covariance_a)
+    notes += degenerate_warning("B", ba.model_b, ba.intrinsics_b, ba.intrinsics_covariance_b)
     sections = {
         "a": bundle_section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
                       ba.sigma_px, n),

@@ -24,8 +24,18 @@ from acs_cli.core.intrinsics import (
     CalibrationResult,
     board_points,
     calibrate_robust,
+    degenerate_distortion,
+    intrinsics_covariance,
 )
-from acs_cli.errors import InputError
+from acs_cli.core.targets import (
+    MIN_POSE_CORNERS,
+    TARGETS_DETECTOR_VERSION,
+    MarkerTarget,
+    detect_target,
+    find_other_family,
+    pose_ready,
+)
+from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import (
@@ -38,6 +48,7 @@ from acs_cli.io.detections import (
 from acs_cli.io.export import write_opencv_yaml
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, DroppedView, ImagesUsed, IntrinsicsArtifact
+from acs_cli.io.target import target_to_mapping
 
 __all__ = [
     "EXPORTS",
@@ -80,6 +91,9 @@ class IntrinsicsConfig:
         Extra files: ``"ros"`` (camera_info YAML), ``"opencv"`` (cv2.FileStorage YAML).
     workers : int, optional
         Detection processes (default ``os.cpu_count()``).
+    target : AprilGrid or Charuco, optional
+        Calibrate on this target (identified corners, partial views) instead of the
+        ``cols x rows`` checkerboard.
     """
 
     cols: int = 9
@@ -88,6 +102,7 @@ class IntrinsicsConfig:
     model: str = "pinhole"
     export: tuple[str, ...] = ()
     workers: int | None = None
+    target: MarkerTarget | None = None
 
 
 @dataclass(frozen=True)
@@ -127,16 +142,30 @@ class IntrinsicsRun:
     warnings: list[str] = field(default_factory=list)
 
 
-def _detect_file(path: str, cols: int, rows: int) -> tuple[str, Detection | None, str | None]:
-    """Worker: read one image and detect the board; errors come back as text."""
+def _detect_file(
+    path: str, cols: int, rows: int, target: MarkerTarget | None = None
+) -> tuple[str, Detection | None, str | None]:
+    """Worker: read one image and detect the board (or ``target``, an AprilGrid or ChArUco:
+    corners ``(m, 2)`` by id, NaN where unseen); errors come back as text."""
     try:
         img, sha = read_gray(path)
     except InputError as exc:
         return "", None, exc.one_line()
-    corners = detect_checkerboard(img, cols, rows)
     h, w = img.shape[:2]
+    if target is not None:
+        found = detect_target(img, target)
+        dense = found.dense(target.n_corners) if len(found) else None
+        det = Detection(Path(path).name, dense is not None, (int(w), int(h)), dense)
+        return _target_key(sha, target), det, None
+    corners = detect_checkerboard(img, cols, rows)
     det = Detection(Path(path).name, corners is not None, (int(w), int(h)), corners)
     return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
+
+
+def _target_key(sha: str, target: MarkerTarget) -> str:
+    """The detections-cache key of an AprilGrid or ChArUco target (identified corners)."""
+    label = target.short().replace(":", "/") + f"#{target.n_corners}"
+    return f"{sha}:{label}:{TARGETS_DETECTOR_VERSION}"
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -155,7 +184,7 @@ def _exit_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _file_key(path: Path, cols: int, rows: int) -> str:
+def _file_key(path: Path, cols: int, rows: int, target: MarkerTarget | None = None) -> str:
     import hashlib
 
     h = hashlib.sha256()
@@ -165,6 +194,8 @@ def _file_key(path: Path, cols: int, rows: int) -> str:
                 h.update(chunk)
     except OSError as exc:
         raise InputError(f"cannot read image ({exc.strerror or exc})", path=path) from exc
+    if target is not None:
+        return _target_key(h.hexdigest(), target)
     return detection_key(h.hexdigest(), cols, rows, DETECTOR_VERSION)
 
 
@@ -173,6 +204,84 @@ def no_board_error(folder: Path, cols: int, rows: int, n: int) -> InputError:
     return InputError(
         f"no {cols}x{rows} board found in any of {n} images; check --board "
         "(inner corners, COLSxROWS)",
+        path=folder,
+    )
+
+
+#: Images :func:`no_target_error` looks at for markers of another family.
+FAMILY_PROBES = 8
+#: The target frame of each kind, as artifacts record it.
+TARGET_FRAMES = {
+    "aprilgrid": "Kalibr's: origin at tag 0's bottom-left corner, x right, y up (z out of "
+    "the target)",
+    "charuco": "OpenCV's: origin at the board's top-left corner, x right, y down, z into the board",
+}
+
+
+def target_views(
+    detections: Sequence[Detection], target: MarkerTarget
+) -> tuple[list[int], list[np.ndarray], list[np.ndarray]]:
+    """The views of a target that determine a pose, with their own corners.
+
+    Parameters
+    ----------
+    detections : sequence of Detection
+        From :func:`detect_folder` with ``target``: corners ``(m, 2)``, NaN where unseen.
+    target : AprilGrid or Charuco
+
+    Returns
+    -------
+    views : list of int
+        Indices of the detections whose seen corners pass
+        :func:`acs_cli.core.targets.pose_ready`.
+    object_points : list of ndarray, shape (k_i, 3)
+        Each view's seen corners in the target frame, metres.
+    image_points : list of ndarray, shape (k_i, 2)
+        Their pixels.
+    """
+    pts = target.points()
+    views: list[int] = []
+    obj: list[np.ndarray] = []
+    img: list[np.ndarray] = []
+    for i, d in enumerate(detections):
+        if not d.found or d.corners is None:
+            continue
+        c = np.asarray(d.corners, dtype=float)
+        seen = np.all(np.isfinite(c), axis=1)
+        if pose_ready(pts[seen]):
+            views.append(i)
+            obj.append(pts[seen])
+            img.append(c[seen])
+    return views, obj, img
+
+
+def no_target_error(
+    folder: Path, target: MarkerTarget, images: Sequence[Path], seen: int = 0
+) -> AcsError:
+    """The error for a folder where no image shows enough of an AprilGrid or ChArUco.
+
+    Looks at up to :data:`FAMILY_PROBES` images (spread over the folder) for markers of
+    another family: when one shows them, an :class:`InputError` (exit 2) names the family;
+    else a :class:`DegenerateMotionError` (exit 3) with advice. ``seen`` counts the images
+    with some corners of the target, too few or too collinear for a pose.
+    """
+    n = len(images)
+    probes = [images[int(i)] for i in np.unique(np.linspace(0, n - 1, min(n, FAMILY_PROBES)))]
+    for p in probes:
+        img, _ = read_gray(p)
+        family = find_other_family(img, target)
+        if family is not None:
+            return InputError(
+                f"the images show markers of the {family} family, not the target's "
+                f"{target.dictionary} (--target {target.short()}); check the target "
+                "description (its dictionary or tag family)",
+                path=p,
+            )
+    few = f"; {seen} image(s) show fewer than {MIN_POSE_CORNERS} usable corners" if seen else ""
+    return DegenerateMotionError(
+        f"no {target.kind} ({target.short()}) found in any of {n} images{few}: record the "
+        "target large, sharp and well lit (at least two whole tags or markers a view), and "
+        "check --target",
         path=folder,
     )
 
@@ -186,6 +295,7 @@ def detect_folder(
     extra_caches: Sequence[Path] = (),
     workers: int | None = None,
     progress: Progress | None = None,
+    target: MarkerTarget | None = None,
 ) -> FolderDetections:
     """Detect the board in every image of a folder, reusing and updating a cache.
 
@@ -204,6 +314,10 @@ def detect_folder(
         Processes; default ``os.cpu_count()``. Few images run in this process.
     progress : callable, optional
         ``progress(done, total)`` after each image.
+    target : AprilGrid or Charuco, optional
+        Detect this target instead of the ``cols x rows`` board: each detection's corners
+        are ``(m, 2)``, row ``j`` = corner id ``j``, NaN where unseen (``found``: any
+        corner seen).
 
     Returns
     -------
@@ -220,7 +334,7 @@ def detect_folder(
         known.update(read_detections(extra))
     own = read_detections(cache)
     known.update(own)
-    keys = [_file_key(p, cols, rows) for p in images]
+    keys = [_file_key(p, cols, rows, target) for p in images]
     found: dict[int, Detection] = {i: known[k] for i, k in enumerate(keys) if k in known}
     cached = len(found)
     todo = [i for i in range(len(images)) if i not in found]
@@ -252,7 +366,7 @@ def detect_folder(
     try:
         if n_workers <= 1:
             for i in todo:
-                key, det, error = _detect_file(str(images[i]), cols, rows)
+                key, det, error = _detect_file(str(images[i]), cols, rows, target)
                 if error is not None:
                     raise InputError(error)
                 if det is None:  # pragma: no cover - _detect_file's contract
@@ -263,7 +377,7 @@ def detect_folder(
                 max_workers=n_workers, initializer=_exit_with_parent, initargs=(os.getpid(),)
             ) as pool:
                 pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
-                    pool.submit(_detect_file, str(images[i]), cols, rows): i for i in todo
+                    pool.submit(_detect_file, str(images[i]), cols, rows, target): i for i in todo
                 }
                 try:
                     while pending:
@@ -354,9 +468,11 @@ def run_intrinsics(
     Raises
     ------
     InputError
-        Bad options, no or corrupt images, images of different sizes, no board anywhere.
+        Bad options, no or corrupt images, images of different sizes, no board anywhere,
+        markers of another family than the target's.
     DegenerateMotionError
-        Too few views of the board to calibrate (nothing but the cache is written).
+        Too few views of the board to calibrate, or no view of the target with enough
+        corners (nothing but the cache is written).
     """
     _check_config(config)
     inputs = [images_dir, *list_images(images_dir)]
@@ -370,17 +486,30 @@ def run_intrinsics(
         check_distinct_output(p, [*inputs, output])
     for p in [output, cache_path_for(output), *exports.values()]:
         check_writable(p)  # before the detection, not after it
-    cols, rows = config.cols, config.rows
+    cols, rows, target = config.cols, config.rows, config.target
     fd = detect_folder(
-        images_dir, cols, rows, cache_path_for(output), workers=config.workers, progress=progress
+        images_dir,
+        cols,
+        rows,
+        cache_path_for(output),
+        workers=config.workers,
+        progress=progress,
+        target=target,
     )
-    with_board = [i for i, d in enumerate(fd.detections) if d.found]
-    skipped = [fd.images[i].name for i, d in enumerate(fd.detections) if not d.found]
-    if not with_board:
-        raise no_board_error(images_dir, cols, rows, len(fd.images))
-    obj = board_points(cols, rows, config.square)
-    img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]
-    calib = calibrate_robust([obj] * len(img_pts), img_pts, fd.image_size, config.model)
+    if target is None:
+        with_board = [i for i, d in enumerate(fd.detections) if d.found]
+        if not with_board:
+            raise no_board_error(images_dir, cols, rows, len(fd.images))
+        obj = board_points(cols, rows, config.square)
+        img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]
+        obj_pts = [obj] * len(img_pts)
+    else:
+        with_board, obj_pts, img_pts = target_views(fd.detections, target)
+        if not with_board:
+            n_some = sum(d.found for d in fd.detections)
+            raise no_target_error(images_dir, target, fd.images, n_some)
+    skipped = [fd.images[i].name for i in range(len(fd.images)) if i not in set(with_board)]
+    calib = calibrate_robust(obj_pts, img_pts, fd.image_size, config.model)
     names = [fd.images[i].name for i in with_board]
     used = [names[j] for j in calib.used]
     dropped = [
@@ -394,6 +523,10 @@ def run_intrinsics(
             f"{len(dropped)} view(s) dropped as outliers: "
             + ", ".join(f"{d.image} ({d.rms_px:.2f} px)" for d in dropped)
         )
+    cov = intrinsics_covariance(calib, obj_pts, img_pts)
+    degenerate = degenerate_distortion(config.model, calib.distortion, cov[4:, 4:])
+    if degenerate:
+        warnings.append(degenerate)
 
     dist_names = DISTORTION_NAMES[config.model]
     std = dict(calib.std_intrinsics)
@@ -411,6 +544,18 @@ def run_intrinsics(
             "board": "origin at the first inner corner, x along a row, z into the board",
         },
     )
+    if target is not None:
+        header["method"] = (
+            f"OpenCV {calibrator} ({config.model} model) on the identified corners of a "
+            f"{target.kind} ({TARGETS_DETECTOR_VERSION}: cv2.aruco markers, corners refined "
+            f"as X-junctions), each view's own corners (at least {MIN_POSE_CORNERS}, not "
+            "collinear); views with RMS above max(median + 3 * 1.4826 * MAD, 2 * median) "
+            "dropped and the calibration redone"
+        )
+        header["frames"].pop("board", None)
+        header["frames"]["target"] = TARGET_FRAMES[target.kind]
+        header["units"].pop("square", None)
+        header["units"]["target"] = "m"
     art = IntrinsicsArtifact(
         model=config.model,
         image_size=(int(fd.image_size[0]), int(fd.image_size[1])),
@@ -420,14 +565,15 @@ def run_intrinsics(
         rms_px=calib.rms_px,
         per_view_rms_px={n: float(e) for n, e in zip(used, calib.per_view_rms, strict=True)},
         std=std if std else None,
-        board=BoardSpec(cols, rows, config.square, "m"),
+        board=BoardSpec(cols, rows, config.square, "m") if target is None else None,
+        target=None if target is None else target_to_mapping(target),
         images=ImagesUsed(
             total=len(fd.images),
             used=used,
             skipped_no_board=skipped,
             dropped_outliers=dropped,
         ),
-        detector=DETECTOR_VERSION,
+        detector=DETECTOR_VERSION if target is None else TARGETS_DETECTOR_VERSION,
         detections_cache=fd.cache.name,
         exports={k: v.name for k, v in exports.items()},
         warnings=warnings,

@@ -19,7 +19,7 @@ import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -31,15 +31,23 @@ from acs_cli.core.pnp import (
     reversed_order_transform,
 )
 from acs_cli.core.sfm import SfmCamera, SfmOptions, SfmProgress, SfmResult
+from acs_cli.core.targets import MIN_POSE_CORNERS, Checkerboard, MarkerTarget, pose_ready
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.detections import cache_path_for
-from acs_cli.io.images import list_images, read_gray, timestamp_from_name
+from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
 from acs_cli.io.poses import PosesArtifact, SfmSummary
-from acs_cli.io.trajectory import Trajectory, write_tum
-from acs_cli.stages.intrinsics import detect_folder, no_board_error
+from acs_cli.io.target import target_from_mapping, target_to_mapping
+from acs_cli.io.timestamps import ImageTimes, image_times, read_timestamps_file
+from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
+from acs_cli.stages.intrinsics import (
+    TARGET_FRAMES,
+    detect_folder,
+    no_board_error,
+    no_target_error,
+)
 
 __all__ = [
     "CameraIntrinsics",
@@ -69,6 +77,14 @@ class PosesConfig:
         Also write the trajectory as a TUM file.
     workers : int, optional
         Detection processes (default ``os.cpu_count()``).
+    timestamps : Path, optional
+        A CSV of image name and time (:func:`acs_cli.io.timestamps.read_timestamps_file`).
+    fps : float, optional
+        Frame rate: frame numbers in the names (or the folder order) become seconds.
+    target : AprilGrid or Charuco, optional
+        Pose on this target (identified corners, partial views) instead of a checkerboard;
+        default: the intrinsics artifact's target when it records one (and no board option
+        is given).
     """
 
     cols: int | None = None
@@ -76,6 +92,9 @@ class PosesConfig:
     square: float | None = None
     tum: Path | None = None
     workers: int | None = None
+    timestamps: Path | None = None
+    fps: float | None = None
+    target: MarkerTarget | None = None
 
 
 #: Kept for callers of the former reader: the intrinsics artifact's class.
@@ -105,15 +124,65 @@ def read_intrinsics(path: Path) -> IntrinsicsArtifact:
     return IntrinsicsArtifact.load(path)
 
 
-def _timestamps(names: list[str], all_names: list[str]) -> tuple[np.ndarray, bool]:
-    """Timestamps from file names if they increase strictly, else the folder indices."""
-    stamps = [timestamp_from_name(n) for n in names]
-    if all(s is not None for s in stamps):
-        t = np.array(stamps, dtype=float)
-        if t.size < 2 or np.all(np.diff(t) > 0):
-            return t, True
-    index = {n: i for i, n in enumerate(all_names)}
-    return np.array([index[n] for n in names], dtype=float), False
+class _TimeOptions(Protocol):
+    """The stage options that say where image times come from."""
+
+    @property
+    def timestamps(self) -> Path | None: ...
+
+    @property
+    def fps(self) -> float | None: ...
+
+
+def _time_source(config: _TimeOptions) -> dict[str, int] | None:
+    """The ``--timestamps`` file read (before any work), with ``--fps`` checked against it."""
+    if config.timestamps is not None and config.fps is not None:
+        raise InputError("give either --timestamps or --fps, not both")
+    if config.fps is not None and not (np.isfinite(config.fps) and config.fps > 0):
+        raise InputError(f"--fps must be a positive frame rate, got {config.fps}")
+    return None if config.timestamps is None else read_timestamps_file(config.timestamps)
+
+
+def _image_times(
+    names: list[str], all_names: list[str], stamps: dict[str, int] | None, config: _TimeOptions
+) -> ImageTimes:
+    return image_times(
+        names,
+        all_names,
+        timestamps=stamps,
+        timestamps_source=str(config.timestamps),
+        fps=config.fps,
+    )
+
+
+def _tum_note(times: ImageTimes) -> str | None:
+    """The TUM file's comment when its times are frame numbers."""
+    return None if times.unit == "s" else f"{FRAME_NUMBERS_NOTE} ({times.source}), not seconds"
+
+
+def _time_header(header: dict[str, Any], times: ImageTimes) -> None:
+    header["timestamps_from"] = times.source
+    header["units"]["timestamps"] = "s" if times.unit == "s" else "frame number (not seconds)"
+
+
+def _poses_target(
+    config: PosesConfig, cam: IntrinsicsArtifact, intrinsics: Path
+) -> MarkerTarget | None:
+    """The AprilGrid or ChArUco to pose on: the option's, else the intrinsics' (unless a
+    checkerboard option is given); None for a checkerboard."""
+    opts = {"--board": config.cols, "--square": config.square}
+    given = [k for k, v in opts.items() if v is not None]
+    if config.target is not None:
+        if given:
+            raise InputError(
+                f"{' and '.join(given)} {'describe' if len(given) > 1 else 'describes'} a "
+                "checkerboard; --target replaces them"
+            )
+        return config.target
+    if cam.target is None or given:
+        return None
+    target = target_from_mapping(cam.target, intrinsics, "target")
+    return None if isinstance(target, Checkerboard) else target
 
 
 def _board_option(value: Any, stored: Any, name: str, path: Path) -> Any:
@@ -139,17 +208,23 @@ def run_poses(
     ------
     InputError
         Bad options or files, no board in any image, images of another size than the
-        intrinsics'.
+        intrinsics', markers of another family than the target's.
+    DegenerateMotionError
+        No image shows enough of an AprilGrid or ChArUco target for a pose.
     """
     cam = read_intrinsics(intrinsics)
-    board = cam.board or BoardSpec()
-    cols = int(_board_option(config.cols, board.cols, "size", intrinsics))
-    rows = int(_board_option(config.rows, board.rows, "size", intrinsics))
-    square = float(_board_option(config.square, board.square, "square", intrinsics))
-    if cols < 2 or rows < 2:
-        raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
-    if not (np.isfinite(square) and square > 0):
-        raise InputError(f"--square must be a positive length in metres, got {square}")
+    stamps = _time_source(config)
+    target = _poses_target(config, cam, intrinsics)
+    cols, rows, square = 0, 0, 0.0  # the checkerboard's; unused with a target
+    if target is None:
+        board = cam.board or BoardSpec()
+        cols = int(_board_option(config.cols, board.cols, "size", intrinsics))
+        rows = int(_board_option(config.rows, board.rows, "size", intrinsics))
+        square = float(_board_option(config.square, board.square, "square", intrinsics))
+        if cols < 2 or rows < 2:
+            raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
+        if not (np.isfinite(square) and square > 0):
+            raise InputError(f"--square must be a positive length in metres, got {square}")
     outputs = [output] + ([config.tum] if config.tum is not None else [])
     inputs = [images_dir, intrinsics, *list_images(images_dir)]
     for o in outputs:
@@ -167,6 +242,7 @@ def run_poses(
         extra_caches=[cache_path_for(intrinsics)],
         workers=config.workers,
         progress=progress,
+        target=target,
     )
     if fd.image_size != cam.image_size:
         raise InputError(
@@ -174,7 +250,7 @@ def run_poses(
             f"calibrated at {cam.image_size[0]}x{cam.image_size[1]}",
             path=images_dir,
         )
-    obj = board_points(cols, rows, square)
+    obj = board_points(cols, rows, square) if target is None else target.points()
     all_names = [p.name for p in fd.images]
     names: list[str] = []
     T_cb: list[np.ndarray] = []
@@ -183,8 +259,14 @@ def run_poses(
     skipped: list[str] = []
     for p, d in zip(fd.images, fd.detections, strict=True):
         pose = None
-        if d.found and d.corners is not None:
+        if d.found and d.corners is not None and target is None:
             pose = board_pose(obj, d.corners, cam.camera_matrix, cam.distortion, cam.model)
+        elif d.found and d.corners is not None:  # identified corners, NaN where unseen
+            seen = np.all(np.isfinite(d.corners), axis=1)
+            if pose_ready(obj[seen]):
+                pose = board_pose(
+                    obj[seen], d.corners[seen], cam.camera_matrix, cam.distortion, cam.model
+                )
         if pose is None or d.corners is None:
             skipped.append(p.name)
             continue
@@ -192,13 +274,17 @@ def run_poses(
         T_cb.append(pose.T_cam_board)
         rms.append(pose.rms_px)
         corners.append(np.asarray(d.corners, dtype=float).reshape(-1, 2))
+    if not names and target is not None:
+        n_some = sum(d.found for d in fd.detections)
+        raise no_target_error(images_dir, target, fd.images, n_some)
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
-    t, has_t = _timestamps(names, all_names)
-    warnings: list[str] = []
+    times = _image_times(names, all_names, stamps, config)
+    t = times.seconds
+    warnings: list[str] = [] if times.note is None else [times.note]
     # one board frame for the whole sequence: undo 180-degree relabellings of the board
     T_cb_arr = np.stack(T_cb)
-    if cols != rows:
+    if target is None and cols != rows:
         order = np.argsort(t, kind="stable")
         flip = np.zeros(len(names), dtype=bool)
         flip[order] = consistent_corner_order(T_cb_arr[order, :3, :3])
@@ -213,7 +299,14 @@ def run_poses(
             )
     T_wc = camera_in_board(T_cb_arr)
     traj = Trajectory(
-        t, T_wc, source=str(output), format="npz", has_timestamps=has_t, names=tuple(names)
+        t,
+        T_wc,
+        source=str(output),
+        format="npz",
+        has_timestamps=times.has_timestamps,
+        names=tuple(names),
+        timestamps_ns=times.nanoseconds,
+        time_unit=times.unit,
     )
     if skipped:
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
@@ -222,15 +315,25 @@ def run_poses(
         {"images": images_dir, "intrinsics": intrinsics},
         method="cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on "
         f"{cols}x{rows} board corners; T_world_cam = inverse of T_cam_board",
-        units={"length": "m", "reprojection_rms": "px", "timestamps": "s or frame number"},
+        units={"length": "m", "reprojection_rms": "px"},
         frames={
             "world": "the board (origin at its first inner corner, z into the board)",
             "cam": "the camera's optical frame",
         },
     )
-    header["board"] = {"cols": cols, "rows": rows, "square": square, "units": "m"}
+    if target is None:
+        header["board"] = {"cols": cols, "rows": rows, "square": square, "units": "m"}
+    else:
+        header["method"] = (
+            "cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on each image's "
+            f"identified {target.kind} corners (at least {MIN_POSE_CORNERS}, not collinear); "
+            "T_world_cam = inverse of T_cam_target; corners (n, m, 2) hold NaN where a corner "
+            "was not seen"
+        )
+        header["frames"]["world"] = f"the target: {TARGET_FRAMES[target.kind]}"
+        header["target"] = target_to_mapping(target)
     header["intrinsics_file"] = str(intrinsics)
-    header["timestamps_from"] = "file names" if has_t else "image indices"
+    _time_header(header, times)
     rms_arr = np.array(rms, dtype=float)
     PosesArtifact(
         trajectory=traj,
@@ -242,7 +345,7 @@ def run_poses(
         header=header,
     ).save(output)
     if config.tum is not None:
-        write_tum(config.tum, t, T_wc)
+        write_tum(config.tum, t, T_wc, timestamps_ns=times.nanoseconds, note=_tum_note(times))
     return PosesRun(traj, rms_arr, skipped, output, fd.cached, warnings)
 
 
@@ -282,6 +385,8 @@ class SfmPosesConfig:
     workdir : Path, optional
         Keep COLMAP's database and models there (an empty or new folder, or one an earlier
         ``--sfm`` run made); default: a temporary folder, removed afterwards.
+    timestamps, fps
+        As :class:`PosesConfig`'s.
     """
 
     tum: Path | None = None
@@ -293,6 +398,8 @@ class SfmPosesConfig:
     max_image_size: int | None = None
     max_features: int = 8192
     workdir: Path | None = None
+    timestamps: Path | None = None
+    fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -496,6 +603,7 @@ def run_sfm_poses(
 
     if config.refine_intrinsics and intrinsics is None:
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
+    stamps = _time_source(config)
     paths = list_images(images_dir)
     camera = _sfm_camera(intrinsics) if intrinsics is not None else None
     opts = SfmOptions(
@@ -527,16 +635,18 @@ def run_sfm_poses(
         result = run_sfm(images_dir, all_names, work, camera, opts, progress)
 
     names = list(result.registered_names)
-    t, has_t = _timestamps(names, all_names)
+    times = _image_times(names, all_names, stamps, config)
     traj = Trajectory(
-        t,
+        times.seconds,
         result.T_world_cam,
         source=str(output),
         format="npz",
-        has_timestamps=has_t,
+        has_timestamps=times.has_timestamps,
         names=tuple(names),
+        timestamps_ns=times.nanoseconds,
+        time_unit=times.unit,
     )
-    warnings = _sfm_warnings(result, camera)
+    warnings = _sfm_warnings(result, camera) + ([] if times.note is None else [times.note])
     cam = result.camera
     given = "given (" + ("refined" if result.intrinsics_refined else "held fixed") + ")"
     n_images = len(all_names)
@@ -559,7 +669,6 @@ def run_sfm_poses(
             "camera centres = 1)",
             "reprojection_rms": "px",
             "camera_matrix": "px",
-            "timestamps": "s or frame number",
         },
         frames={
             "world": "the first registered image's camera frame (SfM fixes the world only up "
@@ -569,7 +678,7 @@ def run_sfm_poses(
     )
     if intrinsics is not None:
         header["intrinsics_file"] = str(intrinsics)
-    header["timestamps_from"] = "file names" if has_t else "image indices"
+    _time_header(header, times)
     header["front_end"] = "sfm"
     feats = result.features_per_image
     header["sfm"] = {
@@ -626,5 +735,11 @@ def run_sfm_poses(
         header=header,
     ).save(output)
     if config.tum is not None:
-        write_tum(config.tum, t, result.T_world_cam)
+        write_tum(
+            config.tum,
+            times.seconds,
+            result.T_world_cam,
+            timestamps_ns=times.nanoseconds,
+            note=_tum_note(times),
+        )
     return SfmPosesRun(traj, result, output, warnings)

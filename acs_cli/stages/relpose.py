@@ -288,10 +288,14 @@ def _pair_with_offset(
     if config.method != "refined":
         raise InputError("--estimate-time-offset needs the refined method (not --method paper)")
     for name, t in (("A", a), ("B", b)):
-        if not t.has_timestamps:
+        if not t.has_timestamps or t.time_unit != "s":
             raise InputError(
-                f"--estimate-time-offset needs timestamps, but camera {name}'s trajectory has "
-                f"none ({t.format})",
+                f"--estimate-time-offset needs timestamps in seconds, but camera {name}'s trajectory "
+                + (
+                    "has frame numbers (give `acscal poses` --fps or --timestamps)"
+                    if t.has_timestamps
+                    else f"has none ({t.format})"
+                ),
                 path=t.source,
             )
     offset = estimate_time_offset(
@@ -328,7 +332,7 @@ def _synchronisation(
     a: Trajectory, b: Trajectory, fit: Callable[[FloatArray, FloatArray], FloatArray]
 ) -> list[str]:
     """A warning when shifting B's clock by up to a frame fits clearly better."""
-    if not (a.has_timestamps and b.has_timestamps):
+    if not (a.has_timestamps and b.has_timestamps) or "frame" in (a.time_unit, b.time_unit):
         return []
     found = synchronisation_check(a.timestamps, a.T_world_cam, b.timestamps, b.T_world_cam, fit)
     if found is None:

@@ -36,6 +36,7 @@ from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
+from acs_cli.core.targets import MarkerTarget
 from acs_cli.core.time_offset import (
     Fit,
     PoseInterpolator,
@@ -47,7 +48,13 @@ from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
-from acs_cli.stages.bundle import CornerViews, bundle_frames, bundle_section, corner_views
+from acs_cli.stages.bundle import (
+    CornerViews,
+    bundle_frames,
+    bundle_section,
+    corner_views,
+    degenerate_warning,
+)
 
 RIG_CONFIG_VERSION = 2
 SCALES = ("known", "unknown")
@@ -55,6 +62,8 @@ FRONT_ENDS = ("board", "sfm")
 SFM_MATCHING = ("auto", "sequential", "exhaustive")
 TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
 RIG_FILE = "rig.yaml"
+#: Camera keys that only apply to a camera given as an image folder.
+_IMAGE_KEYS = ("front_end", "intrinsics", "timestamps", "fps")
 
 
 @dataclass(frozen=True)
@@ -72,6 +81,9 @@ class RigCameraSpec:
     front_end: str = "board"
     #: for ``front_end: sfm``: an intrinsics file (else COLMAP self-calibrates)
     intrinsics: Path | None = None
+    #: with ``images``: where image times come from (``acscal poses --timestamps``/``--fps``)
+    timestamps: Path | None = None
+    fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -98,6 +110,8 @@ class RigRunConfig:
     joints: dict[str, RigJointSpec]
     topology: RigTopology
     board: tuple[int, int, float] | None = None
+    #: an AprilGrid or ChArUco (config key ``target``) instead of the board
+    target: MarkerTarget | None = None
     pair_by: str = "auto"
     max_dt: float | None = None
     workers: int | None = None
@@ -125,7 +139,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         cycle, an unknown camera in a joint, two joints between one pair, a camera in no
         joint.
     """
-    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker
+    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker, camera_times
 
     c = _Checker(path)
     top = c.mapping(
@@ -133,8 +147,8 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         "",
         required=("output", "cameras", "joints"),
         optional=(
-            "schema", "schema_version", "reference", "board", "pair_by", "max_dt", "workers",
-            "bundle", "estimate_time_offset", "max_offset", "sfm",
+            "schema", "schema_version", "reference", "board", "target", "pair_by", "max_dt",
+            "workers", "bundle", "estimate_time_offset", "max_offset", "sfm",
         ),
     )  # fmt: skip
     if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
@@ -155,13 +169,24 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         cam = c.mapping(
             cam if cam is not None else {},
             key,
-            optional=("poses", "format", "images", "model", "scale", "front_end", "intrinsics"),
+            optional=(
+                "poses",
+                "format",
+                "images",
+                "model",
+                "scale",
+                "front_end",
+                "intrinsics",
+                "timestamps",
+                "fps",
+            ),
         )
         if ("poses" in cam) == ("images" in cam):
             raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
         front_end = c.choice(cam.get("front_end", "board"), f"{key}.front_end", FRONT_ENDS)
-        if "images" not in cam and ("front_end" in cam or "intrinsics" in cam):
-            raise c.fail(key, "'front_end' and 'intrinsics' go with 'images'")
+        if "images" not in cam and any(k in cam for k in _IMAGE_KEYS):
+            raise c.fail(key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
+        stamps, fps = camera_times(c, cam, key)
         if front_end == "board" and "intrinsics" in cam:
             raise c.fail(f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)")
         default_scale = "unknown" if front_end == "sfm" else "known"
@@ -181,6 +206,8 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
             intrinsics=c.path(cam["intrinsics"], f"{key}.intrinsics")
             if "intrinsics" in cam
             else None,
+            timestamps=stamps,
+            fps=fps,
         )
     ref = c.mapping(top.get("reference", {}), "reference", optional=("camera", "frame"))
     ref_cam = ref.get("camera", next(iter(cameras)))
@@ -231,10 +258,10 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         topo = rig_topology(list(cameras), raw, ref_cam)
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
-    board = None if top.get("board") is None else c.board(top["board"])
+    board, target = c.board_or_target(top)
     image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
-    if image_cams and board is None:
-        raise c.fail("board", f"missing (camera {image_cams[0]} has images)")
+    if image_cams and board is None and target is None:
+        raise c.fail("board", f"missing (camera {image_cams[0]} has images; or a 'target')")
     max_dt = None
     if top.get("max_dt") is not None:
         max_dt = c.positive(top["max_dt"], "max_dt")
@@ -250,6 +277,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         joints=joints,
         topology=topo,
         board=board,
+        target=target,
         pair_by=c.choice(top.get("pair_by", "auto"), "pair_by", PAIR_BY),
         max_dt=max_dt,
         workers=workers,
@@ -321,6 +349,14 @@ def tracks_on_timeline(
                     "pair_by: index",
                     path=t.source,
                 )
+        units = {t.time_unit for t in trajectories.values()}
+        if len(units) > 1:
+            frames = [n for n, t in trajectories.items() if t.time_unit == "frame"]
+            raise InputError(
+                f"cameras {', '.join(frames)} have frame numbers for times and the others "
+                "seconds: give those cameras fps or timestamps",
+                path=config.path,
+            )
         slots, index = common_timeline(
             {n: t.timestamps for n, t in trajectories.items()}, config.max_dt
         )
@@ -589,6 +625,12 @@ def _need_timestamps(config: RigRunConfig, trajectories: dict[str, Trajectory]) 
                 f"({t.format}); give trajectories with times",
                 path=config.path,
             )
+        if t.time_unit != "s":
+            raise InputError(
+                f"estimate_time_offset: camera {name}'s times are frame numbers, not "
+                "seconds; give it fps or timestamps",
+                path=config.path,
+            )
 
 
 def rig_time_offsets(
@@ -674,7 +716,9 @@ def rig_synchronisation(
     """Warnings for joints whose cameras fit clearly better with one clock shifted by a
     frame (:func:`acs_cli.core.time_offset.synchronisation_check`; whole frames only, three
     solves of the joint per joint, to keep it cheap)."""
-    if config.pair_by == "index" or not all(t.has_timestamps for t in trajectories.values()):
+    if config.pair_by == "index" or not all(
+        t.has_timestamps and t.time_unit == "s" for t in trajectories.values()
+    ):
         return []
     out = []
     for j in config.topology.joints:
@@ -727,10 +771,10 @@ def rig_bundle(
             continue
         rows = index[name]
         valid = rows >= 0
-        corners = np.zeros((n, *got.corners.shape[1:]))
+        corners = np.full((n, *got.corners.shape[1:]), np.nan)  # NaN: not seen
         corners[valid] = got.corners[rows[valid]]
-        ok = np.broadcast_to(valid[:, None], corners.shape[:2]).copy()
-        views[name] = CameraViews(corners, ok, got.board_points, got.intrinsics)
+        ok = np.asarray(np.isfinite(corners).all(axis=2))
+        views[name] = CameraViews(corners, ok, got.board_points, got.intrinsics, got.model)
         sources[name] = got
     if not views:
         return est, {}, notes
@@ -768,6 +812,10 @@ def rig_bundle(
     if not ba.success:
         return est, {}, [*notes, "the rig's bundle adjustment did not converge; the "
                          "pose-based estimate is kept"]  # fmt: skip
+    for c in config.topology.cameras:
+        notes += degenerate_warning(
+            c, views[c].model, ba.intrinsics[c], ba.intrinsics_covariance[c]
+        )
     sections = {
         c: bundle_section(sources[c], ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c],
                           ba.sigma_px, int(ba.frames.size))

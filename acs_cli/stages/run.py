@@ -35,6 +35,7 @@ from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.images import list_images
 
 if TYPE_CHECKING:
+    from acs_cli.core.targets import MarkerTarget, Target
     from acs_cli.stages.rig import RigRunConfig
 
 __all__ = [
@@ -78,6 +79,10 @@ class CameraSpec:
     name: str
     images: Path | None
     model: str = "pinhole"
+    #: where image times come from (``acscal poses --timestamps`` / ``--fps``), for every
+    #: folder of this camera
+    timestamps: Path | None = None
+    fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -112,6 +117,8 @@ class RunConfig:
     square: float
     cameras: dict[str, CameraSpec]
     intrinsics_from: dict[str, Path] | None = None
+    #: an AprilGrid or ChArUco (config key ``target``) instead of the ``cols x rows`` board
+    target: MarkerTarget | None = None
     intrinsics_images: str = "all"
     joint: JointSpec | None = None
     relpose: RelposeSpec | None = None
@@ -181,6 +188,34 @@ class _Checker:
             self.positive(b["square"], "board.square"),
         )
 
+    def target(self, value: Any) -> Target:
+        """``target``: a target mapping (Kalibr's or OpenCV's names, as a target YAML), a
+        short form (``aprilgrid:6x6:0.088:0.3``) or a target YAML file (relative to the
+        config's folder)."""
+        from acs_cli.io.target import parse_target_short, read_target_yaml, target_from_mapping
+
+        if isinstance(value, dict):
+            return target_from_mapping(value, self.file, "target")
+        if isinstance(value, str) and ":" in value:
+            return parse_target_short(value, option=f"{self.file}: key 'target'")
+        return read_target_yaml(self.path(value, "target"))
+
+    def board_or_target(
+        self, top: dict[str, Any]
+    ) -> tuple[tuple[int, int, float] | None, MarkerTarget | None]:
+        """The config's ``board`` or ``target`` (not both): a checkerboard (named either
+        way) as ``(cols, rows, square)``, an AprilGrid or ChArUco as the target."""
+        from acs_cli.core.targets import Checkerboard
+
+        if top.get("board") is not None and top.get("target") is not None:
+            raise self.fail("target", "give either 'board' or 'target', not both")
+        if top.get("target") is None:
+            return (None if top.get("board") is None else self.board(top["board"])), None
+        target = self.target(top["target"])
+        if isinstance(target, Checkerboard):
+            return (target.cols, target.rows, target.square), None
+        return None, target
+
     def path(self, value: Any, key: str) -> Path:
         if not isinstance(value, str) or not value.strip():
             raise self.fail(key, f"must be a path (a string), got {_describe(value)}")
@@ -212,8 +247,16 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
     top = c.mapping(
         doc,
         "",
-        required=("schema", "schema_version", "output", "board", "cameras"),
-        optional=("intrinsics_from", "intrinsics", "joint", "relpose", "workers"),
+        required=("schema", "schema_version", "output", "cameras"),
+        optional=(
+            "board",
+            "target",
+            "intrinsics_from",
+            "intrinsics",
+            "joint",
+            "relpose",
+            "workers",
+        ),
     )
     if top["schema"] != CONFIG_SCHEMA:
         raise c.fail("schema", f"must be {CONFIG_SCHEMA}, got {top['schema']!r}")
@@ -224,7 +267,13 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             f"{version} is newer than this acscal reads ({CONFIG_VERSION}); upgrade acscal",
         )
     output = c.path(top["output"], "output")
-    cols, rows, square = c.board(top["board"])
+    from acs_cli.stages.intrinsics import IntrinsicsConfig
+
+    board, target = c.board_or_target(top)
+    if board is None and target is None:
+        raise c.fail("board", "missing (required, or a 'target')")
+    defaults = IntrinsicsConfig()  # the board's fields, unused with a target
+    cols, rows, square = board or (defaults.cols, defaults.rows, defaults.square)
 
     cams_doc = c.mapping(top["cameras"], "cameras", required=("a",), optional=("b",))
     cameras: dict[str, CameraSpec] = {}
@@ -233,10 +282,11 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             continue
         key = f"cameras.{name}"
         cam = cams_doc[name] if cams_doc[name] is not None else {}
-        cam = c.mapping(cam, key, optional=("images", "model"))
+        cam = c.mapping(cam, key, optional=("images", "model", "timestamps", "fps"))
         images = c.path(cam["images"], f"{key}.images") if cam.get("images") is not None else None
         model = c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS)
-        cameras[name] = CameraSpec(name, images, model)
+        stamps, fps = camera_times(c, cam, key)
+        cameras[name] = CameraSpec(name, images, model, stamps, fps)
 
     intrinsics_from: dict[str, Path] | None = None
     src = top.get("intrinsics_from")
@@ -317,6 +367,7 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
         square=square,
         cameras=cameras,
         intrinsics_from=intrinsics_from,
+        target=target,
         intrinsics_images=intrinsics_images,
         joint=joint,
         relpose=relpose,
@@ -529,6 +580,15 @@ def _numbers(kind: str, output: Path) -> str:
     return ""
 
 
+def camera_times(c: Any, cam: dict[str, Any], key: str) -> tuple[Path | None, float | None]:
+    """A camera's ``timestamps`` (a CSV file) and ``fps`` keys, checked."""
+    stamps = c.path(cam["timestamps"], f"{key}.timestamps") if "timestamps" in cam else None
+    fps = c.positive(cam["fps"], f"{key}.fps") if "fps" in cam else None
+    if stamps is not None and fps is not None:
+        raise c.fail(key, "give either 'timestamps' or 'fps', not both")
+    return stamps, fps
+
+
 def _poses_stage(
     stage: str,
     images: Path,
@@ -536,25 +596,43 @@ def _poses_stage(
     npz: Path,
     board: tuple[int, int, float],
     workers: int | None,
+    times: tuple[Path | None, float | None] = (None, None),
+    target: MarkerTarget | None = None,
 ) -> _Stage:
-    """The poses stage of one camera's image folder (``npz`` and the TUM file beside it)."""
+    """The poses stage of one camera's image folder (``npz`` and the TUM file beside it),
+    on the board, or on ``target`` when given."""
     from acs_cli.stages.poses import PosesConfig, run_poses
 
     cols, rows, square = board
     tum = npz.with_suffix(".tum")
-    pcfg = PosesConfig(cols=cols, rows=rows, square=square, tum=tum, workers=workers)
+    pcfg = PosesConfig(
+        cols=cols if target is None else None,
+        rows=rows if target is None else None,
+        square=square if target is None else None,
+        tum=tum,
+        workers=workers,
+        timestamps=times[0],
+        fps=times[1],
+        target=target,
+    )
 
     def do_poses() -> list[str]:
         return run_poses(images, intrinsics, npz, pcfg).warnings
 
-    return _Stage(
-        stage,
-        "poses",
-        {"images": images, "intrinsics": intrinsics},
-        {"cols": cols, "rows": rows, "square": square},
-        [npz, tum],
-        do_poses,
-    )
+    inputs = {"images": images, "intrinsics": intrinsics}
+    if times[0] is not None:
+        inputs["timestamps"] = times[0]
+    options: dict[str, Any] = _target_options(board, target)
+    if times[1] is not None:
+        options["fps"] = times[1]
+    return _Stage(stage, "poses", inputs, options, [npz, tum], do_poses)
+
+
+def _target_options(board: tuple[int, int, float], target: MarkerTarget | None) -> dict[str, Any]:
+    """A stage's options naming its board (``cols rows square``) or its target."""
+    if target is not None:
+        return {"target": target.short()}
+    return {"cols": board[0], "rows": board[1], "square": board[2]}
 
 
 def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
@@ -564,7 +642,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     from acs_cli.stages.relpose import RelposeConfig, run_relpose
 
     out = config.output
-    board = {"cols": config.cols, "rows": config.rows, "square": config.square}
+    board = _target_options((config.cols, config.rows, config.square), config.target)
     stages: list[_Stage] = []
     intrinsics: dict[str, Path] = {}
     poses: dict[str, Path] = {}
@@ -589,6 +667,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             square=config.square,
             model=cam.model,
             workers=config.workers,
+            target=config.target,
         )
 
         def do_intrinsics(
@@ -624,6 +703,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 npz,
                 (config.cols, config.rows, config.square),
                 config.workers,
+                (config.cameras[name].timestamps, config.cameras[name].fps),
+                config.target,
             )
         )
         return npz
@@ -697,7 +778,14 @@ def _sfm_stage(
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
 
     npz = out / f"cam_{name}" / "poses.npz"
-    cfg = SfmPosesConfig(workers=config.workers, tum=npz.with_suffix(".tum"), **config.sfm)
+    cam = config.cameras[name]
+    cfg = SfmPosesConfig(
+        workers=config.workers,
+        tum=npz.with_suffix(".tum"),
+        timestamps=cam.timestamps,
+        fps=cam.fps,
+        **config.sfm,
+    )
 
     def do_sfm() -> list[str]:
         return run_sfm_poses(images, intrinsics, npz, cfg).warnings
@@ -705,7 +793,9 @@ def _sfm_stage(
     inputs: dict[str, Path] = {"images": images}
     if intrinsics is not None:
         inputs["intrinsics"] = intrinsics
-    options = {"front_end": "sfm", **config.sfm}
+    if cam.timestamps is not None:
+        inputs["timestamps"] = cam.timestamps
+    options = {"front_end": "sfm", **config.sfm} | ({"fps": cam.fps} if cam.fps else {})
     return _Stage(f"sfm {name}", "poses", inputs, options, [npz], do_sfm), npz
 
 
@@ -723,15 +813,22 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             stage, poses[name] = _sfm_stage(name, cam.images, cam.intrinsics, out, config)
             stages.append(stage)
             continue
-        if cam.images is None or config.board is None:
+        if cam.images is None or (config.board is None and config.target is None):
             continue
-        cols, rows, square = config.board
-        board = {"cols": cols, "rows": rows, "square": square}
+        defaults = IntrinsicsConfig()  # the board's fields, unused with a target
+        the_board = config.board or (defaults.cols, defaults.rows, defaults.square)
+        cols, rows, square = the_board
+        board = _target_options(the_board, config.target)
         cam_dir = out / f"cam_{name}"
         intr_out = cam_dir / "intrinsics.yaml"
         intrinsics[name] = intr_out
         icfg = IntrinsicsConfig(
-            cols=cols, rows=rows, square=square, model=cam.model, workers=config.workers
+            cols=cols,
+            rows=rows,
+            square=square,
+            model=cam.model,
+            workers=config.workers,
+            target=config.target,
         )
         images = cam.images
 
@@ -752,7 +849,16 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         )
         npz = cam_dir / "poses.npz"
         stages.append(
-            _poses_stage(f"poses {name}", images, intr_out, npz, config.board, config.workers)
+            _poses_stage(
+                f"poses {name}",
+                images,
+                intr_out,
+                npz,
+                the_board,
+                config.workers,
+                (cam.timestamps, cam.fps),
+                config.target,
+            )
         )
         poses[name] = npz
     rig_out = out / RIG_FILE

@@ -179,7 +179,8 @@ def test_trajectory_input_errors(run: dict[str, object], tmp_path: Path) -> None
     tum = (run_dir / "cam_a" / "poses_general.tum").read_text().splitlines()
     data = [ln for ln in tum if ln and not ln.startswith("#")]
     late = tmp_path / "late_a.tum"
-    late.write_text("\n".join(data[3:]) + "\n")
+    notes = [ln for ln in tum if ln.startswith("#")]  # keep "times are frame numbers"
+    late.write_text("\n".join(notes + data[3:]) + "\n")
     res = acscal("trajectory", "--relpose", rel, "--poses-a", late, "--poses-b",
                  run_dir / "cam_b" / "poses_general.tum", "-o", tmp_path / "t")  # fmt: skip
     assert res.returncode == 2, res.stderr

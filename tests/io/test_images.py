@@ -17,7 +17,7 @@ from acs_cli.io.detections import (
     read_detections,
     write_detections,
 )
-from acs_cli.io.images import list_images, natural_key, read_gray, timestamp_from_name
+from acs_cli.io.images import list_images, natural_key, read_gray
 from acs_cli.stages.intrinsics import detect_folder
 
 
@@ -74,13 +74,6 @@ def test_read_gray_and_corrupt_files(tmp_path: Path) -> None:
     empty.write_bytes(b"")
     with pytest.raises(InputError, match="empty"):
         read_gray(empty)
-
-
-def test_timestamps_from_names() -> None:
-    assert timestamp_from_name("img_00012.png") == 12.0
-    assert timestamp_from_name("frame_1623456789.123.png") == pytest.approx(1623456789.123)
-    assert timestamp_from_name("left01.jpg") == 1.0
-    assert timestamp_from_name("board.png") is None
 
 
 def test_cache_round_trip(tmp_path: Path) -> None:

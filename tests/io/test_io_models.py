@@ -110,8 +110,8 @@ def test_intrinsics_round_trip(tmp_path: Path) -> None:
     assert isinstance(loaded, IntrinsicsArtifact)
     assert list(doc)[8:] == [
         "model", "image_size", "camera_matrix", "distortion", "distortion_names", "rms_px",
-        "per_view_rms_px", "std", "board", "images", "detector", "detections_cache", "exports",
-        "warnings",
+        "per_view_rms_px", "std", "board", "target", "images", "detector", "detections_cache",
+        "exports", "warnings",
     ]  # fmt: skip
     np.testing.assert_array_equal(loaded.camera_matrix, art.camera_matrix)
     np.testing.assert_array_equal(loaded.distortion, art.distortion)
@@ -313,7 +313,7 @@ def test_poses_round_trip(tmp_path: Path, with_corners: bool) -> None:
         keys = list(z.files)
     assert keys == [
         "schema", "schema_version", "T_world_cam", "timestamps", "has_timestamps",
-        "image_names", "header_json", "reprojection_rms", "skipped_images",
+        "image_names", "time_unit", "header_json", "reprojection_rms", "skipped_images",
         *(["corners", "board_points"] if with_corners else []),
     ]  # fmt: skip
     loaded = PosesArtifact.load(p)

@@ -161,3 +161,36 @@ def test_example_configs_are_valid(name: str) -> None:
         images += list(cfg.relpose.images.values())
     root = CONFIGS.parent / "demo_out" / "images"
     assert images and all(p.parent.parent == root for p in images)
+
+
+def test_cameras_take_fps_or_a_timestamps_file(tmp_path: Path) -> None:
+    doc = _with({"cameras.a.fps": 30, "cameras.b.timestamps": "data/b_times.csv"})
+    cfg = load_run_config(_write(tmp_path, doc))
+    assert cfg.cameras["a"].fps == 30.0 and cfg.cameras["a"].timestamps is None
+    assert cfg.cameras["b"].timestamps == tmp_path / "cfg" / "data" / "b_times.csv"
+    both = _with({"cameras.a.fps": 30, "cameras.a.timestamps": "t.csv"})
+    with pytest.raises(InputError, match=r"cameras\.a.*not both"):
+        load_run_config(_write(tmp_path, both))
+    with pytest.raises(InputError, match=r"cameras\.a\.fps"):
+        load_run_config(_write(tmp_path, _with({"cameras.a.fps": -1})))
+
+
+def test_rig_cameras_take_times_only_with_images(tmp_path: Path) -> None:
+    from acs_cli.stages.rig import parse_rig_config
+
+    doc = {
+        "schema": "acscal/run-config",
+        "schema_version": 2,
+        "output": "out/",
+        "board": {"cols": 9, "rows": 6, "square": 0.025},
+        "cameras": {
+            "a": {"images": "imgs/a", "fps": 25},
+            "b": {"poses": "b.tum", "fps": 25},
+        },
+        "joints": {"j": {"between": ["a", "b"], "type": "ball"}},
+    }
+    with pytest.raises(InputError, match=r"cameras\.b.*go with .images."):
+        parse_rig_config(doc, tmp_path / "rig.yaml")
+    doc["cameras"]["b"] = {"images": "imgs/b", "timestamps": "b.csv"}
+    cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert cfg.cameras["a"].fps == 25.0 and cfg.cameras["b"].timestamps == tmp_path / "b.csv"

@@ -1,0 +1,299 @@
+"""Image times: from file names, a timestamps file, or frame numbers and a frame rate.
+
+Rules (``docs/conventions.md``, "Timestamps"), applied to the last number in a file's stem:
+
+- a number with a decimal point is seconds: ``frame_1623456789.123.png`` is 1623456789.123 s;
+- an integer of 18 digits or more is nanoseconds (ROS, EuRoC: ``1403636579763555584.png``),
+  of 15-17 digits microseconds, of 12-14 digits milliseconds, of 9-11 digits seconds (Unix
+  time);
+- a shorter integer is a frame number (``img_00010.png`` is frame 10), not a time: without
+  ``--fps`` the trajectory's times are frame numbers and every output says so.
+
+``--timestamps FILE`` (a CSV of image name and time) overrides the names; ``--fps F`` turns
+frame numbers (or, for names without numbers, the images' order in the folder) into seconds.
+Times are kept as exact integer nanoseconds beside the seconds, so that a TUM file written
+from them carries the digits the source had.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acs_cli.errors import InputError
+from acs_cli.io.images import IMAGE_SUFFIXES
+
+__all__ = [
+    "ImageTimes",
+    "NameStamp",
+    "image_times",
+    "read_timestamps_file",
+    "stamp_from_name",
+]
+
+_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+#: Integer file-name stamps by their number of digits: (fewest digits, unit, ns per unit).
+_INTEGER_UNITS = ((18, "nanoseconds", 1), (15, "microseconds", 1000), (12, "milliseconds", 10**6))
+#: Integers of at least this many digits (and fewer than 12) are seconds of Unix time.
+_SECONDS_DIGITS = 9
+_NS = 10**9
+
+
+@dataclass(frozen=True)
+class NameStamp:
+    """The time (or frame number) one file name carries.
+
+    Attributes
+    ----------
+    unit : str
+        ``"nanoseconds"``, ``"microseconds"``, ``"milliseconds"``, ``"seconds"`` or
+        ``"frame"`` (a frame number, not a time).
+    ns : int
+        The time in integer nanoseconds (exact), or the frame number for ``"frame"``.
+    """
+
+    unit: str
+    ns: int
+
+
+def _exact_ns(token: str) -> int:
+    """Integer nanoseconds of a decimal number of seconds, exactly (rounded past 9 digits)."""
+    try:
+        value = Decimal(token.strip())
+    except InvalidOperation as exc:
+        raise ValueError(f"not a number: {token!r}") from exc
+    if not value.is_finite():
+        raise ValueError(f"not a finite number: {token!r}")
+    return int((value * _NS).to_integral_value())
+
+
+def stamp_from_name(name: str) -> NameStamp | None:
+    """The time (or frame number) in a file name, by the module's rules; None without one.
+
+    ``img_00012.png`` gives frame 12, ``1403636579763555584.png`` 1403636579763555584 ns,
+    ``frame_1623456789.123.png`` 1623456789.123 s, ``board.png`` None.
+    """
+    stem = Path(name).stem if Path(name).suffix.lower() in IMAGE_SUFFIXES else name
+    found = _NUMBER.findall(stem)
+    if not found:
+        return None
+    token = found[-1]
+    if "." in token:
+        return NameStamp("seconds", _exact_ns(token))
+    digits = len(token.lstrip("0")) or 1
+    value = int(token)
+    for fewest, unit, factor in _INTEGER_UNITS:
+        if digits >= fewest:
+            return NameStamp(unit, value * factor)
+    if digits >= _SECONDS_DIGITS:
+        return NameStamp("seconds", value * _NS)
+    return NameStamp("frame", value)
+
+
+@dataclass(frozen=True)
+class ImageTimes:
+    """The times of a sequence of images.
+
+    Attributes
+    ----------
+    seconds : ndarray, shape (n,)
+        Strictly increasing times in seconds, or frame numbers when ``unit == "frame"``.
+    nanoseconds : ndarray of int64, shape (n,), or None
+        The same times as exact integer nanoseconds (None for frame numbers).
+    unit : str
+        ``"s"`` or ``"frame"``.
+    source : str
+        Where they came from, in words (recorded in artifacts' headers).
+    has_timestamps : bool
+        False when the only order is the images' place in the folder (pair by index).
+    """
+
+    seconds: NDArray[np.float64]
+    nanoseconds: NDArray[np.int64] | None
+    unit: str
+    source: str
+    has_timestamps: bool
+
+    @property
+    def note(self) -> str | None:
+        """A warning for outputs whose times are not seconds, or None."""
+        if self.unit == "s":
+            return None
+        return (
+            f"times are {self.source}, not seconds: give --fps (the frame rate) or "
+            "--timestamps FILE for times in seconds; pairing with other recordings and a "
+            "time offset need them"
+        )
+
+
+def _times_from_ns(ns: list[int], unit: str, source: str) -> ImageTimes:
+    arr = np.array(ns, dtype=np.int64)
+    whole, frac = np.divmod(arr, _NS)
+    seconds = whole.astype(float) + frac.astype(float) / _NS
+    return ImageTimes(seconds, arr, unit, source, True)
+
+
+def _check_increasing(names: list[str], ns: list[int], source: str) -> None:
+    for k in range(1, len(ns)):
+        if ns[k] <= ns[k - 1]:
+            raise InputError(
+                f"the times from {source} do not increase in the images' order: "
+                f"{names[k]} is not after {names[k - 1]}"
+            )
+
+
+def read_timestamps_file(path: str | Path) -> dict[str, int]:
+    """Read a timestamps file: one image name and one time per line.
+
+    Comma- (or whitespace-) separated, in either order; blank lines and lines starting with
+    ``#`` are skipped, and a first line without a number is a header. Times are seconds
+    (decimals kept exactly), or nanoseconds when the header says ``[ns]`` or every time is
+    an integer of 18 digits or more (EuRoC's ``data.csv``: ``#timestamp [ns],filename``).
+
+    Returns
+    -------
+    dict of str to int
+        Image file name (without folders) to time in integer nanoseconds.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, a line without exactly one name and one time, a repeated name, or
+        no entries.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except FileNotFoundError as exc:
+        raise InputError("no such timestamps file", path=p) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the timestamps file ({exc})", path=p) from exc
+    header = ""
+    rows: list[tuple[int, str, str]] = []
+    for k, raw in enumerate(text.splitlines(), start=1):
+        s = raw.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            header += s.lower()
+            continue
+        fields = [f.strip() for f in re.split(r"[,;\t ]+", s) if f.strip()]
+        numeric = [_is_number(f) for f in fields]
+        if not rows and not any(numeric):
+            header += s.lower()
+            continue
+        if len(fields) != 2:
+            raise InputError(
+                f"expected an image name and a time, got {len(fields)} field(s)", path=p, line=k
+            )
+        # the name is the field that is not a plain number (or the one with an image suffix)
+        name_first = _is_image_name(fields[0]) or not numeric[0]
+        name, time = (fields[0], fields[1]) if name_first else (fields[1], fields[0])
+        if not _is_number(time):
+            raise InputError(f"not a time in seconds: {time!r}", path=p, line=k)
+        rows.append((k, Path(name).name, time))
+    if not rows:
+        raise InputError("the timestamps file has no entries", path=p)
+    in_ns = (
+        "[ns]" in header
+        or "nanosec" in header
+        or all("." not in t and len(t.lstrip("+0")) >= _INTEGER_UNITS[0][0] for _, _, t in rows)
+    )
+    out: dict[str, int] = {}
+    for k, name, time in rows:
+        if name in out:
+            raise InputError(f"{name} is listed twice", path=p, line=k)
+        out[name] = int(Decimal(time)) if in_ns else _exact_ns(time)
+    return out
+
+
+def _is_number(s: str) -> bool:
+    try:
+        return Decimal(s).is_finite()
+    except InvalidOperation:
+        return False
+
+
+def _is_image_name(s: str) -> bool:
+    return Path(s).suffix.lower() in IMAGE_SUFFIXES
+
+
+def image_times(
+    names: list[str],
+    all_names: list[str],
+    *,
+    timestamps: dict[str, int] | None = None,
+    timestamps_source: str = "the timestamps file",
+    fps: float | None = None,
+) -> ImageTimes:
+    """The times of the images ``names`` (a subsequence of the folder's ``all_names``).
+
+    Parameters
+    ----------
+    names : list of str
+        The images kept (e.g. those with a board pose), in folder order.
+    all_names : list of str
+        Every image of the folder, in order (the fallback: their index).
+    timestamps : dict of str to int, optional
+        From :func:`read_timestamps_file`: overrides the names.
+    timestamps_source : str
+        How to name that file in messages.
+    fps : float, optional
+        Frames per second: frame numbers (or folder indices) become seconds.
+
+    Returns
+    -------
+    ImageTimes
+
+    Raises
+    ------
+    InputError
+        ``timestamps`` and ``fps`` together, a non-positive ``fps``, ``fps`` for names
+        that carry times, images missing from ``timestamps``, or times that do not increase.
+    """
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise InputError(f"--fps must be a positive frame rate, got {fps}")
+    if timestamps is not None:
+        if fps is not None:
+            raise InputError("give either --timestamps or --fps, not both")
+        missing = [n for n in names if n not in timestamps]
+        if missing:
+            raise InputError(
+                f"{len(missing)} image(s) are not in {timestamps_source}: "
+                + ", ".join(missing[:5])
+                + (" ..." if len(missing) > 5 else "")
+            )
+        ns = [timestamps[n] for n in names]
+        _check_increasing(names, ns, timestamps_source)
+        return _times_from_ns(ns, "s", timestamps_source)
+    stamps = [stamp_from_name(n) for n in names]
+    units = {s.unit for s in stamps if s is not None}
+    usable = len(units) == 1 and all(s is not None for s in stamps)
+    if usable:
+        ns = [s.ns for s in stamps if s is not None]
+        usable = all(b > a for a, b in itertools.pairwise(ns))
+    if usable and units != {"frame"}:
+        unit = units.pop()
+        if fps is not None:
+            raise InputError(
+                f"--fps applies to frame numbers, but the image names carry times ({unit}); "
+                "drop --fps"
+            )
+        return _times_from_ns(ns, "s", f"file names ({unit})")
+    if usable:
+        frames = ns
+        what = "frame numbers in the file names"
+    else:
+        index = {n: i for i, n in enumerate(all_names)}
+        frames = [index[n] for n in names]
+        what = "the images' order in the folder"
+    if fps is not None:
+        ns_fps = [round(f * _NS / fps) for f in frames]
+        return _times_from_ns(ns_fps, "s", f"{what} at {fps:g} frames per second")
+    return ImageTimes(np.array(frames, dtype=float), None, "frame", what, usable)
