@@ -290,7 +290,8 @@ def _pair_with_offset(
     for name, t in (("A", a), ("B", b)):
         if not t.has_timestamps or t.time_unit != "s":
             raise InputError(
-                f"--estimate-time-offset needs timestamps in seconds, but camera {name}'s trajectory "
+                f"--estimate-time-offset needs timestamps in seconds, but camera {name}'s "
+                "trajectory "
                 + (
                     "has frame numbers (give `acscal poses` --fps or --timestamps)"
                     if t.has_timestamps
