@@ -7,7 +7,8 @@ levels) filming the target, half the frames showing 30-70 % of it. Then:
 - **corners**: :func:`acs_cli.core.targets.detect_target` on every frame against the true
   projections (``truth_corners.npz``): RMS, 95th percentile and largest error (px), the
   share of the corners in view that were identified, and the time per frame; beside it
-  OpenCV's own corners (``ArucoDetector`` with ``CORNER_REFINE_SUBPIX``, or
+  OpenCV's own corners (``ArucoDetector`` with ``CORNER_REFINE_SUBPIX`` and Kalibr's two-bit
+  tag border, or
   ``CharucoDetector.detectBoard``) on the same frames;
 - **intrinsics**: the intrinsics stage (:func:`acs_cli.stages.intrinsics.run_intrinsics`,
   pinhole model, every view's own corners) against the rendered camera: fx, fy error (%),
@@ -33,6 +34,8 @@ import yaml
 
 from acs_cli.core.targets import (
     ARUCO_DICTIONARIES,
+    KALIBR_BORDER_BITS,
+    KALIBR_CORNERS_FROM_ARUCO,
     AprilGrid,
     Charuco,
     MarkerTarget,
@@ -53,13 +56,14 @@ def opencv_corners(gray: np.ndarray, target: MarkerTarget) -> tuple[np.ndarray, 
         return np.asarray(ids).reshape(-1), np.asarray(c, float).reshape(-1, 2)
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    params.markerBorderBits = KALIBR_BORDER_BITS
     d = cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARIES[target.dictionary])
     q, tags, _ = cv2.aruco.ArucoDetector(d, params).detectMarkers(gray)
     if tags is None:
         return np.zeros(0, int), np.zeros((0, 2))
-    t = np.asarray(tags).reshape(-1)
+    t = np.asarray(tags, dtype=np.int64).reshape(-1)
     keep = t < target.tag_cols * target.tag_rows
-    quads = np.asarray(q, float).reshape(-1, 4, 2)[keep][:, ::-1]  # Kalibr's corner order
+    quads = np.asarray(q, float).reshape(-1, 4, 2)[keep][:, KALIBR_CORNERS_FROM_ARUCO]
     return target.tag_corner_ids(t[keep]).reshape(-1), quads.reshape(-1, 2)
 
 

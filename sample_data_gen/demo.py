@@ -247,8 +247,6 @@ def _trajectory_demo(out: Path, seed: int) -> None:
              "-o", res / f"relpose_scaled_{method}.yaml")  # fmt: skip
     _run("relpose", "--self-calibrate", "--unknown-scale", *poses("general_scaled"),
          "-o", res / "relpose_selfcal_scaled.yaml")  # fmt: skip
-    _run("export", res / "relpose_refined.yaml", "--format", "kalibr",
-         "-o", res / "camchain.yaml")  # fmt: skip
 
     truth = _load(data / "general" / "truth.yaml")
     truth_s = _load(data / "general_scaled" / "truth.yaml")
@@ -450,6 +448,10 @@ def _image_demo(out: Path, seed: int, frames: int, size: tuple[int, int]) -> Non
     table.add_row(f"B's origin in A at frame {ref} (Alg III)", _v(t_t, 4), _v(t_e, 4),
                   f"{1000 * float(np.linalg.norm(t_e - t_t)):.2f} mm")  # fmt: skip
     console.print(table)
+    # a Kalibr camchain of the run: intrinsics from the run folder, T_cn_cnm1 at the reference
+    camchain = runs["fixed_joint"] / "camchain.yaml"
+    _run("export", runs["fixed_joint"] / "relpose.yaml", "--format", "kalibr", "-o", camchain)
+    console.print(f"Kalibr camchain: {_show(camchain)}")
     console.print(f"images and truth in {_show(images)}")
     console.print(f"artifacts in {', '.join(_show(r) for r in runs.values())}")
     for r in runs.values():

@@ -28,12 +28,17 @@ Each camera's world is its own board's frame (what ``acscal poses`` outputs), so
 Output: ``OUT/<scenario>/cam_a/img_00000.png``, ..., ``OUT/<scenario>/cam_b/...``,
 ``OUT/<scenario>/truth.yaml`` (kind ``render_truth``) and the true trajectories
 ``cam_a_truth.tum``, ``cam_b_truth.tum`` (timestamps ``index / 10`` s).
+
+With ``target`` (an AprilGrid or a ChArUco, :data:`SCENE_TARGETS`) each board is that target,
+drawn and warped by :mod:`sample_data_gen.target_render`; each camera's world is then its
+target's frame, ``OUT/<scenario>/target.yaml`` describes it, and a view half out of the
+image still shows identified corners (a partial view).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,12 +46,15 @@ import cv2
 import numpy as np
 
 from acs_cli.core import se3
+from acs_cli.core.targets import AprilGrid, Charuco
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import atomic_write_bytes
+from acs_cli.io.target import target_to_mapping, write_target_yaml
 from acs_cli.io.trajectory import write_tum
 
 __all__ = [
     "RENDER_SCENARIOS",
+    "SCENE_TARGETS",
     "Board",
     "Camera",
     "board_corners",
@@ -62,6 +70,12 @@ FloatArray = se3.FloatArray
 RENDER_SCENARIOS = ("overlap", "fixed_joint", "general")
 TRUTH_KIND = "render_truth"
 FPS = 10.0
+#: Targets the size of the default checkerboard's printed area, whose tags a 640x480 view
+#: from :func:`render_scenario`'s ``board_distance`` resolves (``--target aprilgrid``).
+SCENE_TARGETS: dict[str, AprilGrid | Charuco] = {
+    "aprilgrid": AprilGrid(4, 3, 0.045, 0.3),
+    "charuco": Charuco(7, 5, 0.035, 0.026, "DICT_5X5_100"),
+}
 
 _WHITE = 0.8  # albedo of the white squares and margin
 _BLACK = 0.07  # albedo of the black squares
@@ -460,11 +474,11 @@ def _look_at(P: FloatArray, target: FloatArray, roll_deg: float) -> FloatArray:
     """``R_world_cam`` of a camera at ``P`` looking at ``target``, board-up, rolled."""
     z = target - P
     z = z / np.linalg.norm(z)
-    x = np.cross(np.array([0.0, 1.0, 0.0]), z)
+    x = np.array([z[2], 0.0, -z[0]])  # (0, 1, 0) x z, without np.cross's overhead
     if np.linalg.norm(x) < 1e-6:
         x = np.array([1.0, 0.0, 0.0])
     x /= np.linalg.norm(x)
-    y = np.cross(z, x)
+    y = np.array([z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]])
     return np.stack([x, y, z], axis=1) @ _rot(np.array([0.0, 0.0, 1.0]), roll_deg)
 
 
@@ -707,6 +721,7 @@ def render_scenario(
     partial_fraction: float = 0.1,
     missing_fraction: float = 0.05,
     supersample: int = 2,
+    target: AprilGrid | Charuco | None = None,
 ) -> Path:
     """Render one scenario into ``out_dir / scenario`` and return that folder.
 
@@ -743,6 +758,13 @@ def render_scenario(
         (frame 0 is always a full view).
     supersample : int
         Samples per pixel along each axis (on top of analytic area-averaging).
+    target : AprilGrid or Charuco, optional
+        Film this target instead of the checkerboard (``board`` and ``square`` are then
+        unused): drawn and warped by :mod:`sample_data_gen.target_render`, the cameras
+        placed about the checkerboard standing in for it
+        (:func:`sample_data_gen.target_render.board_proxy`). Each camera's world is its
+        target's frame; ``target.yaml`` (for ``--target``) is written beside the truth, and
+        a partial view keeps the target's corners in the image identified.
     """
     k = _parse_scenario(scenario)
     w, h = (int(v) for v in size)
@@ -766,7 +788,19 @@ def render_scenario(
         make_camera(np.random.default_rng([seed, 10, 0]), (w, h), supersample),
         make_camera(np.random.default_rng([seed, 10, 1]), (w, h), supersample),
     )
+    # imported here: target_render builds on this module
+    from sample_data_gen.target_render import (
+        board_proxy,
+        classify_target_view,
+        render_target_frame,
+        target_texture,
+    )
+
     the_board = Board(cols, rows, float(square))
+    T_target_board: FloatArray = np.eye(4)
+    if target is not None:
+        the_board, T_target_board = board_proxy(target)
+        texture = target_texture(target)
     if scenario == "overlap":
         layout = _overlap_layout(
             np.random.default_rng([seed, 21]), the_board, board_distance, joint_distance
@@ -781,9 +815,17 @@ def render_scenario(
         _kinds(rng, frames, partial_fraction, missing_fraction),
     )
     T_a, T_b = _sample_motion(rng, scenario, layout, cams, kinds, board_distance)
+    T_wa_env: FloatArray = np.eye(4)
+    if target is not None:  # every world from the proxy board's frame to the target's
+        T_a, T_b = T_target_board @ T_a, T_target_board @ T_b
+        layout = replace(
+            layout,
+            T_wa_wb=T_target_board @ layout.T_wa_wb @ se3.invert_transforms(T_target_board),
+            joint_wa=se3.transform_points(T_target_board, layout.joint_wa),
+        )
+        T_wa_env = T_target_board
     T_wb_wa = se3.invert_transforms(layout.T_wa_wb)
     envs = _environment(np.random.default_rng([seed, 40, k]))
-    T_wa_env = np.eye(4)
     # the environment is fixed in world A; express B's poses in world A for it
     out = Path(out_dir) / scenario
     photos: dict[str, list[Photometry]] = {"cam_a": [], "cam_b": []}
@@ -798,13 +840,21 @@ def render_scenario(
         for i in range(frames):
             ph = _random_photometry(img_rng, blur, noise_sigma)
             tr = time.perf_counter()
-            T_env_cam = se3.invert_transforms(T_w_env) @ T_wc[i]
-            # render in the environment's frame: the board is at inv(T_w_env) in it
-            T_env_board = se3.invert_transforms(T_w_env)
-            img = render_view(cam, T_env_cam, the_board, T_env_board, envs, ph, img_rng)
+            if target is None:
+                T_env_cam = se3.invert_transforms(T_w_env) @ T_wc[i]
+                # render in the environment's frame: the board is at inv(T_w_env) in it
+                T_env_board = se3.invert_transforms(T_w_env)
+                img = render_view(cam, T_env_cam, the_board, T_env_board, envs, ph, img_rng)
+            else:
+                img = render_target_frame(
+                    cam, T_wc[i], texture, envs, ph, img_rng, T_world_env=T_w_env
+                )
             t_render += time.perf_counter() - tr
             atomic_write_bytes(out / name / f"img_{i:05d}.png", _encode_png(img))
-            kind, n_in = classify_view(cam, the_board, T_wc[i])
+            if target is None:
+                kind, n_in = classify_view(cam, the_board, T_wc[i])
+            else:
+                kind, n_in = classify_target_view(cam, target, T_wc[i])
             photos[name].append(ph)
             visibility[name].append(kind)
             n_in_view[name].append(n_in)
@@ -828,13 +878,15 @@ def render_scenario(
         supersample=supersample,
         render_seconds=t_render / (2 * frames),
         total_seconds=time.perf_counter() - t0,
+        target=target,
     )
+    shown = f"board {cols}x{rows} x {square} m" if target is None else target.short()
     header = make_header(
         TRUTH_KIND,
         inputs={},
         method=(
             f"rendered synthetic ACS (sample_data_gen.render): scenario {scenario}, seed {seed}, "
-            f"{frames} frames, {w}x{h}, board {cols}x{rows} x {square} m"
+            f"{frames} frames, {w}x{h}, {shown}"
         ),
         units={"length": "metres", "angles": "deg", "intensity": "grey levels (0-255)"},
         frames={
@@ -850,6 +902,9 @@ def render_scenario(
             "boards.board_b.T_world_a_board": "board B's frame in world A",
         },
     )
+    if target is not None:
+        header["frames"]["boards"] = "each board is the target, in its frame (world_a, world_b)"
+        write_target_yaml(out / "target.yaml", target)
     write_yaml_artifact(out / "truth.yaml", header, body)
     return out
 
@@ -871,16 +926,23 @@ def _truth_body(
     supersample: int,
     render_seconds: float,
     total_seconds: float,
+    target: AprilGrid | Charuco | None = None,
 ) -> dict[str, Any]:
     T_wb_wa = se3.invert_transforms(layout.T_wa_wb)
     T_b_a0 = se3.invert_transforms(T_a_b[0])
-    board_doc = {
+    board_doc: dict[str, Any] = {
         "cols": board.cols,
         "rows": board.rows,
         "square": board.square,
         "margin_squares": 1,
         "corner_order": "row-major, cols a row: corner k at (k % cols, k // cols, 0) * square",
     }
+    if target is not None:
+        board_doc = {
+            "target": target_to_mapping(target),
+            "short": target.short(),
+            "file": "target.yaml",
+        }
     joint: dict[str, Any] = {
         "position_in_a": layout.rig.o_a,
         "position_in_b": layout.rig.o_b,

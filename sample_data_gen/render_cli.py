@@ -4,6 +4,8 @@ synthetic two-camera ACS with their ground truth (see :mod:`sample_data_gen.rend
 Without ``--scenario`` all three scenarios are written (``OUT/overlap``,
 ``OUT/fixed_joint``, ``OUT/general``); with it, only ``OUT/<scenario>``. The issue's accuracy
 configuration is ``--size 1024x768 --frames 20 --board-distance 0.75 --joint-distance 0.25``.
+``--target aprilgrid`` (or ``charuco``, or any ``acscal --target`` value: a short form or a
+target YAML) films that target instead of the checkerboard, and writes ``target.yaml``.
 """
 
 from __future__ import annotations
@@ -13,7 +15,10 @@ import sys
 import time
 from collections.abc import Sequence
 
-from sample_data_gen.render import RENDER_SCENARIOS, render_scenario
+from acs_cli.core.targets import AprilGrid, Charuco
+from acs_cli.errors import AcsError
+from acs_cli.io.target import parse_target
+from sample_data_gen.render import RENDER_SCENARIOS, SCENE_TARGETS, render_scenario
 
 
 def _pair(text: str, what: str) -> tuple[int, int]:
@@ -24,6 +29,20 @@ def _pair(text: str, what: str) -> tuple[int, int]:
     if a < 1 or b < 1:
         raise argparse.ArgumentTypeError(f"{what} must be positive, got {text!r}")
     return a, b
+
+
+def _target(text: str) -> AprilGrid | Charuco:
+    """``--target``: a name of :data:`SCENE_TARGETS`, or an AprilGrid or ChArUco as acscal
+    reads it (short form or target YAML)."""
+    if text in SCENE_TARGETS:
+        return SCENE_TARGETS[text]
+    try:
+        target = parse_target(text)
+    except AcsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if not isinstance(target, AprilGrid | Charuco):
+        raise argparse.ArgumentTypeError("--target must be an AprilGrid or a ChArUco (use --board)")
+    return target
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -68,6 +87,15 @@ def _parser() -> argparse.ArgumentParser:
         "--missing", type=float, default=0.05, metavar="FRAC", help="fraction without the board"
     )
     p.add_argument("--supersample", type=int, default=2, metavar="S", help="S x S samples a pixel")
+    p.add_argument(
+        "--target",
+        type=_target,
+        default=None,
+        metavar="TARGET",
+        help="film a target instead of the checkerboard: aprilgrid (4x3 tags of 0.045 m), "
+        "charuco (7x5 squares of 0.035 m) or an acscal --target value (aprilgrid:4x3:0.045:0.3, "
+        "a target YAML); writes target.yaml beside truth.yaml",
+    )
     return p
 
 
@@ -95,6 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 partial_fraction=args.partial,
                 missing_fraction=args.missing,
                 supersample=args.supersample,
+                target=args.target,
             )
         except (ValueError, RuntimeError) as exc:
             print(f"error: {exc}", file=sys.stderr)

@@ -1,13 +1,15 @@
 """Rendered image sequences of one camera filming an AprilGrid or a ChArUco target.
 
-The target is drawn as an image with ``cv2.aruco`` (``generateImageMarker`` for Kalibr's
-AprilGrid, with its black squares between the tags; ``CharucoBoard.generateImage`` for
-ChArUco) at a resolution where every edge falls on a texel boundary, then warped into each
-frame by the plane's ray mapping (a homography, and the lens' distortion) of the renderer
-of :mod:`sample_data_gen.render`: each of ``supersample x supersample`` samples a pixel
-takes the exact mean of the target image over its footprint on the plane (a box, from an
-integral image of the texels), so edges and corners are unbiased. The camera, the
-background, lighting, blur, noise and quantisation are those of that renderer.
+The target is drawn as an image (Kalibr's AprilGrid as Kalibr prints it: the tags of
+:func:`acs_cli.core.targets.aprilgrid_tag_cells`, from ``cv2.aruco``'s codes, with their
+two-bit black border, and the black squares between the tags; ChArUco with
+``CharucoBoard.generateImage``) at a resolution where every edge falls on a texel boundary,
+then warped into each frame by the plane's ray mapping (a homography, and the lens'
+distortion) of the renderer of :mod:`sample_data_gen.render`: each of ``supersample x
+supersample`` samples a pixel takes the exact mean of the target image over its footprint
+on the plane (a box, from an integral image of the texels), so edges and corners are
+unbiased. The camera, the background, lighting, blur, noise and quantisation are those of
+that renderer.
 
 Half the frames show the whole target, the other half 30-70 % of its corners.
 
@@ -31,13 +33,14 @@ import cv2
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.targets import ARUCO_DICTIONARIES, AprilGrid, Charuco
+from acs_cli.core.targets import ARUCO_DICTIONARIES, AprilGrid, Charuco, aprilgrid_tag_cells
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import atomic_path, atomic_write_bytes
 from acs_cli.io.target import target_to_mapping, write_target_yaml
 from sample_data_gen.render import (
     _BLACK,
     _WHITE,
+    Board,
     Camera,
     _background,
     _environment,
@@ -49,6 +52,8 @@ from sample_data_gen.render import (
 __all__ = [
     "TARGET_KINDS",
     "TargetTexture",
+    "board_proxy",
+    "classify_target_view",
     "default_target",
     "project_corners",
     "render_target_frame",
@@ -115,7 +120,8 @@ def _with_integral(
 
 
 def target_texture(target: AprilGrid | Charuco) -> TargetTexture:
-    """The target drawn with ``cv2.aruco`` on a texel grid its edges fall on exactly.
+    """The target drawn on a texel grid its edges fall on exactly (see the module
+    documentation).
 
     Raises
     ------
@@ -124,8 +130,8 @@ def target_texture(target: AprilGrid | Charuco) -> TargetTexture:
     """
     ratio_limit = 10**6
     if isinstance(target, AprilGrid):
-        d = cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARIES[target.dictionary])
-        bits = int(d.markerSize) + 2
+        cells = aprilgrid_tag_cells(np.arange(target.tag_cols * target.tag_rows))
+        bits = cells.shape[1]  # as Kalibr prints a tag: border included
         gap_bits = Fraction(target.spacing).limit_denominator(ratio_limit) * bits
         n = _texels_per_bit(gap_bits)  # the gap a whole number of texels
         tag = bits * n
@@ -144,7 +150,7 @@ def target_texture(target: AprilGrid | Charuco) -> TargetTexture:
             r, c = divmod(t, target.tag_cols)
             x = margin + gap + c * pitch
             y = h - margin - gap - r * pitch - tag
-            img[y : y + tag, x : x + tag] = cv2.aruco.generateImageMarker(d, t, tag, borderBits=1)
+            img[y : y + tag, x : x + tag] = np.where(np.kron(cells[t], np.ones((n, n))), 255, 0)
         texel = target.tag_size / tag
         # tag 0's bottom-left corner (the origin) is at texel (margin + gap, h - margin - gap)
         return _with_integral(
@@ -204,11 +210,14 @@ def _albedo_rows(
     tex: TargetTexture,
     cam: Camera,
     env: np.ndarray,
+    T_world_env: FloatArray | None = None,
 ) -> np.ndarray:
     """Albedo of the samples ``rays`` (m, n, 2): the target where its plane (z = 0 of the
-    world) is hit, the background elsewhere."""
+    world) is hit, the background (fixed in the frame ``T_world_env``, default the world's)
+    elsewhere."""
     s = cam.supersample
-    out = _background(rays[::s, ::s], T_cam_world, env)
+    T_cam_env = T_cam_world if T_world_env is None else T_cam_world @ T_world_env
+    out = _background(rays[::s, ::s], T_cam_env, env)
     out = np.repeat(np.repeat(out, s, axis=0), s, axis=1)
     x = rays[..., 0].astype(np.float64)
     y = rays[..., 1].astype(np.float64)
@@ -245,15 +254,17 @@ def render_target_frame(
     photometry: Any,
     rng: np.random.Generator,
     chunk_rows: int = 240,
+    T_world_env: FloatArray | None = None,
 ) -> np.ndarray:
-    """An 8-bit grey image ``(H, W)`` of the target (world = its frame) from ``T_world_cam``."""
+    """An 8-bit grey image ``(H, W)`` of the target (world = its frame) from ``T_world_cam``;
+    the background ``env`` is fixed in the frame ``T_world_env`` (default the world's)."""
     T_cam_world = se3.invert_transforms(T_world_cam)
     s = cam.supersample
     w, h = cam.size
     rows = []
     step = max(s, (chunk_rows // s) * s)
     for r0 in range(0, h * s, step):
-        alb = _albedo_rows(cam.rays[r0 : r0 + step], T_cam_world, tex, cam, env)
+        alb = _albedo_rows(cam.rays[r0 : r0 + step], T_cam_world, tex, cam, env, T_world_env)
         rows.append(alb.reshape(alb.shape[0] // s, s, w, s).mean(axis=(1, 3)))
     return apply_photometry(np.concatenate(rows, axis=0), photometry, rng)
 
@@ -273,6 +284,51 @@ def project_corners(cam: Camera, T_world_cam: FloatArray, points: FloatArray) ->
     ok &= (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
     uv[~ok] = np.nan
     return np.asarray(uv, dtype=float)
+
+
+def board_proxy(target: AprilGrid | Charuco) -> tuple[Board, FloatArray]:
+    """A checkerboard standing in for ``target`` where the articulated renderer
+    (:func:`sample_data_gen.render.render_scenario`) places its cameras and judges views,
+    and its frame in the target's.
+
+    The proxy's inner corners cover the target's corners (a ChArUco's inner corners exactly,
+    an AprilGrid's tag corners to within one tag pitch), centred on them; its frame has the
+    checkerboard's orientation (y down the printed side, z into the board), so for Kalibr's
+    AprilGrid frame (y up, z out of the target) it is turned half a turn about x.
+
+    Parameters
+    ----------
+    target : AprilGrid or Charuco
+
+    Returns
+    -------
+    board : Board
+        Squares of the ChArUco's side or the AprilGrid's tag pitch (tag and gap).
+    T_target_board : ndarray, shape (4, 4)
+        Maps the proxy board's frame into the target's.
+    """
+    pts = target.points()
+    if isinstance(target, Charuco):
+        R, pitch = np.eye(3), target.square_length
+    else:
+        R, pitch = np.diag([1.0, -1.0, -1.0]), target.tag_size * (1.0 + target.spacing)
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    extent = np.ptp((pts - centre) @ R, axis=0)
+    cols, rows = (int(np.ceil(e / pitch - 1e-6)) + 1 for e in extent[:2])
+    board = Board(cols, rows, float(pitch))
+    return board, se3.transforms_from_rt(R, centre - R @ board.centre)
+
+
+def classify_target_view(
+    cam: Camera, target: AprilGrid | Charuco, T_world_cam: FloatArray
+) -> tuple[str, int]:
+    """``("full"|"partial"|"none", corners in view)`` of ``target`` (world = its frame):
+    "full" when every corner is in the image, "none" when none is."""
+    uv = project_corners(cam, T_world_cam, target.points())
+    n_in = int(np.count_nonzero(np.all(np.isfinite(uv), axis=1)))
+    if n_in == target.n_corners:
+        return "full", n_in
+    return ("partial" if n_in else "none"), n_in
 
 
 def _look_at(P: FloatArray, target: FloatArray, up: FloatArray, roll_deg: float) -> FloatArray:

@@ -11,21 +11,19 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from acs_cli.cli.help_format import AcsCommand
+from acs_cli.cli.output import JsonOpt, artifact_result, emit, err, out, warn
 from acs_cli.errors import InputError
 
 if TYPE_CHECKING:
     from acs_cli.core.targets import MarkerTarget
+    from acs_cli.stages.poses import PosesRun, SfmPosesRun
 
 __all__ = ["intrinsics", "parse_board", "poses", "register"]
-
-out = Console(highlight=False)
-err = Console(stderr=True, highlight=False)
 
 _BOARD = re.compile(r"^\s*(\d+)\s*[xX*,]\s*(\d+)\s*$")
 
@@ -34,11 +32,6 @@ class CameraModel(str, Enum):
     pinhole = "pinhole"
     rational = "rational"
     fisheye = "fisheye"
-
-
-class Export(str, Enum):
-    ros = "ros"
-    opencv = "opencv"
 
 
 def parse_board(text: str) -> tuple[int, int]:
@@ -65,6 +58,14 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
     Off when stderr is not a terminal: a log or a pipe then holds only the messages (a
     transient bar would still leave an empty line there).
     """
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
     with Progress(
         TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
         console=err, transient=True, disable=not err.is_terminal,
@@ -149,10 +150,24 @@ def intrinsics(
         ),
     ] = CameraModel.pinhole,
     export: Annotated[
-        list[Export] | None,
-        typer.Option("--export", help="Also write a ROS camera_info or OpenCV YAML beside it."),
+        list[str] | None,
+        typer.Option(
+            "--export",
+            metavar="ros,opencv",
+            help="Also write ros (<stem>_camera_info.yaml) and/or opencv (<stem>_opencv.yaml) "
+            "beside it: a comma-separated list (ros,opencv), or repeat the option.",
+        ),
     ] = None,
+    camera_name: Annotated[
+        str,
+        typer.Option(
+            "--camera-name",
+            help="camera_name of the ROS camera_info (the camera driver's name; letters, "
+            "digits, _).",
+        ),
+    ] = "camera",
     workers: WorkersOpt = None,
+    json_out: JsonOpt = False,
 ) -> None:
     """Calibrate a camera's intrinsics from checkerboard (or AprilGrid, ChArUco) images.
 
@@ -167,8 +182,11 @@ def intrinsics(
         acscal intrinsics images/cam_a --board 9x6 --square 0.025 -o cam_a/intrinsics.yaml
 
         acscal intrinsics images/cam_a --target april_6x6.yaml -o cam_a/intrinsics.yaml
+
+        acscal intrinsics images/left -o left/intrinsics.yaml --export ros,opencv --camera-name left
     """
-    from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
+    from acs_cli.stages.export import parse_list_option
+    from acs_cli.stages.intrinsics import EXPORTS, IntrinsicsConfig, run_intrinsics
 
     cols, rows, sq, tgt = parse_target_option(target, board, square)
     defaults = IntrinsicsConfig()
@@ -177,7 +195,8 @@ def intrinsics(
         rows=defaults.rows if rows is None else rows,
         square=defaults.square if sq is None else sq,
         model=model.value,
-        export=tuple(dict.fromkeys(e.value for e in (export or []))),
+        export=parse_list_option(export or [], EXPORTS, "--export"),
+        camera_name=camera_name,
         workers=workers,
         target=tgt,
     )
@@ -195,10 +214,10 @@ def intrinsics(
         f"distortion [{', '.join(f'{v:+.5f}' for v in cal.distortion)}]"
     )
     out.print(f"reprojection RMS {cal.rms_px:.4f} px")
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
+    warn(run.warnings)
     written = [str(output), *map(str, run.exports.values())]
     out.print(f"wrote {', '.join(written)}")
+    emit(artifact_result(run.artifact), written=written, warnings=run.warnings)
 
 
 class Matching(str, Enum):
@@ -214,6 +233,14 @@ def _phase_progress() -> Iterator[Callable[[str, int, int], None]]:
     Yields the ``progress(phase, done, total)`` callback. The bar is off when stderr is not
     a terminal; the phase lines are always printed.
     """
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
     with Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
         TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
@@ -345,6 +372,7 @@ def poses(
             "seconds. Without it (or --timestamps) such times stay frame numbers.",
         ),
     ] = None,
+    json_out: JsonOpt = False,
 ) -> None:
     """Each image's camera pose, as a trajectory: on a board, or markerless (--sfm).
 
@@ -429,9 +457,51 @@ def poses(
         f"{n} poses ({run.cached} detections from a cache); reprojection RMS median "
         f"{float(sorted(rms)[len(rms) // 2]):.4f} px, max {float(rms.max()):.4f} px"
     )
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
+    warn(run.warnings)
     out.print(f"wrote {output}" + (f", {tum}" if tum is not None else ""))
+    emit(_poses_result(run), written=[output, *([tum] if tum else [])], warnings=run.warnings)
+
+
+def _poses_result(run: PosesRun | SfmPosesRun) -> dict[str, Any]:
+    """``acscal poses --json``'s result, from the stage's typed result.
+
+    The number of poses, the time unit, the reprojection RMS per posed image (pixels, with
+    its median and maximum); board poses add the images skipped and the detections cached,
+    markerless ones the SfM summary (registered images, points, intrinsics used).
+    """
+    import numpy as np
+
+    from acs_cli.stages.poses import SfmPosesRun
+
+    rms = np.asarray(run.reprojection_rms, dtype=float)
+    traj = run.trajectory
+    result: dict[str, Any] = {
+        "poses": len(traj),
+        "time_unit": traj.time_unit,
+        "reprojection_rms_px": {
+            "median": float(np.median(rms)) if rms.size else None,
+            "max": float(rms.max()) if rms.size else None,
+            "per_image": dict(zip(traj.names, rms.tolist(), strict=True)) if traj.names else rms,
+        },
+    }
+    if isinstance(run, SfmPosesRun):
+        res = run.result
+        result["sfm"] = {
+            "images": len(res.image_names),
+            "registered": int(np.count_nonzero(res.registered)),
+            "num_points3d": res.num_points3d,
+            "mean_track_length": res.mean_track_length,
+            "reprojection_rms_px": res.reprojection_rms,
+            "intrinsics_source": res.intrinsics_source,
+            "intrinsics_refined": res.intrinsics_refined,
+            "camera_matrix": res.camera.camera_matrix,
+            "matching": res.matching,
+            "loop_closure": res.loop_closure,
+            "metric_scale": False,
+        }
+    else:
+        result |= {"skipped": list(run.skipped), "cached": run.cached}
+    return result
 
 
 def _sfm_poses(
@@ -502,12 +572,12 @@ def _sfm_poses(
         + f"; {total:.1f} s ({total / n_all:.2f} s per image)"
     )
     out.print("scale unknown: translations are in SfM units (use `acscal relpose --unknown-scale`)")
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
+    warn(run.warnings)
     out.print(f"wrote {output}" + (f", {tum}" if tum is not None else ""))
+    emit(_poses_result(run), written=[output, *([tum] if tum else [])], warnings=run.warnings)
 
 
 def register(app: typer.Typer) -> None:
     """Add ``intrinsics`` and ``poses`` to the ``acscal`` app."""
-    app.command()(intrinsics)
-    app.command()(poses)
+    app.command(cls=AcsCommand)(intrinsics)
+    app.command(cls=AcsCommand)(poses)

@@ -12,25 +12,35 @@ from enum import Enum
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
-from rich.console import Console
-from rich.table import Table
 
 import acs_cli
-from acs_cli.errors import AcsError, InputError
+from acs_cli.cli.help_format import AcsCommand, AcsGroup
+from acs_cli.cli.output import (
+    JsonOpt,
+    artifact_result,
+    emit,
+    emit_error,
+    err,
+    out,
+    reset,
+    warn,
+)
+from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 
+# Imports here are light (typer, rich's console): numpy, the stages and what they import
+# load inside the commands, so `acscal --help` and `acscal --version` start fast
+# (benchmarks/bench_startup.py; tests/unit/test_lazy_imports.py guards it).
 app = typer.Typer(
     name="acscal",
+    cls=AcsGroup,
     help="Calibrate articulated camera systems: joints, relative poses and scale factors "
     "(Chen & Wong's Algorithms I-IV, and beyond).",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    rich_markup_mode="rich",
+    rich_markup_mode=None,
 )
-out = Console(highlight=False)
-err = Console(stderr=True, highlight=False)
 
 
 BundleOpt = Annotated[
@@ -67,6 +77,7 @@ class PairBy(str, Enum):
 class ExportFormat(str, Enum):
     kalibr = "kalibr"
     opencv = "opencv"
+    ros = "ros"
     urdf = "urdf"
 
 
@@ -97,6 +108,8 @@ UnitOpt = Annotated[
 
 
 def _fmt(v: Any, digits: int = 4) -> str:
+    import numpy as np
+
     arr = np.atleast_1d(np.asarray(v, dtype=float))
     return "[" + ", ".join(f"{x:+.{digits}f}" for x in arr) + "]"
 
@@ -119,7 +132,7 @@ def _root(
     """Calibrate articulated camera systems."""
 
 
-@app.command()
+@app.command(cls=AcsCommand)
 def joint(
     poses_a: Annotated[
         Path, typer.Option("--poses-a", help="Camera A's trajectory (TUM, KITTI, COLMAP, NPZ).")
@@ -145,6 +158,7 @@ def joint(
     pair_by: PairByOpt = PairBy.auto,
     max_dt: MaxDtOpt = None,
     length_unit: UnitOpt = "m",
+    json_out: JsonOpt = False,
 ) -> None:
     """Locate the joint in each camera's frame.
 
@@ -156,6 +170,8 @@ def joint(
 
         acscal joint --overlap --poses-a cam_a.tum --poses-b cam_b.tum -o joint.yaml
     """
+    from rich.table import Table
+
     from acs_cli.stages.joint import JointConfig, run_joint
 
     if fixed_joint == overlap:
@@ -182,12 +198,12 @@ def joint(
     for key, rms in est.residual_rms.items():
         table.add_row(f"residual RMS ({key})", f"{rms:.4g}", "")
     out.print(table)
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
+    warn(run.warnings)
     out.print(f"wrote {output}")
+    emit(artifact_result(run.artifact), written=[output], warnings=run.warnings)
 
 
-@app.command()
+@app.command(cls=AcsCommand)
 def relpose(
     poses_a: Annotated[Path, typer.Option("--poses-a", help="Camera A's trajectory.")],
     poses_b: Annotated[Path, typer.Option("--poses-b", help="Camera B's trajectory.")],
@@ -242,6 +258,7 @@ def relpose(
         float,
         typer.Option("--max-offset", min=0.0, help="Largest clock offset searched, seconds."),
     ] = 0.5,
+    json_out: JsonOpt = False,
 ) -> None:
     """Relative pose T_b_a of two cameras joined by a joint (no overlap needed).
 
@@ -260,9 +277,11 @@ def relpose(
 
     Example (cameras on separate clocks):
 
-        acscal relpose --self-calibrate --estimate-time-offset --max-offset 0.2 \
+        acscal relpose --self-calibrate --estimate-time-offset --max-offset 0.2 \\
             --poses-a a.tum --poses-b b.tum -o relpose.yaml
     """
+    from rich.table import Table
+
     from acs_cli.stages.relpose import RelposeConfig, run_relpose
 
     if joint_file is not None and joint_metric is not None:
@@ -318,61 +337,95 @@ def relpose(
         )
     table.add_row("residual RMS", f"{est.residual_rms:.4g}", "")
     out.print(table)
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
+    warn(run.warnings)
     out.print(f"wrote {output}")
+    emit(artifact_result(run.artifact), written=[output], warnings=run.warnings)
 
 
-@app.command()
+@app.command(cls=AcsCommand)
 def export(
     relpose_file: Annotated[
         Path, typer.Argument(help="relpose.yaml from `acscal relpose`, or a rig's rig.yaml.")
     ],
-    output: Annotated[Path, typer.Option("-o", "--output", help="File to write.")],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="File to write (--format ros: a folder).")
+    ],
     fmt: Annotated[
         ExportFormat,
         typer.Option(
             "--format",
-            help="kalibr (camchain YAML), opencv (cv2.FileStorage YAML; relpose only) or urdf "
-            "(a rig, for robot_state_publisher).",
+            help="kalibr (camchain YAML with every camera's intrinsics), opencv "
+            "(cv2.FileStorage YAML: R, T of T_b_a and each camera's intrinsics; relpose only), "
+            "ros (a camera_info YAML per camera, in the folder -o) or urdf (a rig, for "
+            "robot_state_publisher).",
         ),
     ] = ExportFormat.kalibr,
     intrinsics: Annotated[
         list[str] | None,
         typer.Option(
             "--intrinsics",
-            help="A rig's camera intrinsics as NAME=intrinsics.yaml (repeat per camera); "
-            "default cam_NAME/intrinsics.yaml beside rig.yaml.",
+            metavar="CAMERA=FILE",
+            help="A camera's intrinsics as CAMERA=intrinsics.yaml (repeat per camera; a, b "
+            "for a relpose). Default: the bundle-adjusted ones the file records, else "
+            "cam_CAMERA/intrinsics.yaml beside it.",
+        ),
+    ] = None,
+    camera_name: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--camera-name",
+            metavar="CAMERA=NAME",
+            help="A camera's name as CAMERA=NAME (repeat per camera): ROS camera_name and "
+            "file, Kalibr topic /NAME/image_raw. Default cam_a, cam_b (a rig: its names).",
+        ),
+    ] = None,
+    scale: Annotated[
+        float | None,
+        typer.Option(
+            "--scale",
+            help="Metres per unit of the file's lengths (unknown scale: per unit of camera "
+            "B's trajectory). Needed when they are not metric and have no metric joint.",
         ),
     ] = None,
     robot_name: Annotated[str, typer.Option("--robot-name", help="urdf: the robot's name.")] = (
         "acs_rig"
     ),
+    json_out: JsonOpt = False,
 ) -> None:
     """Export a relative pose, or a whole rig, for other tools.
 
     Example:
 
-        acscal export relpose.yaml --format opencv -o relpose_cv.yaml
+        acscal export run/relpose.yaml --format kalibr -o camchain.yaml
+
+        acscal export relpose.yaml --format ros --camera-name a=left --camera-name b=right -o ros/
+
+        acscal export relpose.yaml --format opencv --intrinsics a=a.yaml -o relpose_cv.yaml
 
         acscal export out/rig.yaml --format urdf -o rig.urdf
     """
-    from acs_cli.errors import InputError
-    from acs_cli.stages.export import run_export
+    from acs_cli.stages.export import parse_named_option, run_export
 
-    given: dict[str, Path] = {}
-    for item in intrinsics or []:
-        name, sep, path = item.partition("=")
-        if not sep or not name or not path:
-            raise InputError(f"--intrinsics {item!r}: write it as NAME=intrinsics.yaml")
-        given[name] = Path(path)
+    given = parse_named_option(intrinsics or [], "--intrinsics", "intrinsics.yaml")
     info = run_export(
-        relpose_file, output, fmt.value, intrinsics=given or None, robot_name=robot_name
+        relpose_file,
+        output,
+        fmt.value,
+        intrinsics={c: Path(p) for c, p in given.items()},
+        camera_names=parse_named_option(camera_name or [], "--camera-name", "NAME"),
+        scale=scale,
+        robot_name=robot_name,
     )
-    out.print(f"wrote {info['output']} ({info['format']}: {', '.join(info['keys'])})")
+    for cam, source in info["intrinsics"].items():
+        out.print(f"intrinsics of {cam}: {source}")
+    for w in info["warnings"]:
+        err.print(f"[yellow]warning:[/] {w} (marked in the export)")
+    for path in info["written"]:
+        out.print(f"wrote {path} ({info['format']})")
+    emit(info, written=info["written"], warnings=info["warnings"])
 
 
-@app.command()
+@app.command(cls=AcsCommand)
 def simulate(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for CSV and figures.")],
     trials: Annotated[int, typer.Option("--trials", min=1, help="Trials per noise level.")] = 100,
@@ -387,6 +440,7 @@ def simulate(
         float, typer.Option("--max-trans", min=0.0, help="Largest translation noise, m.")
     ] = 0.1,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the study.")] = 0,
+    json_out: JsonOpt = False,
 ) -> None:
     """Reproduce the paper's simulation study (section 5): the paper's method beside ours.
 
@@ -422,6 +476,8 @@ def simulate(
         f"wrote {info['trials_csv']}, {info['summary_csv']} and {len(info['figures'])} figures"
     )
     out.print(f"{info['n_rows']} rows in {info['elapsed_s']:.1f} s")
+    written = [info["trials_csv"], info["summary_csv"], info["study_yaml"], *info["figures"]]
+    emit(info, written=written)
 
 
 from acs_cli.cli.images import register as _register_images  # noqa: E402
@@ -440,10 +496,13 @@ _register_report(app)
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
     args = sys.argv[1:] if argv is None else argv
+    reset()
     try:
         app(args=args, prog_name="acscal", standalone_mode=False)
     except AcsError as exc:
         err.print(f"acscal: error: {exc.one_line()}", markup=False, soft_wrap=True)
+        details = exc.details if isinstance(exc, DegenerateMotionError) else None
+        emit_error(exc.exit_code, type(exc).__name__, exc.one_line(), details)
         raise SystemExit(exc.exit_code) from None
     except typer.Abort:
         err.print("acscal: aborted")
@@ -451,15 +510,15 @@ def main(argv: list[str] | None = None) -> None:
     except typer.TyperException as exc:  # usage errors from the option parser: one line
         ctx = getattr(exc, "ctx", None)
         where = getattr(ctx, "command_path", None) or "acscal"
-        err.print(
-            f"acscal: error: {exc.format_message()} (see '{where} --help')",
-            markup=False,
-            soft_wrap=True,
-        )
+        message = f"{exc.format_message()} (see '{where} --help')"
+        err.print(f"acscal: error: {message}", markup=False, soft_wrap=True)
+        emit_error(exc.exit_code, "UsageError", message)
         raise SystemExit(exc.exit_code) from None
     except OSError as exc:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-        err.print(f"acscal: error: {where}{exc.strerror or exc}", markup=False, soft_wrap=True)
+        message = f"{where}{exc.strerror or exc}"
+        err.print(f"acscal: error: {message}", markup=False, soft_wrap=True)
+        emit_error(2, "OSError", message)
         raise SystemExit(2) from None
 
 

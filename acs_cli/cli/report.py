@@ -11,15 +11,12 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
+from acs_cli.cli.help_format import AcsCommand
+from acs_cli.cli.output import JsonOpt, artifact_result, emit, out, warn
 from acs_cli.errors import InputError
 
 __all__ = ["register", "report", "trajectory"]
-
-out = Console(highlight=False)
-err = Console(stderr=True, highlight=False)
 
 
 class _Format(str, Enum):
@@ -100,6 +97,7 @@ def trajectory(
             min=0.0,
         ),
     ] = None,
+    json_out: JsonOpt = False,
 ) -> None:
     """Recover the ACS's trajectory in one frame: camera A's at the reference instant.
 
@@ -126,6 +124,8 @@ def trajectory(
         missing = [n for n, v in (("--relpose", relpose), ("--poses-a", poses_a),
                                    ("--poses-b", poses_b)) if v is None]  # fmt: skip
         raise InputError(f"missing {', '.join(missing)} (or give --rig rig.yaml)")
+    from rich.table import Table
+
     from acs_cli.stages.trajectory import TrajectoryConfig, run_trajectory
 
     cfg = TrajectoryConfig(
@@ -147,10 +147,11 @@ def trajectory(
     table.add_row(f"joint consistency max ({unit})", f"{cons['max']:.4g}")
     table.add_row("rejected frames (by relpose)", str(int(rec.rejected.sum())))
     out.print(table)
-    for w in run.warnings:
-        err.print(f"[yellow]warning:[/] {w}")
-    out.print(f"wrote {', '.join(str(output / n) for n in run.artifact['outputs'].values())}")
+    warn(run.warnings)
+    tums = [output / n for n in run.artifact["outputs"].values()]
+    out.print(f"wrote {', '.join(map(str, tums))}")
     out.print(f"wrote {run.output}")
+    emit(artifact_result(run.artifact), written=[*tums, run.output], warnings=run.warnings)
 
 
 def report(
@@ -166,6 +167,7 @@ def report(
             "<name>_files/ beside it.",
         ),
     ] = None,
+    json_out: JsonOpt = False,
 ) -> None:
     """Write a self-contained HTML report of a calibration run, with its figures as PNG.
 
@@ -182,9 +184,13 @@ def report(
 
     target = output if output is not None else run_dir / "report.html"
     run = run_report(run_dir, target)
-    for note in run.notes:
-        err.print(f"[yellow]note:[/] {note}")
+    warn(run.notes, prefix="note")
     out.print(f"wrote {run.output} ({len(run.figures)} figures in {run.figures_dir})")
+    emit(
+        {"output": run.output, "figures_dir": run.figures_dir, "notes": run.notes},
+        written=[run.output, *run.figures],
+        warnings=run.warnings,
+    )
 
 
 def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
@@ -218,9 +224,18 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
         f"wrote {len(written)} trajectories to {output} ({', '.join(written)}), in "
         f"{art.reference_camera}'s frame at frame {art.reference_frame} ({art.length_unit})"
     )
+    emit(
+        {
+            "reference_camera": art.reference_camera,
+            "reference_frame": art.reference_frame,
+            "length_unit": art.length_unit,
+            "trajectories": {name: output / f"{name}.tum" for name in paths},
+        },
+        written=[output / name for name in written],
+    )
 
 
 def register(app: typer.Typer) -> None:
     """Add ``trajectory`` and ``report`` to the ``acscal`` app."""
-    app.command()(trajectory)
-    app.command()(report)
+    app.command(cls=AcsCommand)(trajectory)
+    app.command(cls=AcsCommand)(report)

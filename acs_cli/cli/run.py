@@ -10,13 +10,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
+
+from acs_cli.cli.help_format import AcsCommand
+from acs_cli.cli.output import JsonOpt, emit, out, warn
 
 __all__ = ["register", "run"]
 
-out = Console(highlight=False)
-err = Console(stderr=True, highlight=False)
+#: Statuses of a stage that wrote its outputs in this run (not skipped, reused or left out).
+WROTE = frozenset({"ran", "written"})
 
 
 class Stage(str, Enum):
@@ -38,6 +39,7 @@ def run(
             "--only", help="Run only this stage (the others' outputs must exist already)."
         ),
     ] = None,
+    json_out: JsonOpt = False,
 ) -> None:
     """Run intrinsics, poses, joint and relpose as a config file says.
 
@@ -49,6 +51,9 @@ def run(
 
         acscal run configs/fixed_joint.yaml
     """
+    from rich.table import Table
+
+    from acs_cli.io.artifacts import to_plain
     from acs_cli.stages.run import StageResult, load_run_config, run_pipeline
 
     cfg = load_run_config(config)
@@ -56,8 +61,7 @@ def run(
     def progress(res: StageResult) -> None:
         extra = f" ({res.seconds:.1f} s)" if res.status == "ran" else ""
         out.print(f"{res.stage}: {res.status}{extra}")
-        for w in res.warnings:
-            err.print(f"[yellow]warning:[/] {res.stage}: {w}")
+        warn(f"{res.stage}: {w}" for w in res.warnings)
 
     result = run_pipeline(
         cfg, force=force, only=None if only is None else only.value, on_stage=progress
@@ -77,6 +81,18 @@ def run(
     else:
         out.print(f"{n_run} stage(s) ran, {n_skip} skipped (unchanged) in {result.seconds:.1f} s")
     out.print(f"outputs in {cfg.output}")
+    emit(
+        {
+            "config": config,
+            "output": cfg.output,
+            "seconds": result.seconds,
+            "ran": result.ran,
+            "skipped": result.skipped,
+            "stages": [to_plain(res) for res in result.stages],
+        },
+        written=[p for res in result.stages if res.status in WROTE for p in res.outputs],
+        warnings=[f"{res.stage}: {w}" for res in result.stages for w in res.warnings],
+    )
 
 
 def _short(path: Path, base: Path) -> str:
@@ -88,4 +104,4 @@ def _short(path: Path, base: Path) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add ``run`` to the ``acscal`` app."""
-    app.command()(run)
+    app.command(cls=AcsCommand)(run)

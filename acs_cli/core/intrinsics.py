@@ -54,6 +54,7 @@ __all__ = [
     "degenerate_distortion",
     "intrinsics_covariance",
     "outlier_views",
+    "std_from_covariance",
 ]
 
 MODELS = ("pinhole", "rational", "fisheye")
@@ -395,6 +396,31 @@ def intrinsics_covariance(
     cov = np.zeros((cam.size, cam.size))
     cov[np.ix_(free, free)] = sigma2 * 0.5 * (inv + inv.T) * np.outer(d, d)
     return cov
+
+
+def std_from_covariance(covariance: NDArray[np.floating]) -> dict[str, object]:
+    """One-sigma standard deviations of a calibration from its intrinsics' covariance.
+
+    Parameters
+    ----------
+    covariance : ndarray, shape (4 + m, 4 + m)
+        Of ``fx fy cx cy`` (px) and ``m`` distortion coefficients, as
+        :func:`intrinsics_covariance` returns it.
+
+    Returns
+    -------
+    dict
+        ``fx``, ``fy``, ``cx``, ``cy`` (px) and ``distortion`` (list, unitless), the layout
+        of :attr:`CalibrationResult.std_intrinsics`.
+    """
+    s = np.sqrt(np.maximum(np.diag(np.asarray(covariance, dtype=float)), 0.0))
+    return {
+        "fx": float(s[0]),
+        "fy": float(s[1]),
+        "cx": float(s[2]),
+        "cy": float(s[3]),
+        "distortion": [float(v) for v in s[4:]],
+    }
 
 
 def degenerate_distortion(

@@ -234,8 +234,8 @@ def pair_trajectories(
     if traj_a.time_unit != traj_b.time_unit:
         frames = traj_a if traj_a.time_unit == "frame" else traj_b
         raise InputError(
-            "has frame numbers for times, the other trajectory seconds: give the poses "
-            "stage --fps or --timestamps so both are in seconds",
+            "has frame numbers for times, the other trajectory seconds: give both in seconds "
+            "(`acscal poses --fps` or `--timestamps`, or a TUM file with times)",
             path=frames.source,
         )
     result = pair_by_timestamp(traj_a.timestamps, traj_b.timestamps, max_dt)

@@ -357,6 +357,18 @@ class _Layout:
         k += int(unknown_scale and metric)
         self.size = k
 
+    def scales(self, x: FloatArray) -> tuple[float, float]:
+        """``phi`` and ``mu`` of ``x`` (1 where not estimated). The log scales are clipped
+        far beyond any real ratio: a start that wanders off must not overflow (it then
+        loses on likelihood)."""
+
+        def exp(i: int | None) -> float:
+            if i is None:
+                return 1.0
+            return float(np.exp(np.clip(x[i], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
+
+        return exp(self.logphi), exp(self.logmu)
+
 
 def estimate_relpose(
     T_wa_a: FloatArray,
@@ -504,7 +516,10 @@ def _estimate_paper(
     Ta: FloatArray, Tb: FloatArray, prior: JointPrior, unknown_scale: bool, reference: int
 ) -> RelposeEstimate:
     if prior.position_in_a is None:
-        raise InputError("the paper's method needs the joint in camera A (joint.position_in_a)")
+        raise InputError(
+            "the paper's method needs the joint in camera A: give --joint (the joint.yaml "
+            "of a fixed-joint calibration), or self-calibrate with the refined method"
+        )
     o_a_in = np.asarray(prior.position_in_a, dtype=float)
     mu_a = None
     if prior.metric and unknown_scale:
@@ -616,18 +631,7 @@ def _estimate_refined(
         x: FloatArray,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float, float]:
         R = se3.matrix_from_rotvec(x[L.rot])
-        # log scales clipped far beyond any real ratio: a start that wanders off must not
-        # overflow (it then loses on likelihood)
-        ph = (
-            float(np.exp(np.clip(x[L.logphi], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
-            if L.logphi is not None
-            else 1.0
-        )
-        mu = (
-            float(np.exp(np.clip(x[L.logmu], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
-            if L.logmu is not None
-            else 1.0
-        )
+        ph, mu = L.scales(x)
         return R, x[L.t], x[L.oa], x[L.ob], ph, mu
 
     def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
@@ -732,18 +736,7 @@ def _prior_rows(prior: JointPrior, L: _Layout, metric: bool):
 
     def rows(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         rs, Js, Ws = [], [], []
-        # log scales clipped far beyond any real ratio: a start that wanders off must not
-        # overflow (it then loses on likelihood)
-        ph = (
-            float(np.exp(np.clip(x[L.logphi], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
-            if L.logphi is not None
-            else 1.0
-        )
-        mu = (
-            float(np.exp(np.clip(x[L.logmu], -_LOG_SCALE_BOUND, _LOG_SCALE_BOUND)))
-            if L.logmu is not None
-            else 1.0
-        )
+        ph, mu = L.scales(x)
         for pos, W, sl in items:
             J = np.zeros((3, L.size))
             if metric:

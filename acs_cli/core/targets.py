@@ -15,10 +15,13 @@ Frames and numbering:
 - **aprilgrid** (Kalibr's ``GridCalibrationTargetAprilgrid``): ``tag_cols x tag_rows``
   tag36h11 tags of side ``tag_size`` (the black border's outer edge), ``spacing *
   tag_size`` apart; tag 0 at the bottom left as printed, ids increasing along a row then
-  upwards. Origin at tag 0's bottom-left corner, x right, y up (z out of the board). The
-  corners form a ``2 tag_rows x 2 tag_cols`` grid numbered row by row from the bottom, as
-  Kalibr numbers its grid points: point ``j`` at grid row ``r = j // (2 tag_cols)``, column
-  ``c = j % (2 tag_cols)``, position ``((c // 2) (1 + spacing) s + (c % 2) s, (r // 2)
+  upwards. Each tag is drawn as Kalibr's ``createTargetPDF.py`` draws it
+  (:func:`aprilgrid_tag_cells`): the official AprilTag image of its code, with a black
+  border :data:`KALIBR_BORDER_BITS` = 2 bits wide, so ``tag_size`` spans 10 bits. Origin
+  at tag 0's bottom-left corner, x right, y up (z out of the board). The corners form a
+  ``2 tag_rows x 2 tag_cols`` grid numbered row by row from the bottom, as Kalibr numbers
+  its grid points: point ``j`` at grid row ``r = j // (2 tag_cols)``, column ``c = j % (2
+  tag_cols)``, position ``((c // 2) (1 + spacing) s + (c % 2) s, (r // 2)
   (1 + spacing) s + (r % 2) s, 0)``. Tag ``t``'s corners (bottom-left, bottom-right,
   top-right, top-left) are points ``b, b + 1, b + 2 tag_cols + 1, b + 2 tag_cols`` with
   ``b = 4 tag_cols (t // tag_cols) + 2 (t % tag_cols)``. Kalibr's black squares between
@@ -30,12 +33,16 @@ Frames and numbering:
   1) + 1) L, (j // (squares_x - 1) + 1) L, 0)`` (origin at the board's top-left corner, x
   right, y down, z into the board), as ``CharucoBoard.getChessboardCorners`` gives them.
 
-Detection (:func:`detect_target`): ``cv2.aruco.ArucoDetector`` (AprilGrid) or
+Detection (:func:`detect_target`): ``cv2.aruco.ArucoDetector`` (AprilGrid: Kalibr's
+two-bit tag border, corners from the lines of the tags' edges) or
 ``cv2.aruco.CharucoDetector`` (ChArUco) for the identified corners, then each corner is
 refined to sub-pixel as the X-junction it is (``cv2.cornerSubPix`` and the saddle fit of
 :func:`acs_cli.core.checkerboard.refine_saddle`) with windows sized from the local scale
-of the tags (a fraction of one tag bit, or of a ChArUco square's white margin), so that
-neither reaches the marker's data bits.
+of the tags (a fraction of one AprilGrid tag bit, or of a ChArUco square's white margin),
+so that neither reaches the marker's data bits. OpenCV 4's
+``DICT_APRILTAG_36h11`` markers are the official tag images turned half a turn (OpenCV 5
+draws them upright): the turn is read from the installed OpenCV once
+(:data:`ARUCO_APRILTAG_TURNS`), and ArUco's corners are mapped to the printed ones with it.
 """
 
 from __future__ import annotations
@@ -50,7 +57,10 @@ from acs_cli.core.checkerboard import detect_checkerboard, refine_saddle
 from acs_cli.core.intrinsics import board_points
 
 __all__ = [
+    "ARUCO_APRILTAG_TURNS",
     "ARUCO_DICTIONARIES",
+    "KALIBR_BORDER_BITS",
+    "KALIBR_CORNERS_FROM_ARUCO",
     "MIN_POSE_CORNERS",
     "TARGETS_DETECTOR_VERSION",
     "TARGET_KINDS",
@@ -60,6 +70,7 @@ __all__ = [
     "MarkerTarget",
     "Target",
     "TargetDetection",
+    "aprilgrid_tag_cells",
     "detect_target",
     "find_other_family",
     "pose_ready",
@@ -70,7 +81,7 @@ IntArray = NDArray[np.int64]
 
 #: Recorded in detection caches of AprilGrid and ChArUco targets: bump when the output
 #: of :func:`detect_target` can change.
-TARGETS_DETECTOR_VERSION = "acscal-targets-1"
+TARGETS_DETECTOR_VERSION = "acscal-targets-2"
 #: The kinds of target, as ``target_type`` names them.
 TARGET_KINDS = ("checkerboard", "aprilgrid", "charuco")
 #: Fewest identified corners of one view used for a pose or a calibration.
@@ -124,11 +135,78 @@ GROW_ROUNDS = 3
 NEAR_TAGS = 4
 #: Smallest tag side (pixels) a predicted tag is looked for at.
 MIN_TAG_PX = 16.0
-#: Cells of a predicted tag (of 64) that may read wrong.
+#: Cells of a predicted tag (of 100, border included) that may read wrong.
 MAX_WRONG_CELLS = 2
 #: Smallest grey-level contrast between a predicted tag's dark and light cells.
 MIN_CONTRAST = 25.0
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
+
+#: Width of an AprilGrid tag's black border, in bits: Kalibr draws 2 (``createTargetPDF.py``'s
+#: ``borderBits``) and its detector expects 2 (``blackTagBorder``), so ``tagSize`` spans
+#: ``6 + 2 * 2`` bits. OpenCV's ArUco default (``markerBorderBits``) is 1.
+KALIBR_BORDER_BITS = 2
+#: Data bits along a tag36h11 tag's side.
+_TAG36H11_BITS = 6
+#: tag36h11 tag 0 as the AprilTag library (and Kalibr's ``createTargetPDF.py``) codes it:
+#: bit 35 is the top-left data cell of the official image, then row by row, 1 = white.
+_TAG36H11_CODE_0 = 0xD5D628584
+
+
+def _aruco_apriltag_turns() -> int:
+    """Quarter turns (``np.rot90``) from OpenCV's ``DICT_APRILTAG_36h11`` marker images to
+    the official AprilTag images, read from ``generateImageMarker`` for tag 0.
+
+    Raises
+    ------
+    RuntimeError
+        The installed OpenCV's tag 0 is no turn of the official one.
+    """
+    d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+    b = _TAG36H11_BITS
+    drawn = cv2.aruco.generateImageMarker(d, 0, b + 2, borderBits=1)[1:-1, 1:-1] > 0
+    shifts = b * b - 1 - np.arange(b * b)
+    official = ((_TAG36H11_CODE_0 >> shifts) & 1).astype(bool).reshape(b, b)
+    for turns in range(4):
+        if np.array_equal(np.rot90(drawn, turns), official):
+            return turns
+    raise RuntimeError(
+        f"OpenCV {cv2.__version__}: DICT_APRILTAG_36h11 tag 0 is not the AprilTag library's"
+    )
+
+
+#: Quarter turns (``np.rot90``, counter-clockwise) that bring the installed OpenCV's
+#: ``DICT_APRILTAG_36h11`` marker images to the official AprilTag images, which Kalibr
+#: prints: 2 in OpenCV 4, 0 once OpenCV draws them upright (OpenCV 5).
+ARUCO_APRILTAG_TURNS = _aruco_apriltag_turns()
+#: ArUco's corners (top-left, top-right, bottom-right, bottom-left of OpenCV's marker
+#: image) that are a printed AprilGrid tag's bottom-left, bottom-right, top-right and
+#: top-left corners (Kalibr's order): the printed corner ``p`` (clockwise from the top
+#: left) is ArUco's ``(p + ARUCO_APRILTAG_TURNS) % 4``.
+KALIBR_CORNERS_FROM_ARUCO = (np.array([3, 2, 1, 0]) + ARUCO_APRILTAG_TURNS) % 4
+
+
+def aprilgrid_tag_cells(tag_ids: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """AprilGrid tags as Kalibr prints them, one boolean a cell (True = white).
+
+    Parameters
+    ----------
+    tag_ids : array of int, shape (k,)
+        tag36h11 ids.
+
+    Returns
+    -------
+    ndarray of bool, shape (k, 10, 10)
+        Row 0 is the printed top, column 0 the left: the official AprilTag image of each
+        code inside a black border :data:`KALIBR_BORDER_BITS` cells wide.
+    """
+    d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+    b, m = _TAG36H11_BITS, KALIBR_BORDER_BITS
+    t = np.asarray(tag_ids, dtype=np.int64).reshape(-1)
+    out = np.zeros((t.size, b + 2 * m, b + 2 * m), dtype=bool)
+    for i, tag in enumerate(t):  # one small lookup a tag
+        code = d.getBitsFromByteList(d.bytesList[int(tag) : int(tag) + 1], b) > 0
+        out[i, m:-m, m:-m] = np.rot90(code, ARUCO_APRILTAG_TURNS)
+    return out
 
 
 def _family_of(dictionary: str) -> str:
@@ -178,7 +256,8 @@ class AprilGrid:
     tag_cols, tag_rows : int
         Tags along x and along y (Kalibr's ``tagCols``, ``tagRows``).
     tag_size : float
-        Side of a tag's black square, metres (``tagSize``).
+        Side of a tag, metres (``tagSize``): the outer edge of its black border, which is
+        :data:`KALIBR_BORDER_BITS` = 2 of the tag's 10 bits wide, as Kalibr prints it.
     spacing : float
         Gap between tags as a fraction of ``tag_size`` (``tagSpacing``).
     """
@@ -347,9 +426,12 @@ def _gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
     return np.ascontiguousarray(img)
 
 
-def _detector(dictionary: str) -> cv2.aruco.ArucoDetector:
+def _detector(
+    dictionary: str, border_bits: int = 1, refinement: int = cv2.aruco.CORNER_REFINE_NONE
+) -> cv2.aruco.ArucoDetector:
     params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+    params.cornerRefinementMethod = refinement
+    params.markerBorderBits = int(border_bits)
     return cv2.aruco.ArucoDetector(
         cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARIES[dictionary]), params
     )
@@ -421,16 +503,6 @@ def _collect(ids: IntArray, pixels: FloatArray) -> TargetDetection:
     return TargetDetection(uniq[keep].astype(np.int64), mean[keep])
 
 
-def _tag_bits(dictionary: str, tag_ids: IntArray) -> NDArray[np.bool_]:
-    """The printed cells of tags, ``(k, b, b)`` booleans (True = white), border included."""
-    d = cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARIES[dictionary])
-    size = int(d.markerSize)
-    out = np.zeros((tag_ids.size, size + 2, size + 2), dtype=bool)
-    for i, t in enumerate(tag_ids):  # one small lookup a tag
-        out[i, 1:-1, 1:-1] = d.getBitsFromByteList(d.bytesList[int(t) : int(t) + 1], size) > 0
-    return out
-
-
 def _verify_tags(
     gray: NDArray[np.uint8], quads: FloatArray, bits: NDArray[np.bool_]
 ) -> NDArray[np.bool_]:
@@ -439,8 +511,9 @@ def _verify_tags(
     ``quads`` (k, 4, 2) are the tags' corners in Kalibr's order (bottom-left, bottom-right,
     top-right, top-left as printed); each cell centre is sampled through the quad's
     homography, thresholded halfway between the darkest and brightest samples of the tag,
-    and compared with ``bits`` (k, b, b). A tag passes with at most
-    :data:`MAX_WRONG_CELLS` wrong cells and a contrast of at least :data:`MIN_CONTRAST`.
+    and compared with ``bits`` (k, b, b), the printed cells (:func:`aprilgrid_tag_cells`).
+    A tag passes with at most :data:`MAX_WRONG_CELLS` wrong cells and a contrast of at least
+    :data:`MIN_CONTRAST`.
     """
     k, b = bits.shape[0], bits.shape[1]
     ok = np.zeros(k, dtype=bool)
@@ -490,7 +563,10 @@ def _predict_tags(
 
 
 def _detect_aprilgrid(gray: NDArray[np.uint8], target: AprilGrid) -> TargetDetection:
-    quads, tag_ids, _ = _detector(target.dictionary).detectMarkers(gray)
+    # the tags' corners from their edges' lines (CORNER_REFINE_CONTOUR): where Kalibr's
+    # squares touch a tag the contour's own corners can be bits off, beyond the windows
+    detector = _detector(target.dictionary, KALIBR_BORDER_BITS, cv2.aruco.CORNER_REFINE_CONTOUR)
+    quads, tag_ids, _ = detector.detectMarkers(gray)
     if tag_ids is None or len(tag_ids) == 0:
         return _empty()
     t = np.asarray(tag_ids, dtype=np.int64).reshape(-1)
@@ -500,11 +576,13 @@ def _detect_aprilgrid(gray: NDArray[np.uint8], target: AprilGrid) -> TargetDetec
     t, q = t[mine], q[mine]
     if t.size == 0:
         return _empty()
-    # aruco's corner order is top-left, top-right, bottom-right, bottom-left of the tag as
-    # printed; Kalibr's is bottom-left, bottom-right, top-right, top-left
-    q = q[:, ::-1]
-    bit_px = _marker_side_px(q) / 8.0  # tag36h11: 6 data bits + a black border bit each side
-    px = _refine_junctions(gray, q.reshape(-1, 2), np.repeat(bit_px, 4)).reshape(-1, 4, 2)
+    # ArUco's corners in Kalibr's order (bottom-left, bottom-right, top-right, top-left of
+    # the tag as printed)
+    q = q[:, KALIBR_CORNERS_FROM_ARUCO]
+    tag_bits = _TAG36H11_BITS + 2 * KALIBR_BORDER_BITS  # tag36h11 in Kalibr's border: 10
+    bit_px = _marker_side_px(q) / tag_bits
+    px = _refine_junctions(gray, q.reshape(-1, 2), np.repeat(bit_px, 4))
+    px = px.reshape(-1, 4, 2)
     # tags the detector missed (Kalibr's squares touch their corners): predicted from their
     # found neighbours, refined, and kept when their cells read as the expected tag
     h, w = gray.shape
@@ -514,22 +592,22 @@ def _detect_aprilgrid(gray: NDArray[np.uint8], target: AprilGrid) -> TargetDetec
             break
         pred = _predict_tags(target, t, px, missing)
         side = _marker_side_px(pred)
+        bit_px = side / tag_bits
+        edge = 2.0 * bit_px[:, None, None]  # two bits from the image's edges
         inside = np.all(
-            np.isfinite(pred)
-            & (pred >= 2 * side[:, None, None] / 8.0)
-            & (pred <= np.array([w - 1, h - 1]) - 2 * side[:, None, None] / 8.0),
+            np.isfinite(pred) & (pred >= edge) & (pred <= np.array([w - 1, h - 1]) - edge),
             axis=(1, 2),
         )
         inside &= side >= MIN_TAG_PX
         if not inside.any():
             break
         cand, pred = missing[inside], pred[inside]
-        ref = _refine_junctions(gray, pred.reshape(-1, 2), np.repeat(side[inside] / 8.0, 4))
+        ref = _refine_junctions(gray, pred.reshape(-1, 2), np.repeat(bit_px[inside], 4))
         ref = ref.reshape(-1, 4, 2)
         good = np.all(np.isfinite(ref), axis=(1, 2))
         if good.any():
             cand, ref = cand[good], ref[good]
-            good = _verify_tags(gray, ref, _tag_bits(target.dictionary, cand))
+            good = _verify_tags(gray, ref, aprilgrid_tag_cells(cand))
         if not good.any():
             break
         t = np.concatenate([t, cand[good]])
@@ -585,7 +663,8 @@ def find_other_family(image: NDArray[np.generic], target: Target) -> str | None:
     """The family of the markers an image shows when they are not ``target``'s, or None.
 
     Tries one dictionary of each common family (ArUco 4x4 to 7x7 and original, AprilTag
-    16h5, 25h9, 36h10, 36h11, ArUco MIP 36h12) except the target's own and returns the
+    16h5, 25h9, 36h10, 36h11, ArUco MIP 36h12) except the target's own, with ArUco's
+    one-bit black border (tag36h11 also with Kalibr's two-bit border), and returns the
     family name (e.g. ``"DICT_6X6"`` or ``"DICT_APRILTAG_36h11"``) with the most markers,
     if at least :data:`MIN_FAMILY_MARKERS`. A checkerboard target has no family: None.
     """
@@ -597,8 +676,10 @@ def find_other_family(image: NDArray[np.generic], target: Target) -> str | None:
     for family, name in _FAMILIES.items():
         if family == own:
             continue
-        _, ids, _ = _detector(name).detectMarkers(gray)
-        n = 0 if ids is None else len(ids)
+        n = 0
+        for border in (1, KALIBR_BORDER_BITS) if name == AprilGrid.dictionary else (1,):
+            _, ids, _ = _detector(name, border).detectMarkers(gray)
+            n = max(n, 0 if ids is None else len(ids))
         if n > n_best:
             best, n_best = family, n
     return best

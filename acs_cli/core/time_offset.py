@@ -11,9 +11,23 @@ The estimate minimises a profile cost ``c(dt)``: for each ``dt`` the caller's es
 calibrates the pair on the shifted pairing and returns its residuals, whose negative
 log-likelihood (:func:`gaussian_profile_cost`) is the cost. The frames are fixed over the
 whole search (those valid for every ``dt`` in ``[-max_offset, max_offset]``), so that costs
-compare. A grid of steps of half a frame interval is refined by a bounded Brent search around its
-best point; the standard deviation is ``1 / sqrt(c'')`` at the minimum (the profile
-likelihood's curvature, by central differences).
+compare. A grid of steps of half a frame interval is refined by a bounded Brent search around
+its best point.
+
+The search pairs *smoothed* trajectories (:class:`PoseSmoother`), not interpolated ones.
+Interpolating noisy poses changes their noise with the shift: on a frame the spline returns
+one noisy sample, half-way it averages neighbours (a noise variance of 0.76x for a cubic
+spline). The fitted noise level, and so the cost, would then ripple with the frame period and
+pull ``dt`` towards the nearest half frame (by 0.5 ms on average, 2 ms at worst, at 30 Hz
+under 0.1 deg / 5 mm of noise). A local quadratic regression with Gaussian weights 1.5 frame
+intervals wide has the same noise gain (0.32) at every fraction of a frame to 1e-4 and keeps
+smooth motion to thousandths of a degree; both cameras are smoothed alike. The calibration
+itself is left to the caller, on the raw poses paired at the estimate.
+
+The standard deviation is a sandwich estimate, ``sqrt(Var(c'(dt))) / c''(dt)`` (see
+:func:`_sandwich_std`): ``1 / sqrt(c'')`` alone, the profile likelihood's, would assume
+residuals independent from frame to frame and of one variance, whereas smoothing correlates
+them over a few frames and the lever arms make their noise differ from frame to frame.
 """
 
 from __future__ import annotations
@@ -33,6 +47,7 @@ from acs_cli.errors import DegenerateMotionError, InputError
 __all__ = [
     "MIN_OFFSET_FRAMES",
     "PoseInterpolator",
+    "PoseSmoother",
     "TimeOffset",
     "estimate_time_offset",
     "gaussian_profile_cost",
@@ -53,6 +68,37 @@ MIN_OFFSET_FRAMES = 20
 COARSE_FRAMES = 100
 #: Largest gap (in median frame intervals) interpolated across.
 MAX_GAP_INTERVALS = 1.5
+#: Width (standard deviation) of the search's Gaussian weights, in median frame intervals:
+#: at 1.5 the smoothing's noise gain varies with the fractional position by about 1e-4 (see
+#: :class:`PoseSmoother`).
+SMOOTHING_INTERVALS = 1.5
+#: The weights are cut at this many widths; a smoothed pose needs this much recording on each
+#: side.
+KERNEL_CUT = 5.0
+#: The standard deviation's stencil step, in median frame intervals.
+STENCIL_INTERVALS = 1.0 / 16.0
+#: Frames per run in the variance of the cost's slope (longer than the smoothing's
+#: correlation of a few frames) ...
+SCORE_BLOCK_FRAMES = 10
+#: ... and at least this many runs (shorter runs on short recordings).
+MIN_SCORE_BLOCKS = 10
+
+
+def _timed_poses(
+    times: FloatArray, T_world_cam: FloatArray, name: str = "poses to interpolate"
+) -> tuple[FloatArray, FloatArray]:
+    """Checked timestamps ``(n,)`` (strictly increasing, ``n >= 4``) and poses ``(n, 4, 4)``
+    (``name`` in messages)."""
+    t = np.asarray(times, dtype=float)
+    T = se3.check_transforms(T_world_cam, name)
+    if t.ndim != 1 or t.size != T.shape[0] or t.size < 4:
+        raise InputError(
+            f"interpolation needs at least 4 timestamped poses, got times {t.shape} and "
+            f"{name} {T.shape}"
+        )
+    if not np.all(np.diff(t) > 0):
+        raise InputError(f"interpolation needs strictly increasing timestamps ({name})")
+    return t, T
 
 
 class PoseInterpolator:
@@ -71,15 +117,7 @@ class PoseInterpolator:
     def __init__(
         self, times: FloatArray, T_world_cam: FloatArray, max_gap: float | None = None
     ) -> None:
-        t = np.asarray(times, dtype=float)
-        T = se3.check_transforms(T_world_cam, "poses to interpolate")
-        if t.ndim != 1 or t.size != T.shape[0] or t.size < 4:
-            raise InputError(
-                f"interpolation needs at least 4 timestamped poses, got times {t.shape} and "
-                f"poses {T.shape}"
-            )
-        if not np.all(np.diff(t) > 0):
-            raise InputError("interpolation needs strictly increasing timestamps")
+        t, T = _timed_poses(times, T_world_cam)
         self.times = t
         self.interval = float(np.median(np.diff(t)))
         self.max_gap = MAX_GAP_INTERVALS * self.interval if max_gap is None else max_gap
@@ -105,9 +143,92 @@ class PoseInterpolator:
         )
 
 
+class PoseSmoother:
+    """Smoothing of a trajectory at arbitrary times (the time offset search's poses).
+
+    The pose at time ``q`` is a local quadratic regression of the samples' rotation and
+    translation blocks on time, with Gaussian weights ``w_j = exp(-(t_j - q)^2 / (2 s^2))``
+    (cut at :data:`KERNEL_CUT` ``s``), its rotation block projected onto SO(3). It is linear in
+    the samples, ``sum_j l_j(q) T_j``: a polynomial of degree 2 in time is reproduced exactly,
+    so the motion is kept to fourth order in ``s`` (a kernel-weighted mean would shrink it to
+    second order, and the projection then bends the joint's path by about ``(w s)^2 |o| / 2``
+    for an angular rate ``w``: a bias of tenths of a millisecond at 30 Hz). On evenly spaced
+    samples of spacing ``d`` the weights' sums equal their integrals up to terms in
+    ``exp(-pi^2 s^2 / d^2)``: at ``s = 1.5 d`` white pose noise of variance ``v`` becomes
+    ``0.32 v`` at every ``q`` (within 1e-4), whereas a cubic spline's noise gain
+    ``sum_j l_j^2`` runs from 1 on a sample to 0.76 half-way.
+
+    Parameters
+    ----------
+    times : ndarray, shape (n,)
+        Strictly increasing sample times (seconds).
+    T_world_cam : ndarray, shape (n, 4, 4)
+    width : float, optional
+        The weights' standard deviation ``s`` (seconds); default
+        :data:`SMOOTHING_INTERVALS` median intervals.
+    max_gap : float, optional
+        Largest interval between samples within the kernel's reach of a query (seconds);
+        default :data:`MAX_GAP_INTERVALS` median intervals.
+    """
+
+    def __init__(
+        self,
+        times: FloatArray,
+        T_world_cam: FloatArray,
+        width: float | None = None,
+        max_gap: float | None = None,
+    ) -> None:
+        t, T = _timed_poses(times, T_world_cam)
+        self.times = t
+        self.interval = float(np.median(np.diff(t)))
+        self.width = SMOOTHING_INTERVALS * self.interval if width is None else width
+        self.max_gap = MAX_GAP_INTERVALS * self.interval if max_gap is None else max_gap
+        self._T = T
+        # gaps[i]: how many intervals among the first i are longer than max_gap
+        self._gaps = np.concatenate([[0], np.cumsum(np.diff(t) > self.max_gap + 1e-12)])
+
+    def _window(self, q: FloatArray) -> tuple[np.ndarray, np.ndarray]:
+        """First sample within the kernel's reach of each query ``(k,)``, and one past the
+        last."""
+        reach = KERNEL_CUT * self.width
+        lo = np.searchsorted(self.times, q - reach, side="left")
+        hi = np.searchsorted(self.times, q + reach, side="right")
+        return lo, hi
+
+    def valid(self, query: FloatArray) -> np.ndarray:
+        """Whether each query time ``(k,)`` has samples over the kernel's whole reach on both
+        sides, without a gap longer than ``max_gap``."""
+        q = np.asarray(query, dtype=float)
+        lo, hi = self._window(q)
+        n = self.times.size
+        inside = (lo >= 1) & (hi <= n - 1)
+        # the intervals lo - 1 .. hi - 1 span the reach
+        a, b = np.clip(lo - 1, 0, n - 1), np.clip(hi, 0, n - 1)
+        return np.asarray(inside & (self._gaps[b] == self._gaps[a]))
+
+    def __call__(self, query: FloatArray) -> FloatArray:
+        """Smoothed ``T_world_cam`` ``(k, 4, 4)`` at the query times (where :meth:`valid`)."""
+        q = np.asarray(query, dtype=float).reshape(-1)
+        lo, hi = self._window(q)
+        span = int(np.max(hi - lo, initial=1))
+        idx = lo[:, None] + np.arange(span)
+        inside = idx < hi[:, None]
+        idx = np.minimum(idx, self.times.size - 1)
+        tau = (self.times[idx] - q[:, None]) / self.width
+        w = np.where(inside, np.exp(-0.5 * tau**2), 0.0)
+        X = tau[..., None] ** np.arange(3)  # (k, span, 3): 1, tau, tau^2
+        S = np.einsum("kj,kja,kjb->kab", w, X, X)
+        e0 = np.broadcast_to(np.array([1.0, 0.0, 0.0])[:, None], (q.size, 3, 1))
+        coef = np.linalg.solve(S, e0)  # the regression's value at tau = 0 is l @ T
+        weights = w * (X @ coef)[..., 0]
+        M = np.einsum("kj,kjab->kab", weights, self._T[idx, :3, :])
+        R, _ = se3.project_to_rotation(M[:, :, :3])
+        return se3.transforms_from_rt(R, M[:, :, 3])
+
+
 def shifted_pairs(
     times_a: FloatArray,
-    interp_b: PoseInterpolator,
+    interp_b: PoseInterpolator | PoseSmoother,
     offsets: FloatArray,
 ) -> np.ndarray:
     """The frames of A paired with B at every offset in ``offsets`` (a mask ``(n_a,)``)."""
@@ -166,16 +287,21 @@ def estimate_time_offset(
     T_a, T_b : ndarray, shape (n_a, 4, 4), (n_b, 4, 4)
         ``T_world_cam`` of each camera.
     fit : (T_a (m, 4, 4), T_b (m, 4, 4)) -> ndarray (m, k) or dict of them
-        Calibrates the pair on paired poses and returns its residuals (e.g. the joint
-        constraint's, without rejecting outliers, so that every offset sees the same
-        frames), or residual blocks of different units (see :func:`profile_cost`); it may
-        raise ``DegenerateMotionError`` for an offset far from the truth.
+        Calibrates the pair on paired poses and returns its residuals, one row per frame
+        (e.g. the joint constraint's, without rejecting outliers, so that every offset sees
+        the same frames), or residual blocks of different units (see :func:`profile_cost`);
+        it may raise ``DegenerateMotionError`` for an offset far from the truth. During the
+        search it is given both cameras' smoothed poses (:class:`PoseSmoother`).
     max_offset : float
         Largest ``|dt|`` searched, seconds.
 
     Returns
     -------
     TimeOffset
+        ``frames`` are those of A whose B-time :class:`PoseInterpolator` covers at every
+        offset searched: the caller calibrates on them, raw, paired at ``offset_s``. The
+        search uses those of them whose smoothed poses exist at every offset (all but a few
+        kernel widths at either end).
 
     Raises
     ------
@@ -188,30 +314,33 @@ def estimate_time_offset(
         raise InputError(
             f"the largest offset must be a positive number of seconds, got {max_offset}"
         )
-    Ta = se3.check_transforms(T_a, "poses of A")
-    ta = np.asarray(times_a, dtype=float)
-    if ta.shape != (Ta.shape[0],):
-        raise InputError(f"{ta.size} timestamps for {Ta.shape[0]} poses of A")
+    ta, Ta = _timed_poses(times_a, T_a, "poses of A")
     interp = PoseInterpolator(times_b, T_b)
     step = 0.5 * interp.interval
     k = max(int(np.ceil(max_offset / step)), 2)
     grid = np.linspace(-max_offset, max_offset, 2 * k + 1)
     frames = shifted_pairs(ta, interp, grid)
-    if int(frames.sum()) < MIN_OFFSET_FRAMES:
+    # the search: both cameras smoothed alike (one width in seconds, for the slower camera)
+    width = SMOOTHING_INTERVALS * max(float(np.median(np.diff(ta))), interp.interval)
+    smooth_a = PoseSmoother(ta, Ta, width=width)
+    smooth_b = PoseSmoother(times_b, T_b, width=width)
+    search = frames & smooth_a.valid(ta) & shifted_pairs(ta, smooth_b, grid)
+    if int(search.sum()) < MIN_OFFSET_FRAMES:
         raise DegenerateMotionError(
-            f"only {int(frames.sum())} frames of A overlap camera B's recording at every "
+            f"only {int(search.sum())} frames of A overlap camera B's recording at every "
             f"offset within +-{max_offset:g} s; the time offset needs at least "
             f"{MIN_OFFSET_FRAMES}: record the two cameras together for longer, or search a "
             "smaller --max-offset"
         )
-    Tf, tf = Ta[frames], ta[frames]
+    tf = ta[search]
+    Tf = smooth_a(tf)
     coarse = _thinned(tf.size)
 
     def c(dt: float) -> float:
-        return _cost(fit, Tf, interp(tf + dt))
+        return _cost(fit, Tf, smooth_b(tf + dt))
 
     def c_coarse(dt: float) -> float:
-        return _cost(fit, Tf[coarse], interp(tf[coarse] + dt))
+        return _cost(fit, Tf[coarse], smooth_b(tf[coarse] + dt))
 
     # the grid on at most COARSE_FRAMES frames (the cost's shape is set by the motion, not
     # by the number of frames), the minimum and its curvature on them all
@@ -225,12 +354,69 @@ def estimate_time_offset(
     lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
     res = minimize_scalar(c, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6})
     dt = float(res.x)
-    h = 0.25 * step
-    lo_c, hi_c = c(max(dt - h, -max_offset)), c(min(dt + h, max_offset))
-    curvature = (lo_c - 2.0 * c(dt) + hi_c) / h**2
-    std = float(1.0 / np.sqrt(curvature)) if curvature > 0 else float("inf")
+    # the residuals at three offsets about dt (inside the range) for the standard deviation
+    h = STENCIL_INTERVALS * interp.interval
+    mid = float(np.clip(dt, -max_offset + h, max_offset - h))
+    stencil = [_residuals(fit, Tf, smooth_b(tf + x)) for x in (mid - h, mid, mid + h)]
+    std = _sandwich_std(stencil, h)
     at_limit = best in (0, grid.size - 1)
     return TimeOffset(dt, std, frames, np.column_stack([grid, values]), at_limit)
+
+
+def _sandwich_std(stencil: list[Residuals | None], h: float) -> float:
+    """Standard deviation of the profile cost's minimiser, ``sqrt(Var(c')) / c''``.
+
+    Parameters
+    ----------
+    stencil : list of 3 residuals (see :func:`estimate_time_offset`'s ``fit``)
+        The calibration's residuals at ``dt - h``, ``dt``, ``dt + h``; None where it failed.
+    h : float
+        The stencil's step, seconds.
+
+    Returns
+    -------
+    float
+        Seconds; infinite where a calibration failed or the curvature is not positive.
+
+    Notes
+    -----
+    Each block's sum of squares ``S_b`` is nearly quadratic in ``dt`` (its residuals nearly
+    linear), so ``c = sum_b (n_b / 2) log(S_b / n_b)`` has the curvature
+    ``c'' = sum_b (n_b / 2) (S_b'' / S_b - (S_b' / S_b)^2)``, with ``S_b'`` and ``S_b''`` by
+    central differences. (A difference of ``c`` itself would understate it: ``c`` is the log
+    of a quadratic, flat beyond the offset at which the signal's residual matches the noise,
+    a few milliseconds.) The slope is a sum over frames, ``c' = sum_i u_i`` with
+    ``u_i = sum_b r_bi . dr_bi/ddt / (S_b / n_b)`` (``dr/ddt`` with the calibration refitted),
+    and its variance is that of the sums of ``u_i`` over runs of :data:`SCORE_BLOCK_FRAMES`
+    consecutive frames. Unlike ``1 / sqrt(c'')`` this holds when the residuals are correlated
+    in time (the search's smoothing makes them so over a few frames) or their noise varies
+    from frame to frame (the lever arms).
+    """
+    if any(r is None for r in stencil):
+        return float("inf")
+    lo, r0, hi = (_blocks(r) for r in stencil if r is not None)
+    curvature = 0.0
+    u = np.zeros(r0[0].shape[0])
+    for bl, b, bh in zip(lo, r0, hi, strict=True):
+        s_lo, s_0, s_hi = (max(float(np.sum(x**2)), 1e-300) for x in (bl, b, bh))
+        d1, d2 = (s_hi - s_lo) / (2.0 * h), (s_hi - 2.0 * s_0 + s_lo) / h**2
+        curvature += 0.5 * b.size * (d2 / s_0 - (d1 / s_0) ** 2)
+        u += np.sum(b * (bh - bl), axis=1) / (2.0 * h * s_0 / b.size)
+    if not curvature > 0:
+        return float("inf")
+    size = max(1, min(SCORE_BLOCK_FRAMES, u.size // MIN_SCORE_BLOCKS))
+    sums = np.add.reduceat(u, np.arange(0, u.size, size))
+    var = float(np.sum((sums - sums.mean()) ** 2)) * sums.size / max(sums.size - 1, 1)
+    return float(np.sqrt(var) / curvature)
+
+
+def _blocks(residuals: Residuals) -> list[FloatArray]:
+    """Residual blocks ``(m, k_b)`` each (one row per frame) as a list."""
+    raw = residuals.values() if isinstance(residuals, dict) else [residuals]
+    out = [np.asarray(r, dtype=float).reshape(np.shape(r)[0], -1) for r in raw]
+    if len({b.shape[0] for b in out}) > 1:
+        raise ValueError("residual blocks must have one row per frame")
+    return out
 
 
 def _thinned(n: int) -> np.ndarray:
@@ -238,12 +424,18 @@ def _thinned(n: int) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, n - 1, min(n, COARSE_FRAMES))).astype(int))
 
 
+def _residuals(fit: Fit, Ta: FloatArray, Tb: FloatArray) -> Residuals | None:
+    """The residuals of one pairing (None where the calibration fails)."""
+    try:
+        return fit(Ta, Tb)
+    except DegenerateMotionError:
+        return None
+
+
 def _cost(fit: Fit, Ta: FloatArray, Tb: FloatArray) -> float:
     """The profile cost of one pairing (infinite where the calibration fails)."""
-    try:
-        return profile_cost(fit(Ta, Tb))
-    except DegenerateMotionError:
-        return float("inf")
+    r = _residuals(fit, Ta, Tb)
+    return float("inf") if r is None else profile_cost(r)
 
 
 def profile_cost(residuals: Residuals) -> float:

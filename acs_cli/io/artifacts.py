@@ -223,6 +223,35 @@ def get_path(
     return node
 
 
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key repeated in one mapping (YAML forbids it;
+    PyYAML would silently keep the last value)."""
+
+
+def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: dict[Any, int] = {}
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            first = seen.get(key)
+        except TypeError:  # an unhashable key: the constructor below says so
+            continue
+        if first is not None:
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"duplicate key {str(key)[:60]!r} (first on line {first + 1})",
+                key_node.start_mark,
+            )
+        seen[key] = key_node.start_mark.line
+    return loader.construct_mapping(node, deep=True)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
 def load_yaml_file(path: str | Path, what: str = "a YAML file") -> Any:
     """Parse a YAML file; every failure is an :class:`InputError` naming the file (and line).
 
@@ -242,7 +271,7 @@ def load_yaml_file(path: str | Path, what: str = "a YAML file") -> Any:
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
     try:
-        return yaml.safe_load(data)
+        return yaml.load(data, Loader=_StrictLoader)  # a SafeLoader: no arbitrary objects
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = None if mark is None else mark.line + 1

@@ -1,4 +1,12 @@
-"""Exports to other tools: Kalibr camchain YAML and OpenCV ``FileStorage`` YAML."""
+"""Exports of one camera to other tools: OpenCV ``FileStorage`` files and ROS ``camera_info``.
+
+:func:`write_opencv_yaml` writes matrices, numbers, strings and one level of named maps with
+``cv2.FileStorage`` itself; :func:`opencv_camera_values` are a camera's keys in it
+(``camera_matrix``, ``distortion_coefficients``, ``image_width``, ``image_height``).
+:func:`ros_camera_info_text` is the ``camera_info`` YAML of camera_calibration_parsers
+(what ``camera_info_manager`` loads). The Kalibr camchain is in
+:mod:`acs_cli.io.rig_export`.
+"""
 
 from __future__ import annotations
 
@@ -10,81 +18,34 @@ from typing import Any
 import cv2
 import numpy as np
 import yaml
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import to_plain
 from acs_cli.io.atomic import atomic_path, atomic_write_text
 
-__all__ = ["read_opencv_yaml", "write_camchain_yaml", "write_opencv_yaml"]
+__all__ = [
+    "ROS_DISTORTION_MODELS",
+    "check_ros_camera_name",
+    "opencv_camera_values",
+    "read_opencv_yaml",
+    "ros_camera_info_text",
+    "write_opencv_yaml",
+    "write_ros_camera_info",
+]
 
 _OPENCV_SUFFIXES = (".yaml", ".yml", ".xml", ".json")
 _OPENCV_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+#: camera_info_manager's rule for a camera name: letters, digits and underscores.
+_ROS_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 
-
-def _intrinsics_4(value: Any, name: str) -> list[float]:
-    """``[fu, fv, pu, pv]`` from 4 numbers or a 3x3 camera matrix ``K`` (pixels)."""
-    arr = np.asarray(value, dtype=float)
-    if arr.shape == (3, 3):
-        arr = np.array([arr[0, 0], arr[1, 1], arr[0, 2], arr[1, 2]])
-    if arr.shape != (4,) or not np.all(np.isfinite(arr)):
-        raise InputError(f"camera {name}: intrinsics must be [fu, fv, pu, pv] or a 3x3 matrix")
-    return [float(v) for v in arr]
-
-
-def write_camchain_yaml(path: str | Path, cameras: Sequence[Mapping[str, Any]]) -> None:
-    """Write a Kalibr-style camchain YAML (``cam0``, ``cam1``, ...) atomically.
-
-    Parameters
-    ----------
-    path : str or Path
-        Destination file.
-    cameras : sequence of mapping
-        One per camera, in chain order. Keys:
-
-        - ``name`` (str, required): used for the default ``rostopic`` ``/<name>/image_raw``.
-        - ``T_cn_cnm1`` ((4, 4), cameras 1.. only): maps points in camera n-1's frame into
-          camera n's frame (lengths in the artifact's units).
-        - ``intrinsics``: ``[fu, fv, pu, pv]`` or a 3x3 ``K`` in pixels (pinhole model);
-          omitted when unknown, together with ``camera_model``.
-        - ``distortion_coeffs``: radtan ``[k1, k2, p1, p2]``; omitted when unknown, together
-          with ``distortion_model``.
-        - ``resolution``: ``[width, height]`` in pixels; omitted when unknown.
-        - ``rostopic``: overrides the default topic.
-
-    Raises
-    ------
-    InputError
-        A camera without a name, ``T_cn_cnm1`` on the first camera or not a rigid
-        transform, bad intrinsics, or an unwritable destination.
-    """
-    doc: dict[str, Any] = {}
-    for i, cam in enumerate(cameras):
-        name = cam.get("name")
-        if not isinstance(name, str) or not name:
-            raise InputError(f"camera {i} needs a non-empty 'name'")
-        entry: dict[str, Any] = {}
-        if cam.get("T_cn_cnm1") is not None:
-            from acs_cli.core import se3  # here: scipy's import costs every command ~0.5 s
-
-            if i == 0:
-                raise InputError(f"camera {name}: the first camera has no T_cn_cnm1")
-            T = se3.check_transforms(cam["T_cn_cnm1"], name=f"camera {name} T_cn_cnm1")
-            entry["T_cn_cnm1"] = to_plain(T[0])
-        if cam.get("intrinsics") is not None:
-            entry["camera_model"] = "pinhole"
-            entry["intrinsics"] = _intrinsics_4(cam["intrinsics"], name)
-        if cam.get("distortion_coeffs") is not None:
-            entry["distortion_model"] = "radtan"
-            entry["distortion_coeffs"] = [
-                float(v) for v in np.asarray(cam["distortion_coeffs"], dtype=float).ravel()
-            ]
-        if cam.get("resolution") is not None:
-            entry["resolution"] = [int(v) for v in np.asarray(cam["resolution"]).ravel()]
-        entry["rostopic"] = str(cam.get("rostopic") or f"/{name}/image_raw")
-        doc[f"cam{i}"] = entry
-    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
-    atomic_write_text(path, text)
+#: ROS ``distortion_model`` (sensor_msgs/distortion_models.h) of each acscal camera model.
+ROS_DISTORTION_MODELS = {
+    "pinhole": "plumb_bob",
+    "rational": "rational_polynomial",
+    "fisheye": "equidistant",
+}
+#: Distortion coefficients of each acscal model (OpenCV's order), as ROS expects them.
+_N_COEFFS = {"pinhole": 5, "rational": 8, "fisheye": 4}
 
 
 def _cv_value(key: str, value: Any) -> Any:
@@ -109,43 +70,210 @@ def _cv_value(key: str, value: Any) -> Any:
     raise TypeError(f"cannot write {key!r} of type {type(value).__name__} to OpenCV YAML")
 
 
-def write_opencv_yaml(path: str | Path, mats: Mapping[str, Any]) -> None:
-    """Write matrices and scalars with ``cv2.FileStorage``, atomically.
+def _cv_values(mats: Mapping[str, Any], where: str = "") -> dict[str, Any]:
+    """Every value as :func:`_cv_value` makes it; a mapping (one level) as a dict of them."""
+    values: dict[str, Any] = {}
+    for key, value in mats.items():
+        if not _OPENCV_KEY.match(key):
+            raise ValueError(f"OpenCV FileStorage cannot store the key {where + key!r}")
+        if isinstance(value, Mapping):
+            if where:
+                raise TypeError(f"cannot write {where + key!r}: maps nest one level only")
+            values[key] = _cv_values(value, f"{key}.")
+        else:
+            values[key] = _cv_value(where + key, value)
+    return values
+
+
+def write_opencv_yaml(
+    path: str | Path, mats: Mapping[str, Any], *, comments: Sequence[str] = ()
+) -> None:
+    """Write matrices, scalars and named maps of them with ``cv2.FileStorage``, atomically.
 
     Parameters
     ----------
     path : str or Path
         Destination; the format follows its suffix when it is ``.yaml``/``.yml``/``.xml``/
         ``.json``, else YAML.
-    mats : mapping of str to ndarray, float, int or str
+    mats : mapping of str to ndarray, float, int, str or mapping
         Values by key. Arrays (at most 2-D is customary, e.g. ``K`` (3, 3), ``T_b_a``
-        (4, 4)) are stored as ``opencv-matrix`` (float64, or int32 for integers).
+        (4, 4)) are stored as ``opencv-matrix`` (float64, or int32 for integers). A mapping
+        of such values is stored as a named map (one level: ``fs["cam_a"]["camera_matrix"]``).
+    comments : sequence of str
+        Lines written as comments at the top (YAML and XML only; JSON has none).
 
     Raises
     ------
     ValueError
         A key OpenCV cannot store (keys must match ``[A-Za-z_][A-Za-z0-9_-]*``).
     TypeError
-        A value of an unsupported type.
+        A value of an unsupported type, or maps nested deeper than one level.
     InputError
         The destination cannot be written.
     """
     dest = Path(path)
     suffix = dest.suffix.lower() if dest.suffix.lower() in _OPENCV_SUFFIXES else ".yaml"
-    values = {}
-    for key, value in mats.items():
-        if not _OPENCV_KEY.match(key):
-            raise ValueError(f"OpenCV FileStorage cannot store the key {key!r}")
-        values[key] = _cv_value(key, value)
+    values = _cv_values(mats)
     with atomic_path(dest, suffix=suffix) as tmp:
         fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
         try:
             if not fs.isOpened():
                 raise InputError("cannot write (OpenCV could not open the file)", path=dest)
+            if suffix != ".json":
+                for line in comments:
+                    fs.writeComment(" ".join(str(line).split()))
             for key, value in values.items():
-                fs.write(key, value)
+                if isinstance(value, dict):
+                    fs.startWriteStruct(key, cv2.FileNode_MAP)
+                    for k, v in value.items():
+                        fs.write(k, v)
+                    fs.endWriteStruct()
+                else:
+                    fs.write(key, value)
         finally:
             fs.release()
+
+
+def _camera_arrays(
+    camera_matrix: ArrayLike, distortion: ArrayLike, image_size: Sequence[int], model: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[int, int]]:
+    """``K`` (3, 3), the coefficients and ``(width, height)``, checked against ``model``."""
+    if model not in _N_COEFFS:
+        raise InputError(f"unknown camera model {model!r}; use one of {', '.join(_N_COEFFS)}")
+    K = np.asarray(camera_matrix, dtype=float)
+    D = np.asarray(distortion, dtype=float).ravel()
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise InputError("the camera matrix must be a finite 3x3 K")
+    if D.size != _N_COEFFS[model] or not np.all(np.isfinite(D)):
+        raise InputError(f"the {model} model needs {_N_COEFFS[model]} finite coefficients")
+    size = tuple(int(v) for v in image_size)
+    if len(size) != 2 or min(size) <= 0:
+        raise InputError("the image size must be [width, height] in pixels")
+    return K, D, (size[0], size[1])
+
+
+def opencv_camera_values(
+    camera_matrix: ArrayLike, distortion: ArrayLike, image_size: Sequence[int], model: str
+) -> dict[str, Any]:
+    """A camera's keys in an OpenCV ``FileStorage`` file (for :func:`write_opencv_yaml`).
+
+    Parameters
+    ----------
+    camera_matrix : array_like, shape (3, 3)
+        ``K``, pixels.
+    distortion : array_like
+        OpenCV's order: pinhole ``k1 k2 p1 p2 k3``, rational ``k1 k2 p1 p2 k3 k4 k5 k6``,
+        fisheye ``k1 k2 k3 k4`` (``cv2.fisheye``).
+    image_size : sequence of int
+        ``(width, height)``, pixels.
+    model : {"pinhole", "rational", "fisheye"}
+
+    Returns
+    -------
+    dict
+        ``image_width``, ``image_height`` (int), ``model`` (str), ``camera_matrix`` (3x3)
+        and ``distortion_coefficients`` (1xN), the keys OpenCV's calibration samples use.
+
+    Raises
+    ------
+    InputError
+        An unknown model, or values that do not fit it.
+    """
+    K, D, size = _camera_arrays(camera_matrix, distortion, image_size, model)
+    return {
+        "image_width": size[0],
+        "image_height": size[1],
+        "model": model,
+        "camera_matrix": K,
+        "distortion_coefficients": D.reshape(1, -1),
+    }
+
+
+def check_ros_camera_name(name: str) -> str:
+    """``name`` if ``camera_info_manager`` accepts it (letters, digits, ``_``), else raise.
+
+    Raises
+    ------
+    InputError
+        An empty name or one with other characters.
+    """
+    if not isinstance(name, str) or not _ROS_NAME.match(name):
+        raise InputError(
+            f"camera name {name!r}: ROS camera names are letters, digits and underscores"
+        )
+    return name
+
+
+def ros_camera_info_text(
+    camera_matrix: ArrayLike,
+    distortion: ArrayLike,
+    image_size: Sequence[int],
+    model: str,
+    camera_name: str,
+    *,
+    comments: Sequence[str] = (),
+) -> str:
+    """A monocular camera's ROS ``camera_info`` YAML (camera_calibration_parsers' format).
+
+    Keys, as ``sensor_msgs/CameraInfo`` holds them: ``image_width``, ``image_height``,
+    ``camera_name``, ``camera_matrix`` (``K``, 3x3), ``distortion_model`` (``plumb_bob``,
+    ``rational_polynomial`` or ``equidistant``), ``distortion_coefficients`` (``D``: 5, 8 or
+    4 numbers), ``rectification_matrix`` (``R``: the identity) and ``projection_matrix``
+    (``P``, 3x4: ``[K | 0]``); each matrix as ``{rows, cols, data}``, row-major.
+
+    Parameters
+    ----------
+    camera_matrix, distortion, image_size, model
+        As :func:`opencv_camera_values`.
+    camera_name : str
+        The name ``camera_info_manager`` compares with the camera driver's.
+    comments : sequence of str
+        Comment lines at the top.
+
+    Returns
+    -------
+    str
+        The YAML.
+
+    Raises
+    ------
+    InputError
+        A bad camera name, an unknown model, or values that do not fit it.
+    """
+    K, D, size = _camera_arrays(camera_matrix, distortion, image_size, model)
+    check_ros_camera_name(camera_name)
+    P = np.zeros((3, 4))
+    P[:, :3] = K
+    doc = {
+        "image_width": size[0],
+        "image_height": size[1],
+        "camera_name": camera_name,
+        "camera_matrix": {"rows": 3, "cols": 3, "data": K.ravel().tolist()},
+        "distortion_model": ROS_DISTORTION_MODELS[model],
+        "distortion_coefficients": {"rows": 1, "cols": int(D.size), "data": D.tolist()},
+        "rectification_matrix": {"rows": 3, "cols": 3, "data": np.eye(3).ravel().tolist()},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": P.ravel().tolist()},
+    }
+    head = "".join(f"# {' '.join(str(c).split())}\n" for c in comments)
+    return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+
+
+def write_ros_camera_info(
+    path: str | Path,
+    camera_matrix: ArrayLike,
+    distortion: ArrayLike,
+    image_size: Sequence[int],
+    model: str,
+    camera_name: str,
+    *,
+    comments: Sequence[str] = (),
+) -> None:
+    """Write :func:`ros_camera_info_text` atomically (raises as it does, or
+    :class:`InputError` for an unwritable destination)."""
+    text = ros_camera_info_text(
+        camera_matrix, distortion, image_size, model, camera_name, comments=comments
+    )
+    atomic_write_text(path, text)
 
 
 def read_opencv_yaml(

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from decimal import Decimal
 from pathlib import Path
 
 import cv2
@@ -25,13 +26,14 @@ __all__ = [
 #: File suffixes (lower case) taken as images.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
-_DIGITS = re.compile(r"(\d+)")
+_NUMBERS = re.compile(r"(\d+(?:\.\d+)?)")
 
 
-def natural_key(name: str) -> tuple[tuple[int, int | str], ...]:
-    """Sort key that orders ``img2`` before ``img10`` (digit runs compare as numbers)."""
-    parts = _DIGITS.split(name)
-    return tuple((0, int(p)) if p.isdigit() else (1, p.lower()) for p in parts if p)
+def natural_key(name: str) -> tuple[tuple[int, Decimal | str], ...]:
+    """Sort key that orders ``img2`` before ``img10``: numbers compare as numbers, decimals
+    included (``t_1.05.png`` before ``t_1.1.png``, as times written without fixed decimals)."""
+    parts = _NUMBERS.split(name)
+    return tuple((0, Decimal(p)) if p[:1].isdigit() else (1, p.lower()) for p in parts if p)
 
 
 def list_images(folder: str | Path) -> list[Path]:
@@ -72,12 +74,58 @@ def list_images(folder: str | Path) -> list[Path]:
     return sorted(images, key=lambda e: natural_key(e.name))
 
 
-def _looks_truncated(data: bytes, suffix: str) -> str | None:
+def _jpeg_end(data: bytes) -> int | None:
+    """Where the JPEG's main image ends (just past its end-of-image marker), or None when
+    the data end first: its marker segments are walked and each scan's entropy-coded data
+    skipped, so that an EXIF thumbnail's marker does not count and bytes a camera appends
+    after the image (phone trailers, motion photos) do not matter."""
+    n, i = len(data), 2
+    while i + 1 < n:
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+        elif marker == 0xD9:
+            return i + 2
+        elif 0xD0 <= marker <= 0xD7 or marker == 0x01:  # markers without a length
+            i += 2
+        elif i + 4 > n:
+            return None
+        else:
+            i += 2 + int.from_bytes(data[i + 2 : i + 4], "big")
+            if marker == 0xDA:  # start of scan: entropy-coded data up to the next marker
+                while True:
+                    i = data.find(b"\xff", i)
+                    if i < 0 or i + 1 >= n:
+                        return None
+                    nxt = data[i + 1]
+                    if nxt == 0x00 or 0xD0 <= nxt <= 0xD7 or nxt == 0xFF:
+                        i += 1 if nxt == 0xFF else 2
+                        continue
+                    break
+    return None
+
+
+def _png_end(data: bytes) -> int | None:
+    """Where the PNG ends (just past its IEND chunk), or None when its chunks run past the
+    end of the data (bytes after IEND do not matter)."""
+    n, i = len(data), 8
+    while i + 8 <= n:
+        end = i + 12 + int.from_bytes(data[i : i + 4], "big")
+        if end > n:
+            return None
+        if data[i + 4 : i + 8] == b"IEND":
+            return end
+        i = end
+    return None
+
+
+def _looks_truncated(data: bytes) -> str | None:
     """Why an encoded image looks cut short, or None."""
-    tail = data[-4096:].rstrip(b"\x00\r\n\x1a")
-    if suffix in (".jpg", ".jpeg") and data[:2] == b"\xff\xd8" and b"\xff\xd9" not in tail[-1024:]:
+    if data[:2] == b"\xff\xd8" and _jpeg_end(data) is None:
         return "truncated JPEG (no end-of-image marker)"
-    if suffix == ".png" and data[:8] == b"\x89PNG\r\n\x1a\n" and b"IEND" not in tail[-64:]:
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and _png_end(data) is None:
         return "truncated PNG (no IEND chunk)"
     return None
 
@@ -112,7 +160,7 @@ def read_gray(path: str | Path) -> tuple[NDArray[np.uint8], str]:
     if not data:
         raise InputError("empty image file", path=p)
     sha = hashlib.sha256(data).hexdigest()
-    why = _looks_truncated(data, p.suffix.lower())
+    why = _looks_truncated(data)
     if why is not None:
         raise InputError(f"corrupt image: {why}", path=p)
     try:

@@ -28,7 +28,8 @@ URDF (:func:`urdf_from_rig`)
     Origins use URDF's convention: ``xyz`` then fixed-axis ``rpy`` (radians) with
     ``R = Rz(yaw) Ry(pitch) Rx(roll)``, the same as acscal's roll-pitch-yaw.
 
-Kalibr camchain (:func:`kalibr_camchain_from_rig`)
+Kalibr camchain (:func:`kalibr_camchain_from_rig`; a relative pose of two cameras:
+:func:`kalibr_camchain_from_pair`; both through :func:`kalibr_camchain`)
     ``cam0``, ``cam1``, ... in the rig's camera order, each with Kalibr's keys
     (``camera_model``, ``intrinsics``, ``distortion_model``, ``distortion_coeffs``,
     ``resolution``, ``rostopic``, ``cam_overlaps``) and, from ``cam1`` on, ``T_cn_cnm1``
@@ -37,6 +38,7 @@ Kalibr camchain (:func:`kalibr_camchain_from_rig`)
 
 Lengths are the artifact's (``rig.length_unit``, the reference camera's units); both URDF
 and Kalibr expect metres, and a comment warns when the rig's unit is another.
+``acscal export`` puts them in metres first (:func:`rig_in_metres`) or refuses.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol, Union
 
@@ -66,8 +68,11 @@ __all__ = [
     "RIG_EXPORT_FORMATS",
     "IntrinsicsFields",
     "IntrinsicsLike",
+    "kalibr_camchain",
+    "kalibr_camchain_from_pair",
     "kalibr_camchain_from_rig",
     "matrix_from_urdf_rpy",
+    "rig_in_metres",
     "urdf_from_rig",
     "urdf_rpy_from_matrix",
     "write_rig_export",
@@ -535,33 +540,43 @@ def _yaml_block(doc: Mapping[str, Any]) -> str:
     return yaml.safe_dump(to_plain(doc), sort_keys=False, default_flow_style=None)
 
 
-def kalibr_camchain_from_rig(
-    rig: RigArtifact,
+def kalibr_camchain(
+    cameras: Sequence[str],
+    T_cn_cnm1: Sequence[ArrayLike | None],
     intrinsics: Mapping[str, IntrinsicsLike] | None,
     *,
+    header: Sequence[str] = (),
+    comments: Sequence[str] | None = None,
     overlaps: Mapping[str, Iterable[str]] | None = None,
     rostopics: Mapping[str, str] | None = None,
 ) -> str:
-    """The rig as a Kalibr camchain YAML (``cam0``, ``cam1``, ... in the rig's camera order).
+    """A Kalibr camchain YAML of a chain of cameras (``cam0``, ``cam1``, ... in order).
 
     Each ``camN`` holds ``camera_model: pinhole``, ``intrinsics: [fu, fv, pu, pv]`` (px),
-    ``distortion_model`` (``radtan`` ``[k1, k2, p1, p2]`` for acscal's pinhole model,
-    ``equidistant`` ``[k1, k2, k3, k4]`` for its fisheye model), ``distortion_coeffs``,
-    ``resolution: [width, height]``, ``rostopic`` (``/<camera>/image_raw``) and
-    ``cam_overlaps`` (indices); from ``cam1`` on, ``T_cn_cnm1`` (4x4, maps camera n-1's
-    frame into camera n's, at the reference instant, in ``rig.length_unit``). A comment
-    before each camera names it and the ball or hinge joints between it and the previous
-    camera, whose ``T_cn_cnm1`` then holds at the reference instant only.
+    ``distortion_model`` (``radtan`` ``[k1, k2, p1, p2]`` for acscal's pinhole model and a
+    rational one whose k3..k6 are 0, ``equidistant`` ``[k1, k2, k3, k4]`` for its fisheye
+    model), ``distortion_coeffs``, ``resolution: [width, height]``, ``rostopic``
+    (``/<camera>/image_raw``) and ``cam_overlaps`` (indices); from ``cam1`` on,
+    ``T_cn_cnm1`` (4x4, maps camera n-1's frame into camera n's: Kalibr's
+    ``T_cn_cnm1 = T_c1_c0`` for ``cam1``), the fields and types Kalibr's
+    ``CameraChainParameters`` reads.
 
     Parameters
     ----------
-    rig : RigArtifact
-        The calibrated rig.
+    cameras : sequence of str
+        The cameras' names, in chain order.
+    T_cn_cnm1 : sequence of (4, 4) array_like or None
+        One per camera: ``None`` for the first, ``T_<n>_<n-1>`` for the others (lengths as
+        they are: Kalibr expects metres).
     intrinsics : mapping of camera name to intrinsics, or None
         Every camera's intrinsics: an object with ``model``, ``camera_matrix``,
         ``distortion`` and ``image_size`` (an
         :class:`~acs_cli.io.intrinsics.IntrinsicsArtifact`), or the path of an
         ``acscal/intrinsics`` YAML file (read with ``IntrinsicsArtifact.load``).
+    header : sequence of str
+        Comment lines at the top (without ``#``).
+    comments : sequence of str, optional
+        One comment line (without ``#``) before each camera; ``camN: <name>`` without.
     overlaps : mapping of camera name to camera names, optional
         Cameras that share views (made symmetric); ``cam_overlaps: []`` without.
     rostopics : mapping of camera name to str, optional
@@ -576,14 +591,18 @@ def kalibr_camchain_from_rig(
     ------
     InputError
         A camera without intrinsics (Kalibr refuses such a camchain; the message names
-        every such camera), intrinsics of a camera the rig does not have, intrinsics Kalibr
-        cannot hold (rational or k3 terms, skew), unreadable intrinsics files, unknown
-        cameras in ``overlaps`` or ``rostopics``, joints that do not form a tree.
+        every such camera), intrinsics of an unknown camera, intrinsics Kalibr cannot hold
+        (rational with non-zero k3..k6, pinhole with k3, skew), unreadable intrinsics files,
+        unknown cameras in ``overlaps`` or ``rostopics``, a ``T_cn_cnm1`` that is not
+        rigid (or given for the first camera, or missing for another).
+    ValueError
+        ``T_cn_cnm1`` or ``comments`` not one per camera.
     """
-    topo = _topology(rig)
-    cams = list(rig.cameras)
+    cams = list(cameras)
+    if len(T_cn_cnm1) != len(cams) or (comments is not None and len(comments) != len(cams)):
+        raise ValueError("T_cn_cnm1 and comments need one entry per camera")
     given = dict(intrinsics or {})
-    unknown = [c for c in given if c not in rig.cameras]
+    unknown = [c for c in given if c not in cams]
     if unknown:
         raise InputError(
             f"intrinsics given for {', '.join(map(str, unknown))}, not a camera of the rig "
@@ -597,31 +616,82 @@ def kalibr_camchain_from_rig(
             + " (give each camera's intrinsics.yaml)"
         )
     for c in rostopics or {}:
-        if c not in rig.cameras:
+        if c not in cams:
             raise InputError(f"rostopic given for unknown camera {c!r}")
     overlap = _overlap_indices(cams, overlaps)
+    text = "".join(f"# {line}\n" for line in header)
+    for i, cam in enumerate(cams):
+        entry: dict[str, Any] = {}
+        T = T_cn_cnm1[i]
+        if (T is None) != (i == 0):
+            raise InputError(f"camera {cam}: T_cn_cnm1 is for every camera but the first")
+        if T is not None:
+            entry["T_cn_cnm1"] = se3.check_transforms(T, name=f"camera {cam} T_cn_cnm1")[0]
+        entry.update(_kalibr_intrinsics(cam, given[cam]))
+        entry["rostopic"] = str((rostopics or {}).get(cam) or f"/{cam}/image_raw")
+        entry["cam_overlaps"] = overlap[cam]
+        comment = f"cam{i}: {cam}" if comments is None else comments[i]
+        text += f"# {comment}\n" + _yaml_block({f"cam{i}": entry})
+    return text
 
-    lines = [
-        "# Kalibr camchain exported by acscal from a calibrated rig",
-        f"# cameras in the rig's order: {', '.join(f'cam{i} = {c}' for i, c in enumerate(cams))}",
-        "# T_cn_cnm1 maps camera n-1's frame into camera n's (p_n = T_cn_cnm1 p_nm1), "
+
+def kalibr_camchain_from_rig(
+    rig: RigArtifact,
+    intrinsics: Mapping[str, IntrinsicsLike] | None,
+    *,
+    overlaps: Mapping[str, Iterable[str]] | None = None,
+    rostopics: Mapping[str, str] | None = None,
+    notes: Sequence[str] = (),
+) -> str:
+    """The rig as a Kalibr camchain YAML (:func:`kalibr_camchain`, in the rig's camera order).
+
+    ``T_cn_cnm1`` is ``T_<n>_<n-1>`` at the reference instant, in ``rig.length_unit`` (a
+    comment warns when that is not metres). A comment before each camera names it and
+    the ball or hinge joints between it and the previous camera, whose ``T_cn_cnm1`` then
+    holds at the reference instant only.
+
+    Parameters
+    ----------
+    rig : RigArtifact
+        The calibrated rig.
+    intrinsics, overlaps, rostopics
+        As :func:`kalibr_camchain`.
+    notes : sequence of str
+        More comment lines for the top (e.g. where the intrinsics came from, warnings).
+
+    Returns
+    -------
+    str
+        The camchain YAML.
+
+    Raises
+    ------
+    InputError
+        What :func:`kalibr_camchain` raises, and joints that do not form a tree.
+    """
+    topo = _topology(rig)
+    cams = list(rig.cameras)
+    header = [
+        "Kalibr camchain exported by acscal from a calibrated rig",
+        f"cameras in the rig's order: {', '.join(f'cam{i} = {c}' for i, c in enumerate(cams))}",
+        "T_cn_cnm1 maps camera n-1's frame into camera n's (p_n = T_cn_cnm1 p_nm1), "
         f"lengths in {'metres' if rig.length_unit == 'm' else rig.length_unit}",
     ]
     if rig.length_unit != "m":
-        lines.append(f"# WARNING: Kalibr expects metres; these lengths are in {rig.length_unit}")
+        header.append(f"WARNING: Kalibr expects metres; these lengths are in {rig.length_unit}")
     articulated = [j for j in rig.joints.values() if j.type != "rigid"]
     if articulated:
-        lines += [
-            "# The rig is articulated ("
+        header += [
+            "The rig is articulated ("
             + ", ".join(f"{j.name}: {j.type}" for j in articulated)
             + "): a T_cn_cnm1 across such a joint",
-            f"# holds at the reference instant only (frame {rig.reference_frame} of "
+            f"holds at the reference instant only (frame {rig.reference_frame} of "
             f"{rig.reference_camera}'s trajectory); Kalibr takes it as fixed.",
         ]
-    text = "\n".join(lines) + "\n"
+    comments: list[str] = []
+    transforms: list[FloatArray | None] = []
     for i, cam in enumerate(cams):
-        entry: dict[str, Any] = {}
-        comment = f"# cam{i}: {cam}"
+        comment = f"cam{i}: {cam}"
         if i > 0:
             prev = cams[i - 1]
             moving = [s.joint for s in topo.path(prev, cam) if s.joint.type != "rigid"]
@@ -633,16 +703,128 @@ def kalibr_camchain_from_rig(
                 )
             else:
                 comment += f"; rigidly mounted with {prev}"
-            entry["T_cn_cnm1"] = rig.T_a_b(cam, prev)
-        entry.update(_kalibr_intrinsics(cam, given[cam]))
-        entry["rostopic"] = str((rostopics or {}).get(cam) or f"/{cam}/image_raw")
-        entry["cam_overlaps"] = overlap[cam]
-        text += comment + "\n" + _yaml_block({f"cam{i}": entry})
-    return text
+        comments.append(comment)
+        transforms.append(rig.T_a_b(cam, cams[i - 1]) if i > 0 else None)
+    return kalibr_camchain(
+        cams,
+        transforms,
+        intrinsics,
+        header=[*header, *notes],
+        comments=comments,
+        overlaps=overlaps,
+        rostopics=rostopics,
+    )
+
+
+def kalibr_camchain_from_pair(
+    T_b_a: ArrayLike,
+    intrinsics: Mapping[str, IntrinsicsLike] | None,
+    *,
+    names: tuple[str, str] = ("cam_a", "cam_b"),
+    reference: int = 0,
+    overlap: bool = False,
+    notes: Sequence[str] = (),
+) -> str:
+    """Two cameras joined by a joint (``relpose.yaml``) as a Kalibr camchain.
+
+    ``cam0`` is camera A, ``cam1`` camera B with ``T_cn_cnm1 = T_b_a`` (maps A's frame into
+    B's), which holds at the reference instant only: a comment says so.
+
+    Parameters
+    ----------
+    T_b_a : array_like, shape (4, 4)
+        The relative pose at the reference instant, metres.
+    intrinsics : mapping, or None
+        Both cameras' intrinsics, by the names in ``names`` (as :func:`kalibr_camchain`).
+    names : tuple of str
+        The cameras' names (their default topics ``/<name>/image_raw``).
+    reference : int
+        The reference instant (paired frame) ``T_b_a`` holds at.
+    overlap : bool
+        Whether the cameras share views (``cam_overlaps`` ``[1]`` and ``[0]``).
+    notes : sequence of str
+        More comment lines for the top.
+
+    Returns
+    -------
+    str
+        The camchain YAML.
+
+    Raises
+    ------
+    InputError
+        What :func:`kalibr_camchain` raises.
+    """
+    a, b = names
+    header = [
+        "Kalibr camchain exported by acscal from a relative pose (relpose.yaml)",
+        f"cam0 = {a} (camera A), cam1 = {b} (camera B)",
+        "T_cn_cnm1 of cam1 is T_b_a: maps camera A's frame into camera B's "
+        "(p_b = T_cn_cnm1 p_a), metres.",
+        f"The cameras are joined by an articulated joint: T_cn_cnm1 holds at the reference "
+        f"instant only (paired frame {reference}); Kalibr takes it as fixed.",
+    ]
+    return kalibr_camchain(
+        [a, b],
+        [None, T_b_a],
+        intrinsics,
+        header=[*header, *notes],
+        comments=[f"cam0: {a}", f"cam1: {b}; T_cn_cnm1 = T_b_a at the reference instant only"],
+        overlaps={a: [b]} if overlap else None,
+    )
+
+
+def rig_in_metres(rig: RigArtifact, metres_per_unit: float) -> RigArtifact:
+    """The rig with every length multiplied by ``metres_per_unit`` (``length_unit: m``).
+
+    Scales each camera's ``T_cam_ref`` and ``T_ref_world`` translations and their stds,
+    and each joint's positions, their stds and ``residual_rms``; rotations, axes and the
+    cameras' ``scale`` (a ratio of trajectory units) are unchanged.
+
+    Raises
+    ------
+    ValueError
+        A factor that is not a positive finite number.
+    """
+    s = float(metres_per_unit)
+    if not (math.isfinite(s) and s > 0):
+        raise ValueError(f"metres_per_unit must be positive and finite, got {metres_per_unit}")
+
+    def scaled(T: FloatArray) -> FloatArray:
+        out = np.array(T, dtype=float)
+        out[:3, 3] *= s
+        return out
+
+    cameras = {
+        name: replace(
+            c,
+            T_cam_ref=scaled(c.T_cam_ref),
+            translation_std=np.asarray(c.translation_std, dtype=float) * s,
+            T_ref_world=None if c.T_ref_world is None else scaled(c.T_ref_world),
+        )
+        for name, c in rig.cameras.items()
+    }
+    joints = {
+        name: replace(
+            j,
+            position_in={k: np.asarray(v, dtype=float) * s for k, v in j.position_in.items()},
+            position_std_in={
+                k: np.asarray(v, dtype=float) * s for k, v in j.position_std_in.items()
+            },
+            residual_rms=j.residual_rms * s,
+        )
+        for name, j in rig.joints.items()
+    }
+    return replace(rig, cameras=cameras, joints=joints, length_unit="m")
 
 
 # --------------------------------------------------------------------------------------
 # writing
+
+
+def _xml_comment(text: str) -> str:
+    """``text`` on one line, safe inside an XML comment (no ``--``)."""
+    return " ".join(str(text).split()).replace("--", "- -")
 
 
 def write_rig_export(
@@ -653,6 +835,7 @@ def write_rig_export(
     intrinsics: Mapping[str, IntrinsicsLike] | None = None,
     robot_name: str = "acs_rig",
     overlaps: Mapping[str, Iterable[str]] | None = None,
+    notes: Sequence[str] = (),
 ) -> str:
     """Write the rig as ``fmt`` (``"urdf"`` or ``"kalibr"``) atomically.
 
@@ -669,6 +852,8 @@ def write_rig_export(
         ``urdf``: the robot's name.
     overlaps : mapping, optional
         ``kalibr``: cameras that share views.
+    notes : sequence of str
+        Comment lines for the top of the file (after its own).
 
     Returns
     -------
@@ -682,8 +867,11 @@ def write_rig_export(
     """
     if fmt == "urdf":
         text = urdf_from_rig(rig, robot_name=robot_name)
+        if notes:
+            head, sep, rest = text.partition("\n")
+            text = head + sep + "".join(f"<!-- {_xml_comment(n)} -->\n" for n in notes) + rest
     elif fmt == "kalibr":
-        text = kalibr_camchain_from_rig(rig, intrinsics, overlaps=overlaps)
+        text = kalibr_camchain_from_rig(rig, intrinsics, overlaps=overlaps, notes=notes)
     else:
         raise InputError(
             f"unknown rig export format {fmt!r}; use one of {', '.join(RIG_EXPORT_FORMATS)}"

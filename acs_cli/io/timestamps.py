@@ -17,6 +17,7 @@ from them carries the digits the source had.
 
 from __future__ import annotations
 
+import csv
 import itertools
 import re
 from dataclasses import dataclass
@@ -43,6 +44,9 @@ _INTEGER_UNITS = ((18, "nanoseconds", 1), (15, "microseconds", 1000), (12, "mill
 #: Integers of at least this many digits (and fewer than 12) are seconds of Unix time.
 _SECONDS_DIGITS = 9
 _NS = 10**9
+#: Times at or beyond this many nanoseconds (int64's range, 292 years) are refused.
+_NS_LIMIT = 2**63
+_INTEGER = re.compile(r"^[+-]?\d+$")
 
 
 @dataclass(frozen=True)
@@ -132,7 +136,31 @@ class ImageTimes:
         )
 
 
+def _check_name_times(names: list[str], stamps: list[NameStamp | None], increasing: bool) -> None:
+    """Refuse image names whose times mix units, or do not increase in the images' order."""
+    units = {s.unit for s in stamps if s is not None}
+    if len(units) > 1:
+        first: dict[str, str] = {}
+        for n, s in zip(names, stamps, strict=True):
+            if s is not None:
+                first.setdefault(s.unit, n)
+        shown = ", ".join(f"{n} ({u})" for u, n in first.items())
+        raise InputError(
+            f"the image names mix time units: {shown}; rename them, or give --timestamps FILE"
+        )
+    if not increasing:
+        ns = [s.ns for s in stamps if s is not None]
+        k = next(i for i in range(1, len(ns)) if ns[i] <= ns[i - 1])
+        raise InputError(
+            f"the times in the image names do not increase in the images' order: {names[k]} "
+            f"comes after {names[k - 1]}; give --timestamps FILE"
+        )
+
+
 def _times_from_ns(ns: list[int], unit: str, source: str) -> ImageTimes:
+    big = next((v for v in ns if abs(v) >= _NS_LIMIT), None)
+    if big is not None:
+        raise InputError(f"a time of {big} ns from {source} is out of range (beyond 292 years)")
     arr = np.array(ns, dtype=np.int64)
     whole, frac = np.divmod(arr, _NS)
     seconds = whole.astype(float) + frac.astype(float) / _NS
@@ -148,13 +176,24 @@ def _check_increasing(names: list[str], ns: list[int], source: str) -> None:
             )
 
 
+#: Unit words a timestamps file's header may carry, and nanoseconds per unit.
+_HEADER_UNITS = (
+    (re.compile(r"\[ns\]|\(ns\)|\bns\b|_ns\b|nanosec"), 1),
+    (re.compile(r"\[us\]|\(us\)|\bus\b|_us\b|microsec|\[\u00b5s\]"), 1000),
+    (re.compile(r"\[ms\]|\(ms\)|\bms\b|_ms\b|millisec"), 10**6),
+)
+
+
 def read_timestamps_file(path: str | Path) -> dict[str, int]:
     """Read a timestamps file: one image name and one time per line.
 
-    Comma- (or whitespace-) separated, in either order; blank lines and lines starting with
-    ``#`` are skipped, and a first line without a number is a header. Times are seconds
-    (decimals kept exactly), or nanoseconds when the header says ``[ns]`` or every time is
-    an integer of 18 digits or more (EuRoC's ``data.csv``: ``#timestamp [ns],filename``).
+    CSV (comma, semicolon or tab; quoted fields allowed), the name and the time in either
+    order; blank lines and lines starting with ``#`` are skipped, and a first line without a
+    number is a header. Times are seconds (decimals kept exactly), unless the header names
+    another unit (``[ns]``, ``t_ns``, ``(us)``, ``[ms]``, ...: EuRoC's ``data.csv`` is
+    ``#timestamp [ns],filename``) or every time is an integer whose digits say it is not
+    seconds, by the file-name rules (18 digits or more: nanoseconds; 15-17: microseconds;
+    12-14: milliseconds).
 
     Returns
     -------
@@ -164,8 +203,8 @@ def read_timestamps_file(path: str | Path) -> dict[str, int]:
     Raises
     ------
     InputError
-        Unreadable file, a line without exactly one name and one time, a repeated name, or
-        no entries.
+        Unreadable file, a line without exactly one name and one time, a time that is not a
+        finite number, a repeated name, a time beyond int64 nanoseconds, or no entries.
     """
     p = Path(path)
     try:
@@ -174,46 +213,52 @@ def read_timestamps_file(path: str | Path) -> dict[str, int]:
         raise InputError("no such timestamps file", path=p) from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read the timestamps file ({exc})", path=p) from exc
+    lines = text.splitlines()
+    sample = "\n".join(ln for ln in lines[:20] if ln.strip() and not ln.lstrip().startswith("#"))
+    delimiter = next((d for d in ",;\t" if d in sample), " ")
     header = ""
     rows: list[tuple[int, str, str]] = []
-    for k, raw in enumerate(text.splitlines(), start=1):
-        s = raw.strip()
-        if not s:
+    reader = csv.reader(lines, delimiter=delimiter, skipinitialspace=True)
+    for k, raw in enumerate(reader, start=1):
+        fields = [f.strip() for f in raw if f.strip()]
+        if not fields:
             continue
-        if s.startswith("#"):
-            header += s.lower()
+        if fields[0].startswith("#"):
+            header += " ".join(fields).lower()
             continue
-        fields = [f.strip() for f in re.split(r"[,;\t ]+", s) if f.strip()]
         numeric = [_is_number(f) for f in fields]
-        if not rows and not any(numeric):
-            header += s.lower()
+        if not rows and not any(numeric) and not any(_is_image_name(f) for f in fields):
+            header += " " + " ".join(fields).lower()  # column names
             continue
         if len(fields) != 2:
             raise InputError(
                 f"expected an image name and a time, got {len(fields)} field(s)", path=p, line=k
             )
-        # the name is the field that is not a plain number (or the one with an image suffix)
-        name_first = _is_image_name(fields[0]) or not numeric[0]
+        # the name is the field with an image suffix, else the one that is not a number
+        name_first = _is_image_name(fields[0]) or (not _is_image_name(fields[1]) and not numeric[0])
         name, time = (fields[0], fields[1]) if name_first else (fields[1], fields[0])
         if not _is_number(time):
-            raise InputError(f"not a time in seconds: {time!r}", path=p, line=k)
-        rows.append((k, Path(name).name, time))
+            raise InputError(f"not a time: {time!r}", path=p, line=k)
+        rows.append((k, Path(name.replace("\\", "/")).name, time))
     if not rows:
         raise InputError("the timestamps file has no entries", path=p)
-    in_ns = (
-        "[ns]" in header
-        or "nanosec" in header
-        or all("." not in t and len(t.lstrip("+0")) >= _INTEGER_UNITS[0][0] for _, _, t in rows)
-    )
+    factor = next((f for pattern, f in _HEADER_UNITS if pattern.search(header)), None)
+    if factor is None and all(_INTEGER.match(t) for _, _, t in rows):
+        digits = min(len(t.lstrip("+0")) for _, _, t in rows)
+        factor = next((f for fewest, _, f in _INTEGER_UNITS if digits >= fewest), None)
     out: dict[str, int] = {}
     for k, name, time in rows:
         if name in out:
             raise InputError(f"{name} is listed twice", path=p, line=k)
-        out[name] = int(Decimal(time)) if in_ns else _exact_ns(time)
+        ns = _exact_ns(time) if factor is None else int(Decimal(time) * factor)
+        if abs(ns) >= _NS_LIMIT:
+            raise InputError(f"time {time} is out of range", path=p, line=k)
+        out[name] = ns
     return out
 
 
 def _is_number(s: str) -> bool:
+    """A finite decimal number (``1.5``, ``-2``, ``1e3``; not ``NaN``, ``0x10``)."""
     try:
         return Decimal(s).is_finite()
     except InvalidOperation:
@@ -274,11 +319,12 @@ def image_times(
         return _times_from_ns(ns, "s", timestamps_source)
     stamps = [stamp_from_name(n) for n in names]
     units = {s.unit for s in stamps if s is not None}
-    usable = len(units) == 1 and all(s is not None for s in stamps)
-    if usable:
-        ns = [s.ns for s in stamps if s is not None]
-        usable = all(b > a for a, b in itertools.pairwise(ns))
-    if usable and units != {"frame"}:
+    every = all(s is not None for s in stamps)
+    ns = [s.ns for s in stamps if s is not None]
+    increasing = every and all(b > a for a, b in itertools.pairwise(ns))
+    if every and units - {"frame"}:
+        # names that carry times are used as such, or refused: never silently replaced
+        _check_name_times(names, stamps, increasing)
         unit = units.pop()
         if fps is not None:
             raise InputError(
@@ -286,7 +332,7 @@ def image_times(
                 "drop --fps"
             )
         return _times_from_ns(ns, "s", f"file names ({unit})")
-    if usable:
+    if increasing:
         frames = ns
         what = "frame numbers in the file names"
     else:
@@ -296,4 +342,4 @@ def image_times(
     if fps is not None:
         ns_fps = [round(f * _NS / fps) for f in frames]
         return _times_from_ns(ns_fps, "s", f"{what} at {fps:g} frames per second")
-    return ImageTimes(np.array(frames, dtype=float), None, "frame", what, usable)
+    return ImageTimes(np.array(frames, dtype=float), None, "frame", what, increasing)

@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.atomic import atomic_path, atomic_write_text
+from acs_cli.io.images import natural_key
 from acs_cli.io.timestamps import image_times
 
 __all__ = [
@@ -167,7 +168,8 @@ class Trajectory:
                     f"timestamps_ns must be {n} integers, got {ns.dtype} {ns.shape}", path=src
                 )
             ns = ns.astype(np.int64)
-            if np.any(np.abs(ns / 1e9 - t) > 1e-6 * np.maximum(1.0, np.abs(t))):
+            whole, frac = np.divmod(ns, 10**9)
+            if np.any(np.abs(whole - t + frac / 1e9) > 1e-6 + 1e-15 * np.abs(t)):
                 raise InputError("timestamps_ns disagree with timestamps (seconds)", path=src)
             object.__setattr__(self, "timestamps_ns", ns)
 
@@ -491,12 +493,13 @@ def write_kitti(path: str | Path, T_world_cam: ArrayLike) -> None:
 # --------------------------------------------------------------------------------------
 # COLMAP
 
-_DIGITS = re.compile(r"(\d+)")
 
-
-def _natural_key(name: str) -> tuple[list[int | str], str]:
-    parts = _DIGITS.split(name)
-    return [int(s) if k % 2 else s for k, s in enumerate(parts)], name
+def _is_float(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 def _colmap_file(path: Path) -> Path:
@@ -576,7 +579,9 @@ def read_colmap(path: str | Path) -> Trajectory:
         values.append(nums)
         if i + 1 < len(body):
             pts_line, pts = body[i + 1]
-            if len(pts.split()) % 3:
+            # triples of numbers: an image line of a file without POINTS2D lines can split
+            # into triples (a name of three words), and must not be taken for one
+            if len(pts.split()) % 3 or not all(_is_float(tok) for tok in pts.split()):
                 raise InputError(
                     "expected the POINTS2D line (X Y POINT3D_ID triples) of the image on "
                     f"line {line_no}",
@@ -607,7 +612,7 @@ def read_colmap(path: str | Path) -> Trajectory:
         raise InputError("a translation is too large to invert", path=p)
 
     names = [name for name, _ in entries]
-    order = sorted(range(len(names)), key=lambda k: _natural_key(names[k]))
+    order = sorted(range(len(names)), key=lambda k: (natural_key(names[k]), names[k]))
     names_sorted = tuple(names[k] for k in order)
     T_sorted = T_world_cam[order]
     base = [PurePosixPath(name.replace("\\", "/")).name for name in names_sorted]

@@ -19,13 +19,18 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from acs_cli.core.se3 import FloatArray
+from acs_cli.report.verdict import COVERAGE_GRID
 
 __all__ = [
     "CameraView",
+    "CornerErrorData",
     "CoverageData",
     "ReprojectionData",
     "ResidualSeries",
+    "corner_errors_figure",
+    "coverage_counts",
     "coverage_figure",
+    "coverage_fraction",
     "reprojection_figure",
     "residuals_figure",
     "rig_reference_figure",
@@ -89,6 +94,8 @@ class ReprojectionData:
         The calibration's RMS (px).
     poses : dict of str to ndarray
         Per-image RMS (px) of each poses file, by file name.
+    pose_images : dict of str to list of str
+        The image names of each poses file (when it records them), as ``poses``.
     """
 
     camera: str
@@ -96,6 +103,7 @@ class ReprojectionData:
     view_rms: FloatArray = field(default_factory=lambda: np.zeros(0))
     overall_rms: float | None = None
     poses: dict[str, FloatArray] = field(default_factory=dict)
+    pose_images: dict[str, list[str]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -114,6 +122,27 @@ class CoverageData:
     camera: str
     corners: FloatArray
     image_size: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class CornerErrorData:
+    """One camera's per-corner reprojection errors.
+
+    Attributes
+    ----------
+    camera : str
+    positions : ndarray, shape (k, 2)
+        The detected corners (pixels).
+    residuals : ndarray, shape (k, 2)
+        Detected minus projected (pixels).
+    centre : ndarray, shape (2,)
+        The principal point ``(cx, cy)`` (pixels), the centre of the radial plot.
+    """
+
+    camera: str
+    positions: FloatArray
+    residuals: FloatArray
+    centre: FloatArray
 
 
 def _png(fig: Figure, dpi: int) -> bytes:
@@ -314,14 +343,12 @@ def rig_reference_figure(
     ax.scatter(
         [jb[0]], [jb[1]], [jb[2]], color="#145214", marker="x", s=50, label="joint (T_a_b o_b)"
     )
-    gap = float(np.linalg.norm(o_a - o_b))
     _equal_axes(ax, _disp(np.vstack([np.atleast_2d(p) for p in pts])))
     ax.view_init(elev=20.0, azim=-60.0)
     ax.legend(loc="upper left", fontsize=7)
     ax.set_title(
         f"The rig at the reference instant (axes: x red, y green, z blue)\n"
-        f"|B's origin in A| = {np.linalg.norm(T[1, :3, 3]):.4g} {unit}, joint gap "
-        f"{gap:.3g} {unit}",
+        f"|B's origin in A| = {np.linalg.norm(T[1, :3, 3]):.4g} {unit}",
         fontsize=9,
     )
     return _png(fig, dpi)
@@ -442,8 +469,15 @@ def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
     return _png(fig, dpi)
 
 
+#: Inches of figure height per bar of a per-view chart.
+_BAR_INCH = 0.16
+
+
 def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> bytes:
     """Per camera: RMS reprojection error of each calibration view and of each posed image.
+
+    The views are horizontal bars, one labelled row each (the figure grows with their
+    number, so 40 or more stay readable); the posed images are points per poses file.
 
     Parameters
     ----------
@@ -451,48 +485,41 @@ def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> 
         At least one.
     dpi : int
     """
-    n = len(cameras)
-    height = 2.8 * n + 0.4
-    ax_h = (height - 1.3 - (n - 1) * 1.2) / n  # inches: margins 1.0 below, 0.3 above
+    heights = [max(2.4, _BAR_INCH * cam.view_rms.size + 0.9) for cam in cameras]
+    height = sum(heights) + 0.8 * len(cameras) + 0.4
+    longest = max((len(v) for cam in cameras for v in cam.view_names), default=0)
     fig = Figure(figsize=(10.0, height))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=1.0 / height, top=1 - 0.3 / height,
-                        hspace=1.2 / ax_h, wspace=0.22)  # fmt: skip
-    axes = fig.subplots(n, 2, squeeze=False)
-    for row, cam in zip(axes, cameras, strict=True):
-        ax = row[0]
+    grid = fig.add_gridspec(
+        len(cameras), 2, height_ratios=heights, left=min(0.05 + 0.0085 * longest, 0.3),
+        right=0.98, bottom=0.7 / height, top=1 - 0.3 / height, hspace=0.8 / np.mean(heights),
+        wspace=0.3,
+    )  # fmt: skip
+    for k, cam in enumerate(cameras):
+        ax = fig.add_subplot(grid[k, 0])
         if cam.view_rms.size:
-            x = np.arange(cam.view_rms.size)
-            ax.bar(x, cam.view_rms, color=COLOR_A if cam.camera == "a" else COLOR_B)
+            y = np.arange(cam.view_rms.size)
+            ax.barh(y, cam.view_rms, color=COLOR_A if cam.camera == "a" else COLOR_B)
             if cam.overall_rms is not None:
-                ax.axhline(
-                    cam.overall_rms,
-                    color="black",
-                    ls="--",
-                    lw=0.8,
-                    label=f"overall RMS {cam.overall_rms:.3g} px",
-                )
-                ax.legend(fontsize=7)
-            step = max(1, cam.view_rms.size // 12)
-            ax.set_xticks(
-                x[::step],
-                [cam.view_names[i] for i in x[::step]],
-                rotation=60,
-                ha="right",
-                fontsize=6,
-            )
+                ax.axvline(cam.overall_rms, color="black", ls="--", lw=0.8)
+            ax.set_yticks(y, cam.view_names, fontsize=6)
+            ax.set_ylim(cam.view_rms.size - 0.5, -0.5)
+            ax.set_xlabel("RMS (px)", fontsize=8)
         else:
             ax.text(
                 0.5, 0.5, "no intrinsics.yaml", ha="center", va="center", transform=ax.transAxes
             )
+        overall = "" if cam.overall_rms is None else f" (dashed: RMS {cam.overall_rms:.3g} px)"
         ax.set_title(
-            f"camera {cam.camera.upper()}: intrinsics calibration, per view", fontsize=9, loc="left"
+            f"camera {cam.camera.upper()}: intrinsics calibration, per view{overall}",
+            fontsize=9,
+            loc="left",
         )
-        ax.set_ylabel("RMS (px)")
-        ax.tick_params(axis="y", labelsize=8)
-        ax = row[1]
+        ax.tick_params(axis="x", labelsize=8)
+        ax.grid(axis="x", alpha=0.3)
+        ax = fig.add_subplot(grid[k, 1])
         if cam.poses:
-            for k, (name, rms) in enumerate(sorted(cam.poses.items())):
-                ax.plot(np.arange(rms.size), rms, "o-", ms=3, lw=0.8, label=name, color=f"C{k}")
+            for j, (name, rms) in enumerate(sorted(cam.poses.items())):
+                ax.plot(np.arange(rms.size), rms, "o-", ms=3, lw=0.8, label=name, color=f"C{j}")
             ax.legend(fontsize=7)
             ax.set_xlabel("posed image (index in the file)", fontsize=8)
         else:
@@ -507,8 +534,106 @@ def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> 
     return _png(fig, dpi)
 
 
+def corner_errors_figure(cameras: Sequence[CornerErrorData], dpi: int = 100) -> bytes:
+    """Per camera: every corner's reprojection error as a vector, against its distance from
+    the principal point, and as a histogram.
+
+    A wrong distortion model shows as errors that grow, or turn, with the distance from the
+    centre; a good fit as a round cloud and a flat radial trend.
+
+    Parameters
+    ----------
+    cameras : sequence of CornerErrorData
+        At least one.
+    dpi : int
+    """
+    n = len(cameras)
+    fig = Figure(figsize=(11.0, 3.4 * n + 0.3))
+    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.6 / (3.4 * n + 0.3),
+                        top=1 - 0.45 / (3.4 * n + 0.3), hspace=0.55, wspace=0.3)  # fmt: skip
+    axes = fig.subplots(n, 3, squeeze=False)
+    for row, cam in zip(axes, cameras, strict=True):
+        color = COLOR_A if cam.camera == "a" else COLOR_B
+        e = np.asarray(cam.residuals, dtype=float).reshape(-1, 2)
+        mag = np.hypot(e[:, 0], e[:, 1])
+        rms = float(np.sqrt(np.mean(mag**2))) if mag.size else float("nan")
+        who = f"camera {cam.camera.upper()}"
+        ax = row[0]
+        ax.scatter(e[:, 0], e[:, 1], s=3, color=color, alpha=0.4, linewidths=0)
+        lim = max(float(np.abs(e).max(initial=0.0)) * 1.1, 1e-3)
+        ax.set_xlim(-lim, lim)
+        ax.set_ylim(lim, -lim)
+        ax.set_aspect("equal")
+        ax.axhline(0.0, color="#999999", lw=0.6)
+        ax.axvline(0.0, color="#999999", lw=0.6)
+        ax.set_xlabel("error u (px)", fontsize=8)
+        ax.set_ylabel("error v (px)", fontsize=8)
+        ax.set_title(f"{who}: {mag.size} corners, RMS {rms:.3g} px", fontsize=9, loc="left")
+        ax = row[1]
+        r = np.hypot(*(np.asarray(cam.positions, dtype=float) - cam.centre).T)
+        ax.scatter(r, mag, s=3, color=color, alpha=0.4, linewidths=0)
+        if r.size:
+            edges = np.linspace(0.0, float(r.max()) + 1e-9, 11)
+            idx = np.digitize(r, edges) - 1
+            mids, med = [], []
+            for b in range(10):
+                sel = idx == b
+                if sel.sum() >= 3:
+                    mids.append((edges[b] + edges[b + 1]) / 2.0)
+                    med.append(float(np.median(mag[sel])))
+            ax.plot(mids, med, "-o", color="black", ms=3, lw=1.0, label="median per ring")
+            ax.legend(fontsize=7, loc="upper left")
+        ax.set_ylim(bottom=0.0)
+        ax.set_xlabel("distance from the principal point (px)", fontsize=8)
+        ax.set_ylabel("|error| (px)", fontsize=8)
+        ax.set_title(f"{who}: error against radius", fontsize=9, loc="left")
+        ax = row[2]
+        ax.hist(mag, bins=30, color=color)
+        ax.set_xlabel("|error| (px)", fontsize=8)
+        ax.set_ylabel("corners", fontsize=8)
+        ax.set_title(f"{who}: histogram", fontsize=9, loc="left")
+        for ax in row:
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+    return _png(fig, dpi)
+
+
+def coverage_counts(
+    corners: FloatArray, image_size: tuple[int, int], grid: tuple[int, int] = COVERAGE_GRID
+) -> FloatArray:
+    """Detected corners per cell of a ``grid`` (cells across, down) over the image.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (k, 2)
+        Pixels; NaN rows (corners not seen) are left out.
+    image_size : (int, int)
+        ``(width, height)``, pixels.
+    grid : (int, int)
+
+    Returns
+    -------
+    ndarray, shape (grid[1], grid[0])
+        Counts, row by row from the image's top.
+    """
+    w, h = image_size
+    pts = np.asarray(corners, dtype=float).reshape(-1, 2)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    counts, _, _ = np.histogram2d(
+        pts[:, 1], pts[:, 0], bins=(grid[1], grid[0]), range=((0, h), (0, w))
+    )
+    return counts
+
+
+def coverage_fraction(
+    corners: FloatArray, image_size: tuple[int, int], grid: tuple[int, int] = COVERAGE_GRID
+) -> float:
+    """The share of the cells of :func:`coverage_counts` holding at least one corner."""
+    return float((coverage_counts(corners, image_size, grid) > 0).mean())
+
+
 def coverage_figure(
-    cameras: Sequence[CoverageData], grid: tuple[int, int] = (16, 12), dpi: int = 100
+    cameras: Sequence[CoverageData], grid: tuple[int, int] = COVERAGE_GRID, dpi: int = 100
 ) -> bytes:
     """Per camera: where in the image the board's corners were detected.
 
@@ -530,9 +655,8 @@ def coverage_figure(
     for ax, cam in zip(axes, cameras, strict=True):
         w, h = cam.image_size
         pts = np.asarray(cam.corners, dtype=float).reshape(-1, 2)
-        counts, _, _ = np.histogram2d(
-            pts[:, 1], pts[:, 0], bins=(grid[1], grid[0]), range=((0, h), (0, w))
-        )
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        counts = coverage_counts(pts, cam.image_size, grid)
         covered = float((counts > 0).mean()) * 100.0
         im = ax.imshow(
             counts, extent=(0, w, h, 0), cmap="viridis", interpolation="nearest", aspect="equal"

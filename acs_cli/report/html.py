@@ -34,6 +34,11 @@ td.num { font-family: ui-monospace, Menlo, Consolas, monospace; text-align: righ
 .note { background: #fff8e1; border-left: 4px solid #f5a623; padding: 0.4rem 0.8rem; }
 .warn li { margin: 0.2rem 0; }
 .ok { color: #2e7d32; }
+td.status-pass, p.status-pass { background: #e8f5e9; color: #1b5e20; font-weight: 600; }
+td.status-check, p.status-check { background: #fff8e1; color: #8a5a00; font-weight: 600; }
+td.status-fail, p.status-fail { background: #ffebee; color: #b71c1c; font-weight: 600; }
+p.verdict { font-size: 1.15rem; padding: 0.5rem 0.8rem; }
+details summary { cursor: pointer; color: #333; }
 """
 
 
@@ -87,20 +92,47 @@ class Page:
         )
 
     def table(
-        self, header: Sequence[str], rows: Sequence[Sequence[str]], numeric: Sequence[int] = ()
+        self,
+        header: Sequence[str],
+        rows: Sequence[Sequence[str]],
+        numeric: Sequence[int] = (),
+        status: int | None = None,
+        collapsed: str | None = None,
     ) -> None:
-        """A table; columns listed in ``numeric`` are right-aligned in a monospace font."""
+        """A table.
+
+        Parameters
+        ----------
+        header : sequence of str
+        rows : sequence of sequence of str
+        numeric : sequence of int
+            Columns right-aligned in a monospace font.
+        status : int, optional
+            A column of ``pass``, ``check`` or ``fail``, coloured by its value.
+        collapsed : str, optional
+            Fold the table under this summary line (``<details>``, opened by a click).
+        """
         head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
         body = []
         for row in rows:
-            cells = "".join(
-                f'<td class="num">{html.escape(c)}</td>'
-                if i in numeric
-                else f"<td>{html.escape(c)}</td>"
-                for i, c in enumerate(row)
-            )
+            cells = "".join(self._cell(i, c, numeric, status) for i, c in enumerate(row))
             body.append(f"<tr>{cells}</tr>")
-        self._add(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>")
+        table = f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+        if collapsed is not None:
+            table = f"<details><summary>{html.escape(collapsed)}</summary>{table}</details>"
+        self._add(table)
+
+    @staticmethod
+    def _cell(i: int, text: str, numeric: Sequence[int], status: int | None) -> str:
+        if i == status:
+            return f'<td class="status-{html.escape(text)}">{html.escape(text)}</td>'
+        if i in numeric:
+            return f'<td class="num">{html.escape(text)}</td>'
+        return f"<td>{html.escape(text)}</td>"
+
+    def status_line(self, status: str, text: str) -> None:
+        """A prominent line coloured by ``status`` (``pass``, ``check`` or ``fail``)."""
+        self._add(f'<p class="verdict status-{html.escape(status)}">{html.escape(text)}</p>')
 
     def items(self, items: Sequence[str], css: str = "") -> None:
         """A bulleted list."""

@@ -13,11 +13,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from acs_cli.core.se3 import FloatArray
-from acs_cli.report.figures import CameraView, CoverageData, ReprojectionData, ResidualSeries
+from acs_cli.report.figures import (
+    CameraView,
+    CornerErrorData,
+    CoverageData,
+    ReprojectionData,
+    ResidualSeries,
+)
+from acs_cli.report.verdict import StageVerdict
 
 __all__ = [
     "ArtifactRow",
     "Estimate",
+    "FinalChoice",
     "ReportModel",
     "RigTrajectory",
     "SectionNotes",
@@ -57,6 +65,8 @@ class Estimate:
         The artifact it comes from (relative to the run folder).
     digits : int
         Significant digits of the value.
+    fixed : bool
+        Held at its value by the estimator (shown as "fixed", not as a std).
     """
 
     quantity: str
@@ -65,6 +75,26 @@ class Estimate:
     unit: str
     source: str
     digits: int = 6
+    fixed: bool = False
+
+
+@dataclass(frozen=True)
+class FinalChoice:
+    """Which artifact holds the final value of a result, and what was exported of it.
+
+    Attributes
+    ----------
+    item : str
+        E.g. ``"intrinsics of camera A"``, ``"joint"``.
+    source : str
+        The artifact and section holding the final value.
+    detail : str
+        Its key numbers, or why it is final.
+    """
+
+    item: str
+    source: str
+    detail: str
 
 
 @dataclass(frozen=True)
@@ -91,6 +121,10 @@ class RigTrajectory:
         The reference frame (``T_r_a[reference]`` is the identity).
     position_in_a : ndarray, shape (3,)
         The joint in camera A's frame.
+    agree_at_reference : bool
+        The joint as A and as B see it coincide at the reference to rounding, by construction
+        (relpose's reference pose corrected by the joint), so ``consistency[reference]`` is
+        no measurement.
     """
 
     title: str
@@ -104,6 +138,7 @@ class RigTrajectory:
     rejected: np.ndarray
     reference: int
     position_in_a: FloatArray
+    agree_at_reference: bool = False
 
     @property
     def consistency_rms(self) -> float:
@@ -159,6 +194,14 @@ class ReportModel:
     reprojection : list of ReprojectionData
     coverage : list of CoverageData
     estimates : list of Estimate
+    verdicts : list of StageVerdict
+        Each stage's pass, check or fail, in the run's order.
+    finals : list of FinalChoice
+        Where the final intrinsics and joint are.
+    exported : list of str
+        The export files the run folder records, each with what it holds.
+    corner_errors : list of CornerErrorData
+        Per-corner reprojection errors per camera.
     warnings : list of str
         ``source: text`` of every warning.
     notes : list of str
@@ -178,6 +221,10 @@ class ReportModel:
     reprojection: list[ReprojectionData] = field(default_factory=list)
     coverage: list[CoverageData] = field(default_factory=list)
     estimates: list[Estimate] = field(default_factory=list)
+    verdicts: list[StageVerdict] = field(default_factory=list)
+    finals: list[FinalChoice] = field(default_factory=list)
+    exported: list[str] = field(default_factory=list)
+    corner_errors: list[CornerErrorData] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     section_notes: dict[str, SectionNotes] = field(default_factory=dict)

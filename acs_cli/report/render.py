@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from acs_cli.report import figures as F
+from acs_cli.report import verdict as V
 from acs_cli.report.html import Page
 from acs_cli.report.model import Estimate, ReportModel, display_unit
 
@@ -22,6 +23,7 @@ FIGURE_NAMES = {
     "reference": "rig_reference.png",
     "residuals": "joint_residuals.png",
     "reprojection": "reprojection.png",
+    "corners": "corner_errors.png",
     "coverage": "coverage.png",
 }
 
@@ -48,7 +50,75 @@ def format_number(x: float | None, digits: int = 6) -> str:
 
 
 def _estimate_row(e: Estimate) -> list[str]:
-    return [e.quantity, format_number(e.value, e.digits), format_number(e.std, 3), e.unit, e.source]
+    std = "fixed" if e.fixed else format_number(e.std, 3)
+    return [e.quantity, format_number(e.value, e.digits), std, e.unit, e.source]
+
+
+def _verdict(page: Page, model: ReportModel) -> None:
+    """The verdict section: the overall status, each stage's checks, the thresholds."""
+    page.section("verdict", "Verdict: can this calibration be trusted?")
+    if not model.verdicts:
+        page.note("No stage to judge: the run folder holds no calibration artifact.")
+        return
+    statuses = [v.status for v in model.verdicts]
+    overall = V.worst(statuses)
+    counts = ", ".join(f"{statuses.count(s)} {s}" for s in V.STATUSES if s in statuses)
+    advice = {
+        "pass": "every stage is within the thresholds below.",
+        "check": "look at the stages marked check (and their figures below) before use.",
+        "fail": "do not use the stages marked fail; see their checks and the warnings.",
+    }[overall]
+    page.status_line(overall, f"Overall: {overall} ({counts} of {len(statuses)} stages): {advice}")
+    page.table(
+        ["stage", "verdict", "checks", "source"],
+        [
+            [v.stage, v.status, "; ".join(c.text() for c in v.checks) or "—", v.source]
+            for v in model.verdicts
+        ],
+        status=1,
+    )
+    page.paragraph("The thresholds the checks are judged by:")
+    page.table(
+        ["threshold", "pass", "check", "fail", "what it measures"],
+        [[t.label, *t.limits(), t.description] for t in V.THRESHOLDS.values()],
+    )
+
+
+def _finals(page: Page, model: ReportModel) -> None:
+    page.section("final", "Final results and exports")
+    if model.finals:
+        page.paragraph(
+            "The final value of each result is the last stage's estimate of it: a bundle "
+            "adjustment's when one ran. The estimates table below also lists the others."
+        )
+        page.table(["result", "final value from", "detail"],
+                   [[f.item, f.source, f.detail] for f in model.finals])  # fmt: skip
+    else:
+        page.paragraph("No intrinsics or joint in the run folder.")
+    if model.exported:
+        page.paragraph("Exported (files the run folder records):")
+        page.items(model.exported)
+    else:
+        page.paragraph(
+            "Exported: no export file is recorded in the run folder (acscal intrinsics "
+            "--export writes ROS and OpenCV files beside intrinsics.yaml; acscal export writes "
+            "camchains where told)."
+        )
+
+
+def _per_view_rows(model: ReportModel) -> list[list[str]]:
+    """Every view's and posed image's RMS, worst first."""
+    rows: list[tuple[float, list[str]]] = []
+    for cam in model.reprojection:
+        C = cam.camera.upper()
+        for name, rms in zip(cam.view_names, cam.view_rms, strict=False):
+            rows.append((float(rms), [C, "intrinsics calibration", name, f"{rms:.4f}"]))
+        for file, values in sorted(cam.poses.items()):
+            names = cam.pose_images.get(file) or [f"#{i}" for i in range(values.size)]
+            for name, rms in zip(names, values, strict=False):
+                rows.append((float(rms), [C, file, name, f"{rms:.4f}"]))
+    rows.sort(key=lambda r: -r[0])
+    return [r for _, r in rows]
 
 
 def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) -> RenderedReport:
@@ -72,6 +142,9 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
     def notes(section: str) -> None:
         for n in model.notes_of(section):
             page.note(n)
+
+    _verdict(page, model)
+    _finals(page, model)
 
     page.section("artifacts", "Artifacts")
     page.table(
@@ -126,11 +199,15 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
             "The rig at the reference instant",
         )
         d = traj.consistency * scale
-        page.paragraph(
-            f"Joint consistency (distance between the joint as A and as B see it): RMS "
-            f"{np.sqrt(np.mean(d**2)):.4g} {shown}, max {d.max():.4g} {shown} over "
-            f"{d.size} frames."
-        )
+        which = f"{d.size} frames"
+        if traj.agree_at_reference:
+            d = np.delete(d, k)
+            which = f"the {d.size} frames besides the reference (where they agree by construction)"
+        if d.size:
+            page.paragraph(
+                f"Joint consistency (distance between the joint as A and as B see it): RMS "
+                f"{np.sqrt(np.mean(d**2)):.4g} {shown}, max {d.max():.4g} {shown} over {which}."
+            )
 
     page.section("residuals", "Joint-constraint residuals per frame")
     notes("residuals")
@@ -150,10 +227,32 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
         pngs["reprojection"] = F.reprojection_figure(model.reprojection, dpi)
         page.figure(
             pngs["reprojection"],
-            "Left: RMS reprojection error of each view of the intrinsics calibration. Right: "
-            "RMS reprojection error of each image's board pose (PnP with the calibrated "
-            "intrinsics), per poses file.",
+            "Left: RMS reprojection error of each view of the intrinsics calibration, one "
+            "labelled bar each. Right: RMS reprojection error of each image's board pose (PnP "
+            "with the calibrated intrinsics), per poses file.",
             "Reprojection error per view and per camera",
+        )
+        rows = _per_view_rows(model)
+        page.table(
+            ["camera", "from", "image", "RMS (px)"],
+            rows,
+            numeric=(3,),
+            collapsed=f"Table of the {len(rows)} views and posed images, worst first",
+        )
+
+    page.section("corners", "Per-corner reprojection errors")
+    notes("corners")
+    if model.corner_errors:
+        pngs["corners"] = F.corner_errors_figure(model.corner_errors, dpi)
+        page.figure(
+            pngs["corners"],
+            "Every detected corner of every posed image (corners not seen are left out), "
+            "reprojected through its board pose and the camera's intrinsics.yaml. Left: the "
+            "error vectors (detected minus projected), a round cloud about zero when the model "
+            "fits. Middle: the error against the distance from the principal point, with the "
+            "median per ring: errors growing towards the border point to a wrong or too simple "
+            "distortion model. Right: the histogram of the error lengths.",
+            "Per-corner reprojection errors",
         )
 
     page.section("coverage", "Image coverage of the detected corners")

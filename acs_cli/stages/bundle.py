@@ -10,11 +10,13 @@ a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
 Each camera keeps the model its intrinsics file was calibrated with (pinhole, rational or
 fisheye); a corner a frame did not see is NaN, so a partial view of a target counts. A
 refined distortion the corners do not determine is warned about
-(:func:`acs_cli.core.intrinsics.degenerate_distortion`).
+(:func:`acs_cli.core.intrinsics.degenerate_distortion`). The fixed-joint adjustment judges
+again, on their corners, the frames the pose-based fit rejected (:func:`readmit_frames`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -22,14 +24,16 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core.bundle import (
+    MIN_FRAME_CORNERS,
     ArticulatedBundle,
+    FixedJointBundle,
     bundle_adjust_articulated,
     bundle_adjust_fixed_joint,
     camera_matrix,
     intrinsics_vector,
 )
 from acs_cli.core.camera_models import camera_model
-from acs_cli.core.intrinsics import degenerate_distortion
+from acs_cli.core.intrinsics import degenerate_distortion, outlier_views
 from acs_cli.core.joint import JointEstimate
 from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
 from acs_cli.io.intrinsics import IntrinsicsArtifact
@@ -46,6 +50,7 @@ __all__ = [
     "bundle_section",
     "corner_views",
     "degenerate_warning",
+    "readmit_frames",
     "shared_board_flip",
 ]
 
@@ -160,31 +165,88 @@ def bundle_fixed_joint(
         return est, None, [warning] if warning else []
     inl, thinned = bundle_frames(est.inliers[cam])
     notes = [thinned] if thinned else []
-    ba = bundle_adjust_fixed_joint(
-        views.corners[inl],
-        None,  # every corner seen (NaN: not seen)
-        views.board_points,
-        views.intrinsics,
-        T_w_c[inl],
-        o0,
-        est.position_in_world[cam],
-        model=views.model,
-    )
+
+    def adjust(frames: np.ndarray) -> FixedJointBundle:
+        return bundle_adjust_fixed_joint(
+            views.corners[frames],
+            None,  # every corner seen (NaN: not seen)
+            views.board_points,
+            views.intrinsics,
+            T_w_c[frames],
+            o0,
+            est.position_in_world[cam],
+            model=views.model,
+        )
+
+    ba = adjust(inl)
     if not ba.success:
         return est, None, [*notes, f"camera {cam.upper()}: the bundle adjustment did not "
                            "converge; the pose-based estimate is kept"]  # fmt: skip
+    if thinned is None:
+        ba, inl = readmit_frames(adjust, ba, inl, views.corners)
     notes += degenerate_warning(cam.upper(), ba.model, ba.intrinsics, ba.intrinsics_covariance)
     cov = ba.joint_covariance
+    inliers = {**est.inliers, cam: inl}
     refined = (
-        replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov)
+        replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov, inliers=inliers)
         if cam == "a"
-        else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov)
+        else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov, inliers=inliers)
     )
     refined.position_in_world[cam] = ba.joint_in_world
     section = bundle_section(
         views, ba.intrinsics, ba.intrinsics_std, ba.rms_px, ba.sigma_px, int(inl.sum())
     )
     return refined, section, notes
+
+
+def readmit_frames(
+    adjust: Callable[[np.ndarray], FixedJointBundle],
+    ba: FixedJointBundle,
+    used: np.ndarray,
+    corners: np.ndarray,
+) -> tuple[FixedJointBundle, np.ndarray]:
+    """Judge again, on their corners, the frames the pose-based fit rejected.
+
+    A pose from a partial view of a target (a few corners in a corner of the image) is
+    noisier than one from a whole board, so the pose-based estimate, which gives every
+    frame one noise level, may reject it although its corners are as good as any. Every
+    rejected frame with at least :data:`acs_cli.core.bundle.MIN_FRAME_CORNERS` corners is
+    adjusted with the others; those whose reprojection RMS is then an outlier
+    (:func:`acs_cli.core.intrinsics.outlier_views`) stay out, the rest are used.
+
+    Parameters
+    ----------
+    adjust : callable
+        The bundle adjustment of the frames a mask ``(n,)`` selects.
+    ba : FixedJointBundle
+        ``adjust(used)``.
+    used : ndarray of bool, shape (n,)
+        The frames the pose-based fit kept.
+    corners : ndarray, shape (n, m, 2)
+        Every frame's corners (NaN: not seen).
+
+    Returns
+    -------
+    FixedJointBundle, ndarray of bool
+        The adjustment and the frames it used (``ba`` and ``used`` when none came back).
+    """
+    seen = np.isfinite(corners).all(axis=2).sum(axis=1) >= MIN_FRAME_CORNERS
+    candidates = ~used & seen
+    if not candidates.any():
+        return ba, used
+    trial = used | candidates
+    ba_all = adjust(trial)
+    if not ba_all.success:
+        return ba, used
+    idx = np.flatnonzero(trial)
+    back = candidates.copy()
+    back[idx[outlier_views(ba_all.per_frame_rms_px)]] = False
+    if not back.any():
+        return ba, used
+    if np.array_equal(back, candidates):
+        return ba_all, trial
+    again = adjust(used | back)
+    return (again, used | back) if again.success else (ba, used)
 
 
 def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:

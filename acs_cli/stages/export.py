@@ -1,17 +1,344 @@
-"""The export stage: ``acscal export`` writes a calibration for other tools."""
+"""The export stage: ``acscal export`` writes a calibration for other tools.
+
+A relative pose (``relpose.yaml``, two cameras ``a`` and ``b``) or a rig (``rig.yaml``)
+exports as
+
+- ``kalibr``: a Kalibr camchain (:mod:`acs_cli.io.rig_export`) with every camera's
+  intrinsics;
+- ``opencv``: a relative pose as one ``cv2.FileStorage`` file (``R``, ``T`` of ``T_b_a``,
+  as ``cv2.stereoCalibrate`` names them, and each camera's intrinsics when known);
+- ``ros``: one ROS ``camera_info`` YAML per camera, ``-o`` being a folder;
+- ``urdf``: a rig's kinematic tree.
+
+Intrinsics (:func:`find_intrinsics`) are, per camera, the file given (``--intrinsics``),
+else the bundle-adjusted ones the artifact records (the final ones), else
+``cam_<camera>/intrinsics.yaml`` beside the artifact (a run folder's layout).
+
+Lengths are exported in metres only (:func:`relpose_metres`, :func:`rig_metres`): from
+a known unit, from the metric joint's ``mu_a``, ``mu_b`` of an unknown-scale relative pose,
+or from an explicit ``scale`` (metres per unit); otherwise the export is refused.
+"""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import load_yaml_file
-from acs_cli.io.atomic import check_distinct_output
-from acs_cli.io.export import write_camchain_yaml, write_opencv_yaml
+from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.export import (
+    check_ros_camera_name,
+    opencv_camera_values,
+    write_opencv_yaml,
+    write_ros_camera_info,
+)
+from acs_cli.io.intrinsics import IntrinsicsArtifact
+from acs_cli.io.joint import BundleSection
 from acs_cli.io.relpose import RelposeArtifact
 
-EXPORT_FORMATS = ("kalibr", "opencv", "urdf")
+__all__ = [
+    "EXPORT_FORMATS",
+    "METRES_PER_UNIT",
+    "find_intrinsics",
+    "parse_list_option",
+    "parse_named_option",
+    "relpose_metres",
+    "rig_metres",
+    "run_export",
+    "run_rig_export",
+]
+
+EXPORT_FORMATS = ("kalibr", "opencv", "ros", "urdf")
+#: The formats of a rig (``rig.yaml``).
+RIG_FORMATS = ("kalibr", "ros", "urdf")
+#: Metres per unit of the length units (``--length-unit``) an export converts by itself.
+METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
+#: A relative pose's cameras: the key by which options name them, and their default names.
+PAIR_CAMERAS = {"a": "cam_a", "b": "cam_b"}
+
+
+# --------------------------------------------------------------------------------------
+# options
+
+
+def parse_list_option(
+    values: Iterable[str], allowed: Sequence[str], option: str
+) -> tuple[str, ...]:
+    """The values of a list option given comma-separated, repeated or both, in order, once each.
+
+    ``["ros,opencv"]`` and ``["ros", "opencv"]`` are both ``("ros", "opencv")``.
+
+    Raises
+    ------
+    InputError
+        A value not in ``allowed``, or an empty item (``ros,``).
+    """
+    out: list[str] = []
+    for value in values:
+        for item in str(value).split(","):
+            item = item.strip()
+            if item not in allowed:
+                raise InputError(
+                    f"{option} {value!r}: {item!r} is not one of {', '.join(allowed)} "
+                    f"(give a comma-separated list, or repeat {option})"
+                )
+            if item not in out:
+                out.append(item)
+    return tuple(out)
+
+
+def parse_named_option(values: Iterable[str], option: str, what: str) -> dict[str, str]:
+    """``NAME=VALUE`` items (a repeated option) as a mapping.
+
+    Raises
+    ------
+    InputError
+        An item without ``=``, an empty name or value, or a name given twice.
+    """
+    out: dict[str, str] = {}
+    for item in values:
+        name, sep, value = str(item).partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or not name or not value:
+            raise InputError(f"{option} {item!r}: write it as CAMERA={what}")
+        if name in out:
+            raise InputError(f"{option}: camera {name} given twice")
+        out[name] = value
+    return out
+
+
+def _pair_keys(given: Mapping[str, Any], option: str) -> dict[str, Any]:
+    """A relative pose's per-camera options by ``a``/``b`` (``cam_a``, ``cam_b`` too)."""
+    out: dict[str, Any] = {}
+    for name, value in given.items():
+        key = {"a": "a", "b": "b", "cam_a": "a", "cam_b": "b"}.get(name)
+        if key is None:
+            raise InputError(f"{option} {name}=...: a relative pose's cameras are a and b")
+        if key in out:
+            raise InputError(f"{option}: camera {key} given twice")
+        out[key] = value
+    return out
+
+
+def _check_output(output: Path, fmt: str, inputs: Sequence[Path]) -> None:
+    """Refuse an output that is an input, or (a file format) that cannot be written, first."""
+    check_distinct_output(output, inputs)
+    if fmt != "ros":  # a folder: its files are checked once named
+        check_writable(output)
+
+
+def _check_scale(scale: float | None) -> None:
+    if scale is not None and not (math.isfinite(scale) and scale > 0):
+        raise InputError(f"--scale must be a positive number of metres per unit, got {scale}")
+
+
+# --------------------------------------------------------------------------------------
+# intrinsics
+
+
+def _existing(path: str, base: Path) -> Path | None:
+    """``path`` as recorded (relative to the working folder), else relative to ``base``."""
+    if not path:
+        return None
+    for p in (Path(path), base / path):
+        try:
+            if p.is_file():
+                return p
+        except (OSError, ValueError):  # a name the system cannot hold (NUL, too long)
+            return None
+    return None
+
+
+def find_intrinsics(
+    given: Path | None, beside: Path, bundle: BundleSection | None, artifact: Path
+) -> tuple[IntrinsicsArtifact | None, str]:
+    """One camera's intrinsics for an export, and where they came from (in words).
+
+    In order: the file ``given``; the bundle adjustment's refined ``K`` and coefficients
+    recorded in ``artifact`` (``bundle``; the image size from ``beside`` or from the
+    intrinsics file the bundle adjustment started from); the file ``beside``.
+
+    Parameters
+    ----------
+    given : Path or None
+        ``--intrinsics``: an ``acscal/intrinsics`` file.
+    beside : Path
+        Where ``acscal run`` writes the camera's intrinsics (``cam_<x>/intrinsics.yaml``).
+    bundle : BundleSection or None
+        The camera's bundle adjustment in the artifact, if any.
+    artifact : Path
+        The ``relpose.yaml`` or ``rig.yaml`` exported.
+
+    Returns
+    -------
+    tuple
+        The intrinsics (None when none were found) and their source.
+
+    Raises
+    ------
+    InputError
+        An unreadable or malformed intrinsics file.
+    """
+    if given is not None:
+        return IntrinsicsArtifact.load(given), f"{given} (--intrinsics)"
+    base = IntrinsicsArtifact.load(beside) if beside.is_file() else None
+    if bundle is not None:
+        start = _existing(bundle.intrinsics_file, artifact.parent)
+        sized = (
+            base if base is not None else None if start is None else IntrinsicsArtifact.load(start)
+        )
+        if sized is not None:
+            refined = IntrinsicsArtifact(
+                model=bundle.model,
+                image_size=sized.image_size,
+                camera_matrix=np.asarray(bundle.camera_matrix, dtype=float),
+                distortion=np.asarray(bundle.distortion, dtype=float),
+            )
+            return refined, f"bundle-adjusted, from {artifact.name}"
+    if base is not None:
+        return base, str(beside)
+    return None, "none found"
+
+
+# --------------------------------------------------------------------------------------
+# lengths
+
+
+def relpose_metres(art: RelposeArtifact, scale: float | None) -> tuple[float, float, str]:
+    """Metres per unit of camera A's and of camera B's lengths in a ``relpose.yaml``.
+
+    Under unknown scale (a ``scale`` section) B's lengths are in B's trajectory units:
+    metres come from ``scale`` (metres per B unit; A's: ``scale * phi_ba``), else from the
+    metric joint's ``mu_a``, ``mu_b`` (trajectory units per metre). Under known scale they
+    are in ``units.length``: ``scale`` when given, else :data:`METRES_PER_UNIT`.
+
+    Returns
+    -------
+    tuple
+        ``(metres per A unit, metres per B unit, how, in words)``.
+
+    Raises
+    ------
+    InputError
+        Lengths that cannot be put in metres: unknown scale without a metric joint or
+        ``scale``, or a unit that is not in :data:`METRES_PER_UNIT` without ``scale``; the
+        message says how to get a metric result.
+    """
+    _check_scale(scale)
+    where = art.source
+    if art.scale is not None:
+        if scale is not None:
+            return scale * art.scale.phi_ba, scale, f"--scale {scale:g} m per unit of B"
+        mu_a, mu_b = art.scale.mu_a, art.scale.mu_b
+        if mu_a is not None and mu_b is not None and min(mu_a, mu_b) > 0:
+            if math.isfinite(mu_a) and math.isfinite(mu_b):
+                return 1.0 / mu_a, 1.0 / mu_b, "the metric joint's mu_a, mu_b"
+        raise InputError(
+            "the relative pose has unknown scale (--unknown-scale): its lengths are in camera "
+            "B's trajectory units, not metres, and would be exported wrong. Rerun acscal "
+            "relpose with --joint-metric JOINT (a joint measured in metres, e.g. acscal joint "
+            "on board poses) to record mu_a and mu_b, or give --scale METRES_PER_UNIT "
+            "(metres per unit of camera B's trajectory)",
+            path=where,
+        )
+    unit = art.length_unit
+    if scale is not None:
+        return scale, scale, f"--scale {scale:g} m per {unit}"
+    if unit in METRES_PER_UNIT:
+        m = METRES_PER_UNIT[unit]
+        return m, m, f"recorded in {unit}"
+    raise InputError(
+        f"the relative pose's lengths are in {unit!r} (--length-unit), which acscal cannot "
+        f"convert to metres ({', '.join(METRES_PER_UNIT)}); give --scale METRES_PER_UNIT",
+        path=where,
+    )
+
+
+def rig_metres(length_unit: str, scale: float | None, where: str | None) -> tuple[float, str]:
+    """Metres per unit of a rig's lengths (the reference camera's), and how, in words.
+
+    Raises
+    ------
+    InputError
+        A unit other than :data:`METRES_PER_UNIT` (the reference camera's scale is
+        unknown) without ``scale``.
+    """
+    _check_scale(scale)
+    if scale is not None:
+        return scale, f"--scale {scale:g} m per {length_unit}"
+    if length_unit in METRES_PER_UNIT:
+        return METRES_PER_UNIT[length_unit], f"recorded in {length_unit}"
+    raise InputError(
+        f"the rig's lengths are in {length_unit} (the reference camera's trajectory has "
+        "unknown scale), not metres. Give --scale METRES_PER_UNIT (metres per unit of the "
+        "reference camera's trajectory), or make the reference camera a metric one "
+        "(reference: {camera: ...} in the rig config)",
+        path=where,
+    )
+
+
+def _known(cams: Mapping[str, IntrinsicsArtifact | None]) -> dict[str, IntrinsicsArtifact]:
+    """The cameras whose intrinsics were found."""
+    return {c: v for c, v in cams.items() if v is not None}
+
+
+def _warning_notes(artifact: str, warnings: Sequence[str]) -> list[str]:
+    """Comment lines that mark a result exported despite its artifact's warnings."""
+    if not warnings:
+        return []
+    return [
+        f"WARNING: {artifact} carries {len(warnings)} warning(s); this calibration may be "
+        "poorly determined:",
+        *(f"WARNING: {w}" for w in warnings),
+    ]
+
+
+# --------------------------------------------------------------------------------------
+# writing
+
+
+def _write_ros(
+    folder: Path,
+    cameras: Mapping[str, IntrinsicsArtifact | None],
+    names: Mapping[str, str],
+    sources: Mapping[str, str],
+    notes: Sequence[str],
+) -> list[Path]:
+    """One ``<name>.yaml`` camera_info per camera in ``folder`` (``names``: camera key to
+    its ROS name); refuses a camera without intrinsics before writing anything."""
+    known = _known(cameras)
+    missing = [names[c] for c in cameras if c not in known]
+    if missing:
+        raise InputError(
+            "a ROS camera_info needs the camera's intrinsics; none found for "
+            + ", ".join(missing)
+            + " (give --intrinsics CAMERA=intrinsics.yaml)"
+        )
+    if folder.is_file():
+        raise InputError(
+            "--format ros writes a folder of camera_info files; this is a file", path=folder
+        )
+    targets = {c: folder / f"{check_ros_camera_name(names[c])}.yaml" for c in cameras}
+    if len(set(targets.values())) != len(targets):
+        raise InputError("two cameras have the same --camera-name")
+    for p in targets.values():
+        check_writable(p)
+    for c, intr in known.items():
+        write_ros_camera_info(
+            targets[c],
+            intr.camera_matrix,
+            intr.distortion,
+            intr.image_size,
+            intr.model,
+            names[c],
+            comments=[f"exported by acscal: camera {names[c]}, intrinsics {sources[c]}", *notes],
+        )
+    return list(targets.values())
 
 
 def run_rig_export(
@@ -20,41 +347,97 @@ def run_rig_export(
     fmt: str,
     *,
     intrinsics: dict[str, Path] | None = None,
+    camera_names: Mapping[str, str] | None = None,
+    scale: float | None = None,
     robot_name: str = "acs_rig",
     doc: Any = None,
 ) -> dict[str, Any]:
-    """Export ``rig.yaml`` as a URDF or a Kalibr camchain of every camera.
+    """Export ``rig.yaml`` as a Kalibr camchain, ROS camera_infos or a URDF.
 
-    Intrinsics (for Kalibr) come from ``intrinsics`` (camera name to ``intrinsics.yaml``)
-    or, for cameras not given there, from ``cam_<name>/intrinsics.yaml`` beside
-    ``rig.yaml`` (where ``acscal run`` writes them) when it exists.
+    Intrinsics come per camera as :func:`find_intrinsics` finds them (``intrinsics``: camera
+    name to ``intrinsics.yaml``; ``cam_<name>/intrinsics.yaml`` beside ``rig.yaml``).
+    Lengths are put in metres (:func:`rig_metres`). ``camera_names`` name the ROS
+    camera_info files (default: the rig's camera names). ``cam_overlaps`` are empty: a rig
+    does not record which cameras share views.
+
+    Returns
+    -------
+    dict
+        ``format``, ``output``, ``keys`` (the cameras), ``written`` (paths),
+        ``intrinsics`` (camera to source) and ``warnings`` (the rig's).
+
+    Raises
+    ------
+    InputError
+        A format a rig does not have, a bad ``rig.yaml``, intrinsics of an unknown camera,
+        a camera without intrinsics (kalibr, ros), lengths that cannot be put in metres.
     """
     from acs_cli.io.rig import RigArtifact
-    from acs_cli.io.rig_export import write_rig_export
+    from acs_cli.io.rig_export import rig_in_metres, write_rig_export
 
-    if fmt not in ("kalibr", "urdf"):
-        raise InputError(f"a rig exports as kalibr or urdf, not {fmt!r}", path=rig_file)
+    if fmt not in RIG_FORMATS:
+        raise InputError(f"a rig exports as {', '.join(RIG_FORMATS)}, not {fmt!r}", path=rig_file)
     found = dict(intrinsics or {})
-    check_distinct_output(output, [rig_file, *found.values()])
+    _check_output(output, fmt, [rig_file, *found.values()])
     rig = RigArtifact.load(rig_file) if doc is None else RigArtifact.from_parsed(doc, rig_file)
-    unknown = [c for c in found if c not in rig.cameras]
-    if unknown:
-        raise InputError(
-            f"--intrinsics {unknown[0]}=...: the rig has no camera {unknown[0]} "
-            f"({', '.join(rig.cameras)})"
-        )
-    for cam in rig.cameras:
-        beside = rig_file.parent / f"cam_{cam}" / "intrinsics.yaml"
-        if cam not in found and beside.is_file():
-            found[cam] = beside
+    for option, given in (("--intrinsics", found), ("--camera-name", camera_names or {})):
+        unknown = [c for c in given if c not in rig.cameras]
+        if unknown:
+            raise InputError(
+                f"{option} {unknown[0]}=...: the rig has no camera {unknown[0]} "
+                f"({', '.join(rig.cameras)})"
+            )
+    cams: dict[str, IntrinsicsArtifact | None] = {}
+    sources: dict[str, str] = {}
+    if fmt != "urdf":
+        for cam in rig.cameras:
+            cams[cam], sources[cam] = find_intrinsics(
+                found.get(cam),
+                rig_file.parent / f"cam_{cam}" / "intrinsics.yaml",
+                rig.bundle_adjustment.get(cam),
+                rig_file,
+            )
+    notes = _warning_notes(rig_file.name, rig.warnings)
+    info: dict[str, Any] = {
+        "format": fmt,
+        "output": str(output),
+        "keys": list(rig.cameras),
+        "intrinsics": sources,
+        "warnings": list(rig.warnings),
+    }
+    if fmt == "ros":
+        names = {c: (camera_names or {}).get(c, c) for c in rig.cameras}
+        info["written"] = [str(p) for p in _write_ros(output, cams, names, sources, notes)]
+        return info
+    m, how = rig_metres(rig.length_unit, scale, str(rig_file))
+    notes = [f"lengths in metres ({how})", *notes]
+    if fmt == "kalibr":
+        notes = [f"intrinsics of {c}: {sources[c]}" for c in rig.cameras] + notes
     write_rig_export(
         output,
-        rig,
+        rig_in_metres(rig, m),
         fmt,
-        intrinsics=found if fmt == "kalibr" else None,
+        intrinsics=_known(cams) if fmt == "kalibr" else None,
         robot_name=robot_name,
+        notes=notes,
     )
-    return {"format": fmt, "output": str(output), "keys": list(rig.cameras)}
+    info["written"] = [str(output)]
+    return info
+
+
+def _pair_overlap(art: RelposeArtifact, relpose: Path) -> bool:
+    """Whether the pair shared views: its joint came from ``acscal joint --overlap``."""
+    entry = art.inputs.get("joint")
+    path = (
+        _existing(str(entry.get("path", "")), relpose.parent) if isinstance(entry, dict) else None
+    )
+    if path is None:
+        return False
+    try:
+        doc = load_yaml_file(path)
+    except InputError:
+        return False
+    return isinstance(doc, dict) and doc.get("scenario") == "overlap"
 
 
 def run_export(
@@ -62,55 +445,147 @@ def run_export(
     output: Path,
     fmt: str,
     *,
-    intrinsics: dict[str, Path] | None = None,
+    intrinsics: Mapping[str, Path] | None = None,
+    camera_names: Mapping[str, str] | None = None,
+    scale: float | None = None,
     robot_name: str = "acs_rig",
 ) -> dict[str, Any]:
-    """Export ``relpose.yaml`` (or a rig's ``rig.yaml``, see :func:`run_rig_export`) as a
-    Kalibr camchain or an OpenCV FileStorage YAML (a rig: a Kalibr camchain or a URDF).
+    """Export ``relpose.yaml`` (or a rig's ``rig.yaml``, see :func:`run_rig_export`).
 
-    Reads ``relative_pose.T_b_a`` (a rigid 4x4), ``relative_pose.reference``,
-    ``joint.position_in_a/b``, ``scale.phi_ba`` and ``units.length`` through
-    :class:`~acs_cli.io.relpose.RelposeArtifact`.
+    A relative pose exports as ``kalibr`` (``cam0`` = A, ``cam1`` = B with ``T_cn_cnm1 =
+    T_b_a``; ``cam_overlaps`` when its joint came from overlapping views), ``opencv`` (one
+    file: ``R``, ``T``, ``T_b_a``, ``reference``, the joint, ``phi_ba``, ``length_unit`` and
+    each camera's intrinsics, when known, as a map ``cam_a``, ``cam_b``) or ``ros`` (a
+    camera_info per camera in the folder ``output``). Lengths are put in metres
+    (:func:`relpose_metres`); the artifact's warnings are copied into the file as comments.
+
+    Parameters
+    ----------
+    relpose : Path
+        ``relpose.yaml`` or ``rig.yaml``.
+    output : Path
+        The file to write (``ros``: the folder).
+    fmt : {"kalibr", "opencv", "ros", "urdf"}
+    intrinsics : mapping of camera to Path, optional
+        Intrinsics files by camera (``a``, ``b`` or ``cam_a``, ``cam_b`` for a pair);
+        else as :func:`find_intrinsics` finds them.
+    camera_names : mapping of camera to str, optional
+        The cameras' names (ROS ``camera_name`` and file name, default topics); default
+        ``cam_a``, ``cam_b`` (a rig: its camera names).
+    scale : float, optional
+        Metres per unit of the artifact's lengths (unknown scale: of camera B's trajectory).
+    robot_name : str
+        ``urdf``: the robot's name.
 
     Returns
     -------
     dict
-        What was written (``format``, ``output``, ``keys``).
+        What was written: ``format``, ``output``, ``keys``, ``written`` (paths),
+        ``intrinsics`` (camera to source) and ``warnings`` (the artifact's).
 
     Raises
     ------
     InputError
-        An unknown format, an unreadable or malformed ``relpose.yaml``, or an output that
-        would overwrite it.
+        An unknown format, an unreadable or malformed artifact, an output that would
+        overwrite an input, missing intrinsics (kalibr, ros), lengths that cannot be put
+        in metres (kalibr, opencv).
     """
     if fmt not in EXPORT_FORMATS:
         raise InputError(f"unknown export format {fmt!r}; use one of {', '.join(EXPORT_FORMATS)}")
     doc = load_yaml_file(relpose, "an acscal artifact (YAML)")  # read once: rig or relpose
     if isinstance(doc, dict) and doc.get("schema") == "acscal/rig":
         return run_rig_export(
-            relpose, output, fmt, intrinsics=intrinsics, robot_name=robot_name, doc=doc
+            relpose,
+            output,
+            fmt,
+            intrinsics=dict(intrinsics or {}),
+            camera_names=camera_names,
+            scale=scale,
+            robot_name=robot_name,
+            doc=doc,
         )
     if fmt == "urdf":
         raise InputError("urdf exports a rig (rig.yaml from acscal run)", path=relpose)
-    check_distinct_output(output, [relpose])
+    given = _pair_keys(intrinsics or {}, "--intrinsics")
+    _check_output(output, fmt, [relpose, *given.values()])
     art = RelposeArtifact.from_parsed(doc, relpose)
-    T_b_a = art.relative_pose.T_b_a
+    names = {**PAIR_CAMERAS, **_pair_keys(camera_names or {}, "--camera-name")}
+    cams: dict[str, IntrinsicsArtifact | None] = {}
+    sources: dict[str, str] = {}
+    for x in PAIR_CAMERAS:
+        cams[x], sources[x] = find_intrinsics(
+            given.get(x),
+            relpose.parent / f"cam_{x}" / "intrinsics.yaml",
+            art.quality.bundle_adjustment.get(x),
+            relpose,
+        )
+    notes = _warning_notes(relpose.name, art.warnings)
+    info: dict[str, Any] = {
+        "format": fmt,
+        "output": str(output),
+        "keys": [names["a"], names["b"]],
+        "intrinsics": {names[x]: sources[x] for x in PAIR_CAMERAS},
+        "warnings": list(art.warnings),
+    }
+    if fmt == "ros":
+        written = _write_ros(output, cams, names, sources, notes)
+        info["written"] = [str(p) for p in written]
+        return info
+
+    m_a, m_b, how = relpose_metres(art, scale)
+    T_b_a = np.array(art.relative_pose.T_b_a, dtype=float)
+    T_b_a[:3, 3] *= m_b
+    ref = int(art.relative_pose.reference)
+    notes = [f"lengths in metres ({how})", *notes]
     if fmt == "kalibr":
-        write_camchain_yaml(output, [{"name": "cam_a"}, {"name": "cam_b", "T_cn_cnm1": T_b_a}])
-        return {"format": fmt, "output": str(output), "keys": ["cam0", "cam1"]}
+        from acs_cli.io.atomic import atomic_write_text
+        from acs_cli.io.rig_export import kalibr_camchain_from_pair
+
+        text = kalibr_camchain_from_pair(
+            T_b_a,
+            _known({names[x]: cams[x] for x in PAIR_CAMERAS}),
+            names=(names["a"], names["b"]),
+            reference=ref,
+            overlap=_pair_overlap(art, relpose),
+            notes=[*(f"intrinsics of {names[x]}: {sources[x]}" for x in PAIR_CAMERAS), *notes],
+        )
+        atomic_write_text(output, text)
+        info["written"] = [str(output)]
+        return info
+
     mats: dict[str, Any] = {
+        "R": T_b_a[:3, :3],
+        "T": T_b_a[:3, 3:4],
         "T_b_a": T_b_a,
         "R_b_a": T_b_a[:3, :3],
         "t_b_a": T_b_a[:3, 3:4],
-        "reference": int(art.relative_pose.reference),
+        "reference": ref,
     }
     if art.joint is not None:
-        for which in ("a", "b"):
+        for which, m in (("a", m_a), ("b", m_b)):
             pos = art.joint.position(which)
             if pos is not None:
-                mats[f"joint_in_{which}"] = pos[:, None]
+                mats[f"joint_in_{which}"] = m * np.asarray(pos, dtype=float)[:, None]
     if art.scale is not None:
         mats["phi_ba"] = float(art.scale.phi_ba)
-    mats["length_unit"] = art.length_unit
-    write_opencv_yaml(output, mats)
-    return {"format": fmt, "output": str(output), "keys": list(mats)}
+    mats["length_unit"] = "m"
+    if art.warnings:  # also as a key: a JSON FileStorage has no comments
+        mats["warnings"] = "; ".join(art.warnings)
+    for x in PAIR_CAMERAS:
+        intr = cams[x]
+        if intr is not None:
+            values = opencv_camera_values(
+                intr.camera_matrix, intr.distortion, intr.image_size, intr.model
+            )
+            mats[f"cam_{x}"] = {"camera_name": names[x], **values}
+    comments = [
+        "acscal relative pose: R, T (= T_b_a) map camera A's frame into camera B's "
+        f"(p_b = R p_a + T, as cv2.stereoCalibrate), at the reference instant (paired frame "
+        f"{ref}) of an articulated pair",
+        *(f"intrinsics of {names[x]} (map cam_{x}): {sources[x]}" for x in PAIR_CAMERAS),
+        *notes,
+    ]
+    write_opencv_yaml(output, mats, comments=comments)
+    info["keys"] = list(mats)
+    info["written"] = [str(output)]
+    return info

@@ -20,12 +20,14 @@ import numpy as np
 from acs_cli.core.checkerboard import DETECTOR_VERSION, detect_checkerboard
 from acs_cli.core.intrinsics import (
     DISTORTION_NAMES,
+    MIN_VIEWS,
     MODELS,
     CalibrationResult,
     board_points,
     calibrate_robust,
     degenerate_distortion,
     intrinsics_covariance,
+    std_from_covariance,
 )
 from acs_cli.core.targets import (
     MIN_POSE_CORNERS,
@@ -45,7 +47,12 @@ from acs_cli.io.detections import (
     read_detections,
     write_detections,
 )
-from acs_cli.io.export import write_opencv_yaml
+from acs_cli.io.export import (
+    check_ros_camera_name,
+    opencv_camera_values,
+    write_opencv_yaml,
+    write_ros_camera_info,
+)
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, DroppedView, ImagesUsed, IntrinsicsArtifact
 from acs_cli.io.target import target_to_mapping
@@ -58,7 +65,7 @@ __all__ = [
     "detect_folder",
     "no_board_error",
     "run_intrinsics",
-    "write_ros_camera_info",
+    "write_ros_camera_info",  # re-exported from acs_cli.io.export
 ]
 
 EXPORTS = ("ros", "opencv")
@@ -68,12 +75,6 @@ CACHE_EVERY = 8
 MIN_IMAGES_PER_WORKER = 12
 
 Progress = Callable[[int, int], None]
-
-_ROS_MODELS = {
-    "pinhole": "plumb_bob",
-    "rational": "rational_polynomial",
-    "fisheye": "equidistant",
-}
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,8 @@ class IntrinsicsConfig:
     model : {"pinhole", "rational", "fisheye"}
     export : tuple of str
         Extra files: ``"ros"`` (camera_info YAML), ``"opencv"`` (cv2.FileStorage YAML).
+    camera_name : str
+        ``camera_name`` of the ROS camera_info (camera_info_manager's default, ``camera``).
     workers : int, optional
         Detection processes (default ``os.cpu_count()``).
     target : AprilGrid or Charuco, optional
@@ -101,6 +104,7 @@ class IntrinsicsConfig:
     square: float = 0.025
     model: str = "pinhole"
     export: tuple[str, ...] = ()
+    camera_name: str = "camera"
     workers: int | None = None
     target: MarkerTarget | None = None
 
@@ -199,13 +203,118 @@ def _file_key(path: Path, cols: int, rows: int, target: MarkerTarget | None = No
     return detection_key(h.hexdigest(), cols, rows, DETECTOR_VERSION)
 
 
-def no_board_error(folder: Path, cols: int, rows: int, n: int) -> InputError:
-    """The error for a folder where no image shows the board."""
+def no_board_error(
+    folder: Path, cols: int, rows: int, n: int, advice: str | None = None
+) -> InputError:
+    """The error for a folder where no image shows the board (``advice``: from
+    :func:`board_advice`)."""
     return InputError(
-        f"no {cols}x{rows} board found in any of {n} images; check --board "
-        "(inner corners, COLSxROWS)",
+        f"no {cols}x{rows} board found in any of {n} images; "
+        + (advice or "check --board (inner corners, COLSxROWS)"),
         path=folder,
     )
+
+
+#: Images without the board that :func:`board_advice` tries nearby sizes on.
+HINT_IMAGES = 4
+#: Below this share of images with the board, the board size is checked (and named).
+FEW_BOARDS = 0.5
+
+
+def board_advice(
+    images: Sequence[Path], cols: int, rows: int
+) -> tuple[str, tuple[int, int] | None]:
+    """Advice naming ``--board`` for images where a ``cols x rows`` board was not found,
+    and the nearby size they show, if one is found in them
+    (:func:`acs_cli.core.board_hint.board_size_hint` on up to :data:`HINT_IMAGES` of them)."""
+    from acs_cli.core.board_hint import nearby_board_sizes
+
+    found = _size_in(images, nearby_board_sizes(cols, rows))
+    if found is None:
+        return (
+            "check --board: it counts inner corners (squares minus one), COLSxROWS, and the "
+            "whole board must be in view",
+            None,
+        )
+    (c, r), k = found
+    return (
+        f"the images show a {c}x{r} board (found in {k} of {min(len(images), HINT_IMAGES)} "
+        f"images tried where {cols}x{rows} was not): give --board {c}x{r} (inner corners)",
+        (c, r),
+    )
+
+
+def _size_in(
+    images: Sequence[Path], sizes: Sequence[tuple[int, int]]
+) -> tuple[tuple[int, int], int] | None:
+    """:func:`acs_cli.core.board_hint.board_size_hint` on up to :data:`HINT_IMAGES` of
+    ``images``, evenly spread."""
+    from acs_cli.core.board_hint import board_size_hint
+
+    if not images:
+        return None
+    pick = np.unique(np.round(np.linspace(0, len(images) - 1, HINT_IMAGES)).astype(int))
+    return board_size_hint([read_gray(images[int(i)])[0] for i in pick], sizes)
+
+
+def few_boards(
+    folder: Path,
+    images: Sequence[Path],
+    found: Sequence[bool],
+    cols: int,
+    rows: int,
+    need: int,
+    *,
+    part_is_error: bool,
+) -> str | None:
+    """Check the board size against the images (a wrong ``--board`` is named, issue 13).
+
+    - The given board is in fewer than ``need`` images, or in fewer than
+      :data:`FEW_BOARDS` of them: when a nearby size is found where it was not,
+      :class:`InputError` (exit 2) naming that size; else :class:`DegenerateMotionError`
+      (exit 3) naming ``--board`` below ``need``, or a warning naming it.
+    - The images where it was found show a larger board (OpenCV finds an 8x6 board inside a
+      9x6 one, at a different place in each image): :class:`InputError` when
+      ``part_is_error`` (poses: the board's frame would jump), else a warning (intrinsics:
+      the part's geometry is still right).
+
+    Returns
+    -------
+    str or None
+        A warning, or None.
+    """
+    from acs_cli.core.board_hint import larger_board_sizes
+
+    k, n = int(sum(found)), len(images)
+    if k >= need and k >= FEW_BOARDS * n:
+        with_board = [p for p, f in zip(images, found, strict=True) if f]
+        larger = _size_in(with_board, larger_board_sizes(cols, rows))
+        if larger is None or 2 * larger[1] < min(len(with_board), HINT_IMAGES):
+            return None
+        (c, r), m = larger
+        text = (
+            f"the images show a {c}x{r} board (found in {m} of "
+            f"{min(len(with_board), HINT_IMAGES)} images tried), of which --board {cols}x{rows} "
+            f"is a part: give --board {c}x{r} (inner corners)"
+        )
+        if part_is_error:
+            raise InputError(text + "; a part would put the board's origin at a different "
+                             "corner in different images", path=folder)  # fmt: skip
+        return text
+    without = [p for p, f in zip(images, found, strict=True) if not f]
+    advice, size = board_advice(without, cols, rows)
+    if k == 0:
+        raise no_board_error(folder, cols, rows, n, advice)
+    if size is not None:
+        raise InputError(
+            f"a {cols}x{rows} board is in only {k} of {n} images; {advice}", path=folder
+        )
+    if k < need:
+        raise DegenerateMotionError(
+            f"a {cols}x{rows} board is in only {k} of {n} images, and {need} views are "
+            f"needed; {advice}; else record more views at different distances and tilts"
+        )
+    return f"a {cols}x{rows} board is in only {k} of {n} images; {advice}"
 
 
 #: Images :func:`no_target_error` looks at for markers of another family.
@@ -410,34 +519,6 @@ def detect_folder(
     return FolderDetections(images, dets, size, cached, cache)
 
 
-def write_ros_camera_info(
-    path: Path, calib: CalibrationResult, camera_name: str, model: str
-) -> None:
-    """Write a ROS ``camera_info`` YAML (the camera_calibration_parsers format)."""
-    from acs_cli.io.atomic import atomic_write_text
-
-    K = calib.camera_matrix
-    P = np.zeros((3, 4))
-    P[:3, :3] = K
-    text_doc = {
-        "image_width": int(calib.image_size[0]),
-        "image_height": int(calib.image_size[1]),
-        "camera_name": camera_name,
-        "camera_matrix": {"rows": 3, "cols": 3, "data": K.ravel().tolist()},
-        "distortion_model": _ROS_MODELS[model],
-        "distortion_coefficients": {
-            "rows": 1,
-            "cols": int(calib.distortion.size),
-            "data": calib.distortion.tolist(),
-        },
-        "rectification_matrix": {"rows": 3, "cols": 3, "data": np.eye(3).ravel().tolist()},
-        "projection_matrix": {"rows": 3, "cols": 4, "data": P.ravel().tolist()},
-    }
-    import yaml
-
-    atomic_write_text(path, yaml.safe_dump(text_doc, sort_keys=False, default_flow_style=None))
-
-
 def _check_config(config: IntrinsicsConfig) -> None:
     if config.cols < 2 or config.rows < 2:
         raise InputError(
@@ -452,6 +533,8 @@ def _check_config(config: IntrinsicsConfig) -> None:
     for e in config.export:
         if e not in EXPORTS:
             raise InputError(f"unknown --export {e!r}; use one of {', '.join(EXPORTS)}")
+    if "ros" in config.export:
+        check_ros_camera_name(config.camera_name)
 
 
 def run_intrinsics(
@@ -496,10 +579,13 @@ def run_intrinsics(
         progress=progress,
         target=target,
     )
+    board_note = None
     if target is None:
         with_board = [i for i, d in enumerate(fd.detections) if d.found]
-        if not with_board:
-            raise no_board_error(images_dir, cols, rows, len(fd.images))
+        found = [d.found for d in fd.detections]
+        board_note = few_boards(
+            images_dir, fd.images, found, cols, rows, MIN_VIEWS, part_is_error=False
+        )
         obj = board_points(cols, rows, config.square)
         img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]
         obj_pts = [obj] * len(img_pts)
@@ -515,7 +601,7 @@ def run_intrinsics(
     dropped = [
         DroppedView(names[j], float(calib.first_pass_per_view_rms[j])) for j in calib.dropped
     ]
-    warnings: list[str] = []
+    warnings: list[str] = [] if board_note is None else [board_note]
     if skipped:
         warnings.append(f"no board in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     if dropped:
@@ -529,14 +615,14 @@ def run_intrinsics(
         warnings.append(degenerate)
 
     dist_names = DISTORTION_NAMES[config.model]
-    std = dict(calib.std_intrinsics)
+    std = dict(calib.std_intrinsics) or std_from_covariance(cov)  # fisheye: OpenCV gives none
     calibrator = "cv2.fisheye.calibrate" if config.model == "fisheye" else "calibrateCameraExtended"
     header = make_header(
         "intrinsics",
         {"images": images_dir},
         method=f"OpenCV {calibrator} "
         f"({config.model} model) on {DETECTOR_VERSION} corners (coarse findChessboardCorners, "
-        "cornerSubPix sized to the squares, saddle-point refinement); views with RMS above "
+        "cornerSubPix sized to the squares, X-junction fit); views with RMS above "
         "max(median + 3 * 1.4826 * MAD, 2 * median) dropped and the calibration redone",
         units={"square": "m", "camera_matrix": "px", "rms": "px", "distortion": "unitless"},
         frames={
@@ -581,19 +667,11 @@ def run_intrinsics(
         source=str(output),
     )
     art.save(output)
-    camera_name = output.parent.name or output.stem
+    camera = (calib.camera_matrix, calib.distortion, fd.image_size, config.model)
     if "ros" in exports:
-        write_ros_camera_info(exports["ros"], calib, camera_name, config.model)
+        write_ros_camera_info(exports["ros"], *camera, config.camera_name)
     if "opencv" in exports:
         write_opencv_yaml(
-            exports["opencv"],
-            {
-                "image_width": int(fd.image_size[0]),
-                "image_height": int(fd.image_size[1]),
-                "model": config.model,
-                "camera_matrix": calib.camera_matrix,
-                "distortion_coefficients": calib.distortion.reshape(1, -1),
-                "rms_px": calib.rms_px,
-            },
+            exports["opencv"], {**opencv_camera_values(*camera), "rms_px": calib.rms_px}
         )
     return IntrinsicsRun(calib, to_plain(art.to_doc()), output, exports, fd, warnings)

@@ -45,6 +45,7 @@ from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
 from acs_cli.stages.intrinsics import (
     TARGET_FRAMES,
     detect_folder,
+    few_boards,
     no_board_error,
     no_target_error,
 )
@@ -152,6 +153,22 @@ def _image_times(
         timestamps=stamps,
         timestamps_source=str(config.timestamps),
         fps=config.fps,
+    )
+
+
+def _trajectory(
+    times: ImageTimes, T_world_cam: np.ndarray, names: list[str], output: Path
+) -> Trajectory:
+    """The posed images' trajectory, with their times as :func:`_image_times` gave them."""
+    return Trajectory(
+        times.seconds,
+        T_world_cam,
+        source=str(output),
+        format="npz",
+        has_timestamps=times.has_timestamps,
+        names=tuple(names),
+        timestamps_ns=times.nanoseconds,
+        time_unit=times.unit,
     )
 
 
@@ -277,11 +294,15 @@ def run_poses(
     if not names and target is not None:
         n_some = sum(d.found for d in fd.detections)
         raise no_target_error(images_dir, target, fd.images, n_some)
+    board_note = None
+    if target is None:  # a wrong --board is named (exit 2) rather than posing a few images
+        found = [d.found for d in fd.detections]
+        board_note = few_boards(images_dir, fd.images, found, cols, rows, 1, part_is_error=True)
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
     times = _image_times(names, all_names, stamps, config)
     t = times.seconds
-    warnings: list[str] = [] if times.note is None else [times.note]
+    warnings = [w for w in (board_note, times.note) if w is not None]
     # one board frame for the whole sequence: undo 180-degree relabellings of the board
     T_cb_arr = np.stack(T_cb)
     if target is None and cols != rows:
@@ -298,16 +319,7 @@ def run_poses(
                 "is one for the whole sequence"
             )
     T_wc = camera_in_board(T_cb_arr)
-    traj = Trajectory(
-        t,
-        T_wc,
-        source=str(output),
-        format="npz",
-        has_timestamps=times.has_timestamps,
-        names=tuple(names),
-        timestamps_ns=times.nanoseconds,
-        time_unit=times.unit,
-    )
+    traj = _trajectory(times, T_wc, names, output)
     if skipped:
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     header = make_header(
@@ -636,16 +648,7 @@ def run_sfm_poses(
 
     names = list(result.registered_names)
     times = _image_times(names, all_names, stamps, config)
-    traj = Trajectory(
-        times.seconds,
-        result.T_world_cam,
-        source=str(output),
-        format="npz",
-        has_timestamps=times.has_timestamps,
-        names=tuple(names),
-        timestamps_ns=times.nanoseconds,
-        time_unit=times.unit,
-    )
+    traj = _trajectory(times, result.T_world_cam, names, output)
     warnings = _sfm_warnings(result, camera) + ([] if times.note is None else [times.note])
     cam = result.camera
     given = "given (" + ("refined" if result.intrinsics_refined else "held fixed") + ")"

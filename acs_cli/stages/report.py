@@ -2,7 +2,10 @@
 
 Reads what a run folder holds (``cam_<x>/intrinsics.yaml``, ``cam_<x>/*.npz`` poses,
 ``joint.yaml``, ``relpose.yaml``) through the typed artifacts of :mod:`acs_cli.io`, each
-file once, into a :class:`~acs_cli.report.model.ReportModel` (:func:`build_report`); then
+file once, into a :class:`~acs_cli.report.model.ReportModel` (:func:`build_report`): with
+each stage's verdict (:mod:`acs_cli.report.verdict`), the final intrinsics and joint, and
+every posed corner's reprojection error recomputed from the poses NPZs
+(:mod:`acs_cli.report.corners`); then
 :func:`~acs_cli.report.render.render_report` draws the figures and the self-contained HTML
 page, written with the same figures as PNG files in ``<name>_files/`` beside it. A section
 whose artifact is missing or unreadable is skipped with a note; a folder with no artifact at
@@ -31,15 +34,18 @@ from acs_cli.errors import AcsError, InputError
 from acs_cli.io.artifacts import sha256_of
 from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text, check_distinct_output
 from acs_cli.io.intrinsics import IntrinsicsArtifact
-from acs_cli.io.joint import FramesUsed, JointArtifact
+from acs_cli.io.joint import BundleSection, FramesUsed, JointArtifact, JointSection, PoseNoise
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import Trajectory, read_trajectory
 from acs_cli.report import figures as F
+from acs_cli.report import verdict as V
+from acs_cli.report.corners import corner_residuals
 from acs_cli.report.model import (
     ArtifactRow,
     Estimate,
+    FinalChoice,
     ReportModel,
     RigOfManyView,
     RigTrajectory,
@@ -266,11 +272,30 @@ def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
             )  # fmt: skip
         rows.append(Estimate(f"{name} residual RMS", j.residual_rms, None, u, src, 4))
     for c, b in rig.bundle_adjustment.items():  # the rig's bundle adjustment on the corners
-        for key, val in b.values().items():
-            unit = "px" if key in ("fx", "fy", "cx", "cy") else ""
-            rows.append(Estimate(f"{c} {key} (bundle)", val, b.intrinsics_std.get(key), unit, src))
-        rows.append(Estimate(f"{c} reprojection RMS (bundle)", b.rms_px, None, "px", src, 4))
+        _bundle_rows(rows, c, b, src)
     return rows
+
+
+def _intrinsic(quantity: str, value: float, std: float | None, unit: str, src: str) -> Estimate:
+    """An intrinsic parameter's row: a std of exactly 0 is a parameter held fixed (the
+    artifacts record held parameters so: pinhole ``k3``, rational ``k4 k5 k6`` in a bundle
+    adjustment), shown as "fixed"."""
+    fixed = std is not None and std == 0.0
+    return Estimate(quantity, value, None if fixed else std, unit, src, fixed=fixed)
+
+
+def _bundle_rows(rows: list[Estimate], who: str, sec: BundleSection, src: str) -> None:
+    """The intrinsics and RMS of one camera's bundle adjustment."""
+    for key, val in sec.values().items():
+        unit = "px" if key in ("fx", "fy", "cx", "cy") else ""
+        rows.append(
+            _intrinsic(
+                f"{who} {key} (bundle adjustment)", val, sec.intrinsics_std.get(key), unit, src
+            )
+        )
+    rows.append(
+        Estimate(f"{who} reprojection RMS (bundle adjustment)", sec.rms_px, None, "px", src, 4)
+    )
 
 
 def _poses_of(found: _Found, cam: str) -> list[tuple[Path, PosesArtifact]]:
@@ -354,6 +379,7 @@ def _trajectory(found: _Found) -> RigTrajectory:
             rec.rejected,
             t.reference,
             rec.position_in_a,
+            agree_at_reference=_exact(t.consistency[t.reference], rec.position_in_a),
         )
     joint = found.joint
     if joint is not None and joint.scenario == "overlap":
@@ -381,6 +407,12 @@ def _trajectory(found: _Found) -> RigTrajectory:
         "no relpose.yaml (and no overlap joint.yaml): the rig's trajectory needs the "
         "relative pose of the cameras"
     )
+
+
+def _exact(distance: float, joint: np.ndarray) -> bool:
+    """Whether ``distance`` is zero to rounding (a value zero by construction, e.g. the joint
+    seen from A and from B at a reference instant whose pose the joint corrected)."""
+    return bool(distance <= 1e-9 * max(float(np.linalg.norm(joint)), 1.0))
 
 
 def _rejected(frames: FramesUsed | None, labels: np.ndarray) -> np.ndarray:
@@ -440,9 +472,41 @@ def _reprojection(found: _Found) -> list[F.ReprojectionData]:
             names = list(intr.per_view_rms_px)
             rms = np.asarray(list(intr.per_view_rms_px.values()), dtype=float)
             overall = intr.rms_px
-        poses = {p.name: art.reprojection_rms for p, art in _poses_of(found, cam)}
-        poses = {k: v for k, v in poses.items() if v.size}
-        data.append(F.ReprojectionData(cam, names, rms, overall, poses))
+        arts = [(p.name, art) for p, art in _poses_of(found, cam) if art.reprojection_rms.size]
+        poses = {k: art.reprojection_rms for k, art in arts}
+        images = {k: list(art.trajectory.names) for k, art in arts if art.trajectory.names}
+        data.append(F.ReprojectionData(cam, names, rms, overall, poses, images))
+    return data
+
+
+def _corner_errors(found: _Found) -> list[F.CornerErrorData]:
+    """Every posed corner's reprojection error per camera, recomputed from its poses NPZs
+    (corners, board points, board poses) and the camera's ``intrinsics.yaml``."""
+    data = []
+    for cam in CAMERAS:
+        intr = found.intrinsics.get(cam)
+        if intr is None:
+            continue
+        observed, residual = [], []
+        for _, art in _poses_of(found, cam):
+            if art.corners is None or art.board_points is None or art.metric_scale is False:
+                continue
+            got = corner_residuals(
+                art.corners,
+                art.board_points,
+                art.trajectory.T_world_cam,
+                intr.model,
+                intr.camera_matrix,
+                intr.distortion,
+            )
+            observed.append(got.observed)
+            residual.append(got.residual)
+        if observed:
+            data.append(
+                F.CornerErrorData(
+                    cam, np.vstack(observed), np.vstack(residual), intr.principal_point
+                )
+            )
     return data
 
 
@@ -457,6 +521,9 @@ def _coverage(found: _Found) -> list[F.CoverageData]:
         if not chunks:
             continue
         corners = np.vstack(chunks)
+        corners = corners[np.isfinite(corners).all(axis=1)]  # NaN: a target's unseen corner
+        if not corners.size:
+            continue
         intr = found.intrinsics.get(cam)
         if intr is not None:
             size = intr.image_size
@@ -501,12 +568,12 @@ def _estimates(found: _Found) -> list[Estimate]:
         std: dict[str, Any] = intr.std or {}
         C = cam.upper()
         for key, val in (("fx", K[0, 0]), ("fy", K[1, 1]), ("cx", K[0, 2]), ("cy", K[1, 2])):
-            rows.append(Estimate(f"camera {C} {key}", float(val), std.get(key), "px", src))
+            rows.append(_intrinsic(f"camera {C} {key}", float(val), std.get(key), "px", src))
         dstd = std.get("distortion") or []
         names = intr.distortion_names or [f"d{i}" for i in range(intr.distortion.size)]
         for i, (name, val) in enumerate(zip(names, intr.distortion, strict=False)):
             s = float(dstd[i]) if i < len(dstd) else None
-            rows.append(Estimate(f"camera {C} {name}", float(val), s, "", src))
+            rows.append(_intrinsic(f"camera {C} {name}", float(val), s, "", src))
         rows.append(Estimate(f"camera {C} reprojection RMS", intr.rms_px, None, "px", src, 4))
     if found.joint is not None:
         art = found.joint
@@ -523,16 +590,7 @@ def _estimates(found: _Found) -> list[Estimate]:
                 "xyz",
             )
         for cam, sec in art.quality.bundle_adjustment.items():
-            for key, val in sec.values().items():
-                rows.append(
-                    Estimate(
-                        f"camera {cam.upper()} {key} (bundle adjustment)",
-                        val,
-                        sec.intrinsics_std.get(key),
-                        "px" if key in ("fx", "fy", "cx", "cy") else "",
-                        src,
-                    )
-                )
+            _bundle_rows(rows, f"camera {cam.upper()}", sec, src)
         for key, noise in art.quality.estimated_pose_noise.items():
             rows.append(
                 Estimate(f"pose noise ({key}): translation", noise.sigma_trans, None, unit, src, 3)
@@ -576,6 +634,8 @@ def _estimates(found: _Found) -> list[Estimate]:
             for key, val, s in (("mu_a", sc.mu_a, sc.mu_a_std), ("mu_b", sc.mu_b, sc.mu_b_std)):
                 if val is not None:
                     rows.append(Estimate(key, val, s, f"{key[-1].upper()} units per metre", src))
+        for cam, sec in rp.quality.bundle_adjustment.items():
+            _bundle_rows(rows, f"camera {cam.upper()}", sec, src)
         rp_noise = rp.quality.estimated_pose_noise
         if rp_noise is not None:
             rows.append(
@@ -626,6 +686,226 @@ def _collect_warnings(found: _Found) -> None:
                 f"of B ({pairing.pairs} pairs, by {pairing.by})"
             )
             found.warn(src, text)
+
+
+# --------------------------------------------------------------------------- verdict
+
+
+def _coverage_fractions(found: _Found, coverage: Sequence[F.CoverageData]) -> dict[str, float]:
+    """Each camera's image coverage; one under half is a warning."""
+    out = {}
+    for c in coverage:
+        frac = F.coverage_fraction(c.corners, c.image_size)
+        out[c.camera] = frac
+        if V.classify("coverage", frac) != "pass":
+            found.warn(
+                "report",
+                f"camera {c.camera.upper()}: the detected corners cover "
+                f"{V.THRESHOLDS['coverage'].show(frac)} of the image cells (under half): the "
+                "distortion outside them is extrapolated; add views with the board near the "
+                "image's borders and corners",
+            )
+    return out
+
+
+def _warning_check(found: _Found, *sources: str) -> V.Check:
+    """The check of the number of warnings listed from ``sources``."""
+    return V.Check("warnings", float(sum(src in sources for src, _ in found.warnings)))
+
+
+def _norm(v: np.ndarray | None) -> float:
+    """The length of ``v`` (0 for None: no distance, no check)."""
+    return 0.0 if v is None else float(np.linalg.norm(v))
+
+
+def _noise(n: PoseNoise | None) -> tuple[float, float] | None:
+    """``(sigma_trans, sigma_rot_deg)`` of an estimated pose noise, if any."""
+    return None if n is None else (n.sigma_trans, n.sigma_rot_deg)
+
+
+def _bundle_verdicts(
+    file: str, src: str, bundles: dict[str, BundleSection]
+) -> list[V.StageVerdict]:
+    """One verdict (its reprojection RMS) per camera an artifact bundle-adjusted."""
+    return [
+        V.StageVerdict(
+            f"bundle adjustment ({file}), camera {cam.upper()}",
+            src,
+            V.reprojection_checks(sec.rms_px),
+        )
+        for cam, sec in bundles.items()
+    ]
+
+
+def _joint_std_checks(joint: JointSection) -> list[V.Check]:
+    """The std-against-distance check of a joint section, per camera."""
+    checks = []
+    for cam in CAMERAS:
+        o = joint.position(cam)
+        if o is not None:
+            checks += V.joint_checks(
+                None, _norm(o), joint.std(cam), subject=f"joint in {cam.upper()}"
+            )
+    return checks
+
+
+def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]:
+    """Each stage's verdict, in the run's order (call after the warnings are collected)."""
+    out: list[V.StageVerdict] = []
+    for cam in CAMERAS:
+        intr = found.intrinsics.get(cam)
+        if intr is not None:
+            src = found.rel(intr.source)
+            checks = V.reprojection_checks(intr.rms_px, coverage.get(cam))
+            out.append(
+                V.StageVerdict(
+                    f"intrinsics, camera {cam.upper()}", src, [*checks, _warning_check(found, src)]
+                )
+            )
+    for cam in CAMERAS:
+        arts = _poses_of(found, cam)
+        if not arts:
+            continue
+        srcs = [found.rel(p) for p, _ in arts]
+        rms = np.concatenate([a.reprojection_rms for _, a in arts])
+        checks = V.reprojection_checks(
+            float(np.sqrt(np.mean(rms**2))) if rms.size else None,
+            None if cam in found.intrinsics else coverage.get(cam),
+        )
+        out.append(
+            V.StageVerdict(
+                f"poses, camera {cam.upper()}",
+                ", ".join(srcs),
+                [*checks, _warning_check(found, *srcs)],
+            )
+        )
+    joint = found.joint
+    if joint is not None:
+        src = found.rel(joint.source)
+        q = joint.quality
+        keys = [("ab", "a", 2)] if joint.scenario == "overlap" else [("a", "a", 1), ("b", "b", 1)]
+        checks = []
+        for key, cam, n in keys:
+            res = q.residual_rms.get(key) if isinstance(q.residual_rms, dict) else q.residual_rms
+            checks += V.joint_checks(
+                res,
+                _norm(joint.joint.position(cam)),
+                None,
+                _noise(q.estimated_pose_noise.get(key)),
+                n,
+                "residual" if key == "ab" else f"camera {cam.upper()}",
+            )
+        checks += _joint_std_checks(joint.joint)
+        out.append(V.StageVerdict("joint", src, [*checks, _warning_check(found, src)]))
+        out += _bundle_verdicts("joint.yaml", src, q.bundle_adjustment)
+    rp = found.relpose
+    if rp is not None:
+        src = found.rel(rp.source)
+        checks = []
+        if rp.joint is not None:
+            checks += V.joint_checks(
+                rp.quality.residual_rms,
+                _norm(rp.joint.position_in_b),
+                None,
+                _noise(rp.quality.estimated_pose_noise),
+                2,
+                "joint from A and from B",
+            )
+            checks += _joint_std_checks(rp.joint)
+        out.append(V.StageVerdict("relpose", src, [*checks, _warning_check(found, src)]))
+        out += _bundle_verdicts("relpose.yaml", src, rp.quality.bundle_adjustment)
+    rig = found.rig
+    if rig is not None:
+        src = found.rel(rig.source)
+        checks = []
+        for name, j in rig.joints.items():
+            o = j.position_in.get(j.between[0])
+            if o is not None:
+                checks += V.joint_checks(
+                    j.residual_rms, _norm(o), j.position_std_in.get(j.between[0]), subject=name
+                )
+        out.append(V.StageVerdict("rig", src, [*checks, _warning_check(found, src)]))
+        out += _bundle_verdicts("rig.yaml", src, rig.bundle_adjustment)
+    return out
+
+
+def _intrinsics_text(K: np.ndarray, rms: float | None) -> str:
+    """``fx fy cx cy`` of ``K`` and the RMS, for the final-results table."""
+    text = f"fx {K[0, 0]:.2f}, fy {K[1, 1]:.2f}, cx {K[0, 2]:.2f}, cy {K[1, 2]:.2f} px"
+    return text if rms is None else f"{text}; reprojection RMS {rms:.3g} px"
+
+
+def _finals(found: _Found) -> tuple[list[FinalChoice], list[str]]:
+    """Where the final intrinsics and joint are, and what the run folder exported."""
+    finals: list[FinalChoice] = []
+    adjusted: set[str] = set()
+    # the last stage's bundle adjustment is final: relpose, then joint; a rig's on its own
+    bundles = [
+        (found.rel(a.source), "quality.bundle_adjustment", a.quality.bundle_adjustment)
+        for a in (found.relpose, found.joint)
+        if a is not None
+    ]
+    if found.rig is not None:
+        rig = found.rig
+        bundles.append((found.rel(rig.source), "bundle_adjustment", rig.bundle_adjustment))
+    for cam in CAMERAS:
+        C = cam.upper()
+        for src, key, secs in bundles:
+            sec = secs.get(cam)
+            if sec is not None:
+                finals.append(
+                    FinalChoice(
+                        f"intrinsics of camera {C}",
+                        f"{src}: {key}.{cam}",
+                        f"bundle-adjusted from {sec.intrinsics_file} on {sec.frames} frames: "
+                        + _intrinsics_text(sec.camera_matrix, sec.rms_px),
+                    )
+                )
+                adjusted.add(cam)
+                break
+        else:
+            intr = found.intrinsics.get(cam)
+            if intr is not None:
+                finals.append(
+                    FinalChoice(
+                        f"intrinsics of camera {C}",
+                        found.rel(intr.source),
+                        "the calibration (no bundle adjustment refined it): "
+                        + _intrinsics_text(intr.camera_matrix, intr.rms_px),
+                    )
+                )
+    if found.relpose is not None and found.relpose.joint is not None:
+        j = found.relpose.joint
+        how = j.source or "the joint relpose.yaml used"
+        if found.relpose.quality.bundle_adjustment:
+            how += "; bundle-adjusted with the relative pose"
+        finals.append(FinalChoice("joint", f"{found.rel(found.relpose.source)}: joint", how))
+    elif found.joint is not None:
+        how = "bundle-adjusted" if found.joint.quality.bundle_adjustment else "pose-based"
+        finals.append(
+            FinalChoice(
+                "joint",
+                f"{found.rel(found.joint.source)}: joint",
+                f"{how} ({found.joint.scenario.replace('_', ' ')})",
+            )
+        )
+    if found.rig is not None:
+        how = "bundle-adjusted" if found.rig.bundle_adjustment else "pose-based solve"
+        finals.append(
+            FinalChoice("rig (camera poses and joints)", found.rel(found.rig.source), how)
+        )
+    exported = []
+    for cam in CAMERAS:
+        intr = found.intrinsics.get(cam)
+        if intr is None:
+            continue
+        for kind, name in intr.exports.items():
+            path = Path(str(intr.source)).parent / name
+            text = f"{found.rel(path)} ({kind}): the intrinsics of {found.rel(intr.source)}"
+            if cam in adjusted:
+                text += ", not the final bundle-adjusted ones"
+            exported.append(text if path.is_file() else f"{text} (file missing)")
+    return finals, exported
 
 
 # --------------------------------------------------------------------------- the report
@@ -751,7 +1031,15 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     if not model.reprojection and not found.intrinsics and not found.poses:
         model.skip("reprojection", "No intrinsics.yaml and no poses: no reprojection errors.")
 
+    model.corner_errors = _corner_errors(found)
+    if not model.corner_errors:
+        model.skip(
+            "corners",
+            "No per-corner errors: they need a camera's intrinsics.yaml and poses with corners.",
+        )
+
     model.coverage = _coverage(found)
+    coverage = _coverage_fractions(found, model.coverage)
     if not model.coverage:
         model.skip(
             "coverage",
@@ -767,6 +1055,8 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     for w in extra_warnings:
         found.warn("run", w)
     _collect_warnings(found)
+    model.verdicts = _verdicts(found, coverage)
+    model.finals, model.exported = _finals(found)
     model.warnings = [f"{src}: {text}" for src, text in found.warnings]
     model.notes += [n for n in found.notes if n not in model.notes]
     return model

@@ -7,6 +7,8 @@ One module fixture renders a small image set (fixed-joint and general motion), r
 from __future__ import annotations
 
 import base64
+import dataclasses
+import html as html_lib
 import re
 import shutil
 import subprocess
@@ -19,6 +21,7 @@ import yaml
 from cli_runner import acscal
 
 from acs_cli.core import se3
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.trajectory import read_tum
 from sample_data_gen.render import render_scenario
 from sample_data_gen.writer import SCENARIOS, make_sequence, rig_for_seed, write_scenario
@@ -28,6 +31,7 @@ FIGURES = {
     "rig_reference.png",
     "joint_residuals.png",
     "reprojection.png",
+    "corner_errors.png",
     "coverage.png",
 }
 DATA_IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
@@ -53,6 +57,17 @@ def load(path: Path) -> dict:
 
 def _without_data(html: str) -> str:
     return DATA_IMG.sub("<img>", html)
+
+
+def _text(html: str) -> str:
+    """The page's text: tags out, entities decoded."""
+    return html_lib.unescape(re.sub(r"<[^>]+>", " ", _without_data(html)))
+
+
+def _verdict_rows(html: str) -> dict[str, str]:
+    """Each stage's verdict in the verdict table, by stage."""
+    rows = re.findall(r'<tr><td>([^<]+)</td><td class="status-(pass|check|fail)">', html)
+    return {html_lib.unescape(stage): status for stage, status in rows}
 
 
 def _chromium() -> str | None:
@@ -137,7 +152,7 @@ def test_trajectory_under_unknown_scale_is_in_a_units(tmp_path: Path) -> None:
         write_scenario(tmp_path / scenario, scenario, seed=seed, frames=frames, mu_a=mu_a,
                        mu_b=mu_b)  # fmt: skip
     g = tmp_path / "general"
-    poses = ["--poses-a", g / "cam_a.tum", "--poses-b", g / "cam_b.tum"]
+    poses: list[str | Path] = ["--poses-a", g / "cam_a.tum", "--poses-b", g / "cam_b.tum"]
     f = tmp_path / "fixed_joint"
     assert acscal("joint", "--fixed-joint", "--poses-a", f / "cam_a.tum", "--poses-b",
                   f / "cam_b.tum", "-o", tmp_path / "joint.yaml").returncode == 0  # fmt: skip
@@ -205,7 +220,7 @@ def test_report_command_writes_html_and_pngs(run: dict[str, object], tmp_path: P
     out = tmp_path / "out" / "calib.html"
     res = acscal("report", Path(str(run["dir"])), "-o", out)
     assert res.returncode == 0, res.stderr
-    assert "5 figures" in res.stdout
+    assert f"{len(FIGURES)} figures" in res.stdout
     folder = tmp_path / "out" / "calib_files"
     assert {p.name for p in folder.iterdir()} == FIGURES
     html = out.read_text(encoding="utf-8")
@@ -216,6 +231,95 @@ def test_report_command_writes_html_and_pngs(run: dict[str, object], tmp_path: P
     # every estimate with its std and unit; the warnings of the run
     assert "camera A fx" in html and "joint in B (o_b) z" in html and "R_a_b yaw" in html
     assert "no partner" in html or "unpaired samples" in html or "No warnings" in html
+
+
+def test_report_opens_with_a_verdict_against_stated_thresholds(run: dict[str, object]) -> None:
+    html = (Path(str(run["dir"])) / "report.html").read_text(encoding="utf-8")
+    text = _text(html)
+    # the verdict comes first, every stage of the run marked pass, check or fail
+    assert html.index('id="verdict"') < html.index('id="artifacts"')
+    assert re.search(r"Overall: (pass|check|fail) \(", text)
+    stages = _verdict_rows(html)
+    for stage in ("intrinsics, camera A", "intrinsics, camera B", "poses, camera A", "joint",
+                  "relpose", "bundle adjustment (joint.yaml), camera A",
+                  "bundle adjustment (relpose.yaml), camera B"):  # fmt: skip
+        assert stage in stages, stages
+    # good rendered data: corners well fitted, the joint well determined
+    assert "reprojection RMS 0.0" in text and "(fail)" not in text
+    assert re.search(r"joint in A: joint std / joint distance [0-9.]+% \(pass\)", text)
+    # the thresholds are in the report itself
+    for label in ("reprojection RMS", "image coverage", "joint residual / expected from the "
+                  "pose noise", "joint std / joint distance", "<= 0.5 px", ">= 50%"):  # fmt: skip
+        assert label in text, label
+    # coverage under half: a check in the verdict and a warning
+    for cam, pct in re.findall(r"intrinsics, camera ([AB]) \w+ [^|]*?image coverage ([0-9.]+)%",
+                               text):  # fmt: skip
+        if float(pct) < 50:
+            assert f"camera {cam}: the detected corners cover {pct}% of the image cells" in text
+            assert stages[f"intrinsics, camera {cam}"] != "pass"
+
+
+def test_report_says_what_is_final_fixed_and_exported(run: dict[str, object]) -> None:
+    html = (Path(str(run["dir"])) / "report.html").read_text(encoding="utf-8")
+    text = _text(html)
+    # the bundle-adjusted intrinsics of the last stage are the final ones, and its joint
+    assert "relpose.yaml: quality.bundle_adjustment.a" in text
+    assert "relpose.yaml: joint" in text
+    assert "Exported: no export file is recorded in the run folder" in text
+    # k3, held by the pinhole calibration and the bundle adjustments: "fixed", never std 0
+    k3 = re.findall(r'<td>camera [AB] k3[^<]*</td><td class="num">[^<]*</td>'
+                    r'<td class="num">([^<]*)</td>', html)  # fmt: skip
+    assert len(k3) == 6 and set(k3) == {"fixed"}, k3
+    # nothing zero by construction
+    assert "joint gap" not in text
+    assert "besides the reference (where they agree by construction)" in text
+    # the per-corner errors: a scatter, the radial trend, a histogram per camera
+    assert "Per-corner reprojection errors" in text and "distance from the principal point" in text
+    png = Path(str(run["dir"])) / "report_files" / "corner_errors.png"
+    assert png.stat().st_size > 20_000
+
+
+def test_report_of_45_views_with_partial_corners(run: dict[str, object], tmp_path: Path) -> None:
+    """45 calibration views (every one labelled, and in a table), poses whose corners are seen
+    in the top-left quarter only (NaN elsewhere: a low coverage, warned about) and an
+    export that holds the calibration, not the bundle-adjusted intrinsics."""
+    run_dir = Path(str(run["dir"]))
+    cam = tmp_path / "many" / "cam_a"
+    cam.mkdir(parents=True)
+    doc = load(run_dir / "cam_a" / "intrinsics.yaml")
+    doc["per_view_rms_px"] = {f"view_{i:03d}_left.png": 0.01 + 0.001 * i for i in range(45)}
+    doc["exports"] = {"opencv": "intrinsics_opencv.yaml"}
+    (cam / "intrinsics.yaml").write_text(yaml.safe_dump(doc), encoding="utf-8")
+    (cam / "intrinsics_opencv.yaml").write_text("%YAML:1.0\n", encoding="utf-8")
+    poses = PosesArtifact.load(run_dir / "cam_a" / "poses.npz")
+    assert poses.corners is not None
+    corners = poses.corners.copy()
+    corners[(corners[..., 0] > 320) | (corners[..., 1] > 240)] = np.nan
+    dataclasses.replace(poses, corners=corners).save(cam / "poses.npz")
+
+    res = acscal("report", cam.parent)
+    assert res.returncode == 0, res.stderr
+    names = {p.name for p in (cam.parent / "report_files").iterdir()}
+    assert names == {"reprojection.png", "corner_errors.png", "coverage.png"}
+    html = (cam.parent / "report.html").read_text(encoding="utf-8")
+    text = _text(html)
+    # every view in the table, worst first, beside the 9 posed images
+    assert "Table of the 54 views and posed images, worst first" in text
+    listed = re.findall(r"<td>(view_\d{3}_left\.png)</td>", html)
+    assert listed == [f"view_{i:03d}_left.png" for i in range(44, -1, -1)]
+    # the chart grows with the views: every one gets a labelled bar
+    chart = cv2.imread(str(cam.parent / "report_files" / "reprojection.png"))
+    assert chart is not None and chart.shape[0] > 45 * 0.16 * 100
+    # at most a quarter of the image covered: a warning, and no pass in the verdict
+    got = re.search(r"camera A: the detected corners cover ([0-9.]+)% of the image cells "
+                    r"\(under half\)", text)  # fmt: skip
+    assert got is not None, text
+    pct = float(got.group(1))
+    status = "check" if pct == 25 else "fail"
+    assert 0 < pct <= 25 and f"image coverage {got.group(1)}% ({status})" in text
+    assert _verdict_rows(html)["intrinsics, camera A"] == status
+    assert "intrinsics_opencv.yaml (opencv): the intrinsics of cam_a/intrinsics.yaml" in text
+    assert "cam_a/intrinsics.yaml" in text and "no bundle adjustment refined it" in text
 
 
 def test_report_degrades_gracefully(run: dict[str, object], tmp_path: Path) -> None:
@@ -243,7 +347,7 @@ def test_run_report_hook_lists_a_failure_and_never_raises(
 
     copy = tmp_path / "run"
     shutil.copytree(Path(str(run["dir"])), copy, symlinks=True)
-    seen = []
+    seen: list[object] = []
     res = write_run_report(copy, seen.append, ["relpose failed: the joint path is straight"])
     assert res.status == "written" and seen == [res] and res.outputs == [copy / "report.html"]
     html = (copy / "report.html").read_text(encoding="utf-8")
@@ -286,12 +390,12 @@ def test_report_renders_in_headless_chromium(run: dict[str, object], tmp_path: P
         browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
         "--no-first-run", "--disable-background-networking", "--disable-component-update",
         "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
-        "--window-size=1200,3000", report.resolve().as_uri(),
+        "--window-size=1200,5000", report.resolve().as_uri(),
     ]  # fmt: skip
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     assert res.returncode == 0 and shot.is_file(), res.stderr[-2000:]
     img = cv2.imread(str(shot), cv2.IMREAD_COLOR)
-    assert img is not None and img.shape[:2] == (3000, 1200)
+    assert img is not None and img.shape[:2] == (5000, 1200)
     pixels = img.reshape(-1, 3).astype(int)
     non_white = float(np.mean(pixels.min(axis=1) < 235))
     colours = np.unique(pixels[:, 0] * 65536 + pixels[:, 1] * 256 + pixels[:, 2]).size

@@ -180,7 +180,7 @@ def test_export_a_rig_as_urdf_and_refuse_kalibr_without_intrinsics(
     assert res.returncode == 2 and "intrinsics" in res.stderr
     assert not (tmp_path / "cc.yaml").exists()
     res = acscal("export", rig_file, "--format", "opencv", "-o", tmp_path / "cv.yaml")
-    assert res.returncode == 2 and "kalibr or urdf" in res.stderr
+    assert res.returncode == 2 and "kalibr, ros, urdf" in res.stderr
 
 
 def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> None:

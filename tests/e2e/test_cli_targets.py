@@ -119,3 +119,23 @@ def test_run_config_with_a_target(rendered: dict[str, Path], tmp_path: Path) -> 
     art = PosesArtifact.load(tmp_path / "out" / "cam_a" / "poses.npz")
     assert art.header["target"]["target_type"] == "charuco"
     assert len(art) == FRAMES
+
+
+def test_report_of_partial_views_without_intrinsics(
+    rendered: dict[str, Path], tmp_path: Path
+) -> None:
+    """A run folder whose camera has only a target's poses (NaN where a corner was not seen)
+    and no intrinsics.yaml: the coverage takes the seen corners (it crashed on NaN)."""
+    folder = rendered["aprilgrid"]
+    intr = tmp_path / "intrinsics.yaml"
+    res = acscal("intrinsics", folder / "images", "--target", folder / "target.yaml", "-o", intr)
+    assert res.returncode == 0, res.stderr
+    run = tmp_path / "run"
+    (run / "cam_a").mkdir(parents=True)
+    res = acscal(
+        "poses", folder / "images", "--intrinsics", intr, "-o", run / "cam_a" / "poses.npz"
+    )
+    assert res.returncode == 0, res.stderr
+    res = acscal("report", run)
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr

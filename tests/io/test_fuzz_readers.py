@@ -242,11 +242,15 @@ def read_detections_strict_len(blob: bytes) -> int:
 
 
 def _export_opencv(path: Path) -> None:
-    run_export(path, path.with_name("out_cv.yaml"), "opencv")
+    # the seed has unknown scale: metres need an explicit --scale
+    run_export(path, path.with_name("out_cv.yaml"), "opencv", scale=1.0)
 
 
 def _export_kalibr(path: Path) -> None:
-    run_export(path, path.with_name("out_chain.yaml"), "kalibr")
+    intr = path.with_name("seed_intrinsics.yaml")  # Kalibr needs every camera's intrinsics
+    intr.write_bytes(seeds()["intrinsics"])
+    cams = {"a": intr, "b": intr}
+    run_export(path, path.with_name("out_chain.yaml"), "kalibr", intrinsics=cams, scale=1.0)
 
 
 def _read_detections(path: Path) -> None:

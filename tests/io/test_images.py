@@ -76,6 +76,38 @@ def test_read_gray_and_corrupt_files(tmp_path: Path) -> None:
         read_gray(empty)
 
 
+def test_bytes_after_the_image_are_not_truncation(tmp_path: Path) -> None:
+    """Phones append trailers (or a whole video) after a JPEG's end marker, and tools write
+    bytes after a PNG's IEND: the image is whole. A JPEG cut after its EXIF thumbnail, whose
+    own end marker comes early, is still cut short."""
+    img = board_image()
+    ok, jpg = cv2.imencode(".jpg", img)
+    ok2, png = cv2.imencode(".png", img)
+    assert ok and ok2
+    trailer = b"SEFH" + bytes(range(256)) * 40 + b"\xff\xd8\xff\xe0"
+    for name, data in (("phone.jpg", jpg.tobytes()), ("tool.png", png.tobytes())):
+        f = tmp_path / name
+        f.write_bytes(data + trailer)
+        np.testing.assert_array_equal(read_gray(f)[0], cv2.imdecode(data_u8(data), 0))
+    ok, thumb = cv2.imencode(".jpg", img[::8, ::8])
+    assert ok
+    t = thumb.tobytes()
+    app1 = b"Exif\x00\x00" + t  # a thumbnail inside an APP1 segment
+    body = jpg.tobytes()
+    exif = body[:2] + b"\xff\xe1" + (len(app1) + 2).to_bytes(2, "big") + app1 + body[2:]
+    whole = tmp_path / "exif.jpg"
+    whole.write_bytes(exif)
+    assert read_gray(whole)[0].shape == (480, 640)
+    cut = tmp_path / "exif_cut.jpg"
+    cut.write_bytes(exif[: len(exif) - len(body) // 2])
+    with pytest.raises(InputError, match="truncated JPEG"):
+        read_gray(cut)
+
+
+def data_u8(data: bytes) -> np.ndarray:
+    return np.frombuffer(data, np.uint8)
+
+
 def test_cache_round_trip(tmp_path: Path) -> None:
     corners = np.arange(108, dtype=float).reshape(54, 2) + 0.25
     dets = {

@@ -194,3 +194,20 @@ def test_reader_raises_only_input_error(data: bytes | str) -> None:
             read_yaml_artifact(path, "joint", required=["x.y"])
         except InputError as exc:
             assert "\n" not in str(exc)
+
+
+def test_a_repeated_key_is_refused_naming_its_line(tmp_path: Path) -> None:
+    """YAML forbids a key twice in one mapping; PyYAML would keep the last value silently
+    (a run config's second `square:` would win). Merge keys (`<<`) are not repeats."""
+    from acs_cli.io.artifacts import load_yaml_file
+
+    f = tmp_path / "run.yaml"
+    f.write_text("board:\n  cols: 9\n  rows: 6\n  cols: 8\n")
+    with pytest.raises(InputError, match="duplicate key 'cols' \\(first on line 2\\)") as err:
+        load_yaml_file(f)
+    assert err.value.line == 4
+    f.write_text("a: {b: 1, b: 2}\n")
+    with pytest.raises(InputError, match="duplicate key 'b'"):
+        load_yaml_file(f)
+    f.write_text("base: &b {x: 1, y: 2}\nuse:\n  <<: *b\n  y: 3\n")
+    assert load_yaml_file(f) == {"base": {"x": 1, "y": 2}, "use": {"x": 1, "y": 3}}

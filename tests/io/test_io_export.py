@@ -1,4 +1,4 @@
-"""Kalibr camchain and OpenCV FileStorage exports."""
+"""OpenCV FileStorage exports (the Kalibr camchain: tests/io/test_rig_export.py)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-import yaml
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
-from acs_cli.io.export import read_opencv_yaml, write_camchain_yaml, write_opencv_yaml
+from acs_cli.io.export import read_opencv_yaml, write_opencv_yaml
 
 
 def test_opencv_yaml_read_back(tmp_path: Path, rng: np.random.Generator) -> None:
@@ -69,49 +68,3 @@ def test_read_opencv_yaml_errors(tmp_path: Path) -> None:
     bad.write_text("%YAML:1.0\n---\na: [1, 2\n")
     with pytest.raises(InputError):
         read_opencv_yaml(bad, ["a"])
-
-
-def test_camchain(tmp_path: Path, rng: np.random.Generator) -> None:
-    T = se3.transforms_from_rt(Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3))
-    K = np.array([[500.0, 0, 320], [0, 505.0, 240], [0, 0, 1]])
-    path = tmp_path / "camchain.yaml"
-    write_camchain_yaml(
-        path,
-        [
-            {
-                "name": "cam_a",
-                "intrinsics": K,
-                "distortion_coeffs": [0.1, -0.01, 0, 0],
-                "resolution": [640, 480],
-            },
-            {"name": "cam_b", "T_cn_cnm1": T},
-        ],
-    )
-    doc = yaml.safe_load(path.read_text())
-    assert list(doc) == ["cam0", "cam1"]
-    cam0 = doc["cam0"]
-    assert cam0 == {
-        "camera_model": "pinhole",
-        "intrinsics": [500.0, 505.0, 320.0, 240.0],
-        "distortion_model": "radtan",
-        "distortion_coeffs": [0.1, -0.01, 0.0, 0.0],
-        "resolution": [640, 480],
-        "rostopic": "/cam_a/image_raw",
-    }
-    cam1 = doc["cam1"]
-    assert set(cam1) == {"T_cn_cnm1", "rostopic"}  # unknown intrinsics are omitted
-    np.testing.assert_array_equal(np.array(cam1["T_cn_cnm1"]), T)
-
-
-def test_camchain_errors(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="first camera"):
-        write_camchain_yaml(tmp_path / "c.yaml", [{"name": "a", "T_cn_cnm1": np.eye(4)}])
-    with pytest.raises(InputError, match="name"):
-        write_camchain_yaml(tmp_path / "c.yaml", [{}])
-    with pytest.raises(InputError, match="intrinsics"):
-        write_camchain_yaml(tmp_path / "c.yaml", [{"name": "a", "intrinsics": [1, 2, 3]}])
-    with pytest.raises(InputError, match="T_cn_cnm1"):
-        write_camchain_yaml(
-            tmp_path / "c.yaml", [{"name": "a"}, {"name": "b", "T_cn_cnm1": 2 * np.eye(4)}]
-        )
-    assert list(tmp_path.iterdir()) == []

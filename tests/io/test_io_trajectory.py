@@ -533,3 +533,16 @@ def test_npz_quality_round_trip(tmp_path: Path, rng: np.random.Generator) -> Non
     assert rms.size == 0 and skipped == []
     with pytest.raises(InputError):
         read_npz_quality(tmp_path / "missing.npz")
+
+
+def test_colmap_names_of_several_words_and_missing_points_lines(tmp_path: Path) -> None:
+    """A name of three words makes an image line of 12 fields, which splits into triples: a
+    file without POINTS2D lines must be refused, not read as every second image."""
+    lines = [f"{k} 1 0 0 0 {0.1 * k} 0 0 1 my left image {k}.png" for k in (1, 2, 3, 4)]
+    good = tmp_path / "images.txt"
+    good.write_text("".join(f"{ln}\n\n" for ln in lines))
+    assert read_colmap(good).names == tuple(f"my left image {k}.png" for k in (1, 2, 3, 4))
+    bad = tmp_path / "no_points.txt"
+    bad.write_text("".join(f"{ln}\n" for ln in lines))
+    with pytest.raises(InputError, match="POINTS2D"):
+        read_colmap(bad)

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from export_consumers import check_kalibr_camchain
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
@@ -312,45 +313,6 @@ def test_urdf_loads_in_yourdfpy(rec: RigRecording) -> None:
 
 
 # ------------------------------------------------------------------------ Kalibr
-
-KALIBR_CAMERA_MODELS = {"pinhole": 4, "omni": 5, "eucm": 6, "ds": 6}
-KALIBR_DISTORTION_MODELS = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
-
-
-def check_kalibr_camchain(doc: Any) -> list[dict[str, Any]]:
-    """Kalibr's camchain rules (from its documented format); the cameras, in order."""
-    assert isinstance(doc, dict)
-    n = len(doc)
-    assert list(doc) == [f"cam{i}" for i in range(n)]
-    cams = []
-    for i in range(n):
-        cam = doc[f"cam{i}"]
-        model = cam["camera_model"]
-        assert model in KALIBR_CAMERA_MODELS
-        intr = cam["intrinsics"]
-        assert isinstance(intr, list) and len(intr) == KALIBR_CAMERA_MODELS[model]
-        assert all(isinstance(v, float) and math.isfinite(v) for v in intr)
-        dist = cam["distortion_model"]
-        assert dist in KALIBR_DISTORTION_MODELS
-        coeffs = cam["distortion_coeffs"]
-        assert isinstance(coeffs, list) and len(coeffs) == KALIBR_DISTORTION_MODELS[dist]
-        res = cam["resolution"]
-        assert isinstance(res, list) and len(res) == 2
-        assert all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in res)
-        assert isinstance(cam["rostopic"], str) and cam["rostopic"].startswith("/")
-        overlaps = cam["cam_overlaps"]
-        assert isinstance(overlaps, list)
-        assert all(isinstance(k, int) and 0 <= k < n and k != i for k in overlaps)
-        if i > 0:
-            T = np.asarray(cam["T_cn_cnm1"], dtype=float)
-            assert T.shape == (4, 4)
-            np.testing.assert_allclose(T[3], [0, 0, 0, 1], atol=0)
-            np.testing.assert_allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)
-            assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0, abs=1e-12)
-        else:
-            assert "T_cn_cnm1" not in cam
-        cams.append(cam)
-    return cams
 
 
 def _intrinsics(i: int, model: str = "pinhole") -> IntrinsicsArtifact:

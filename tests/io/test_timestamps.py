@@ -178,3 +178,59 @@ def test_frame_numbers_do_not_pair_with_seconds() -> None:
     with pytest.raises(InputError, match="frame numbers"):
         pair_trajectories(frames, seconds)
     assert pair_trajectories(frames, frames).n_pairs == 5
+
+
+def test_decimal_names_without_fixed_decimals_sort_by_time(tmp_path: Path) -> None:
+    from acs_cli.io.images import list_images
+
+    stamps = ["1623456789", "1623456789.05", "1623456789.1", "1623456789.15", "1623456789.2"]
+    for s in stamps[::-1]:
+        (tmp_path / f"{s}.png").write_bytes(b"")
+    names = [p.name for p in list_images(tmp_path)]
+    assert names == [f"{s}.png" for s in stamps]
+    times = image_times(names, names)
+    np.testing.assert_allclose(times.seconds - 1623456789, [0, 0.05, 0.1, 0.15, 0.2], atol=1e-6)
+
+
+def test_names_that_mix_units_or_go_back_are_refused_never_replaced() -> None:
+    mixed = ["1403636579.5.png", "1403636580000000000.png", "1403636580.5.png"]
+    for fps in (None, 10.0):
+        with pytest.raises(InputError, match="mix time units"):
+            image_times(mixed, mixed, fps=fps)
+    back = ["t_2.5.png", "t_1.5.png"]
+    with pytest.raises(InputError, match="do not increase"):
+        image_times(back, back)
+
+
+def test_times_beyond_int64_nanoseconds_are_refused(tmp_path: Path) -> None:
+    huge = ["99999999999999999999.png", "99999999999999999999999.png"]
+    with pytest.raises(InputError, match="out of range"):
+        image_times(huge, huge)
+    f = tmp_path / "t.csv"
+    f.write_text("a.png,1e30\n")
+    with pytest.raises(InputError, match="out of range"):
+        read_timestamps_file(f)
+
+
+@pytest.mark.parametrize(
+    ("text", "ns"),
+    [
+        ("name,t_ns\na.png,123456789\n", 123456789),  # unit in the header
+        ("name,t [ms]\na.png,1623456789123\n", 1623456789123 * 10**6),
+        ("a.png,1623456789123\n", 1623456789123 * 10**6),  # 13 integer digits: milliseconds
+        ('"a.png","1.5"\n', 1500000000),  # quoted fields
+        ("name;time\r\na.png;2.25\r\n", 2250000000),  # semicolons, CRLF
+    ],
+)
+def test_timestamps_file_units_and_dialects(tmp_path: Path, text: str, ns: int) -> None:
+    f = tmp_path / "t.csv"
+    f.write_bytes(text.encode())
+    assert read_timestamps_file(f) == {"a.png": ns}
+
+
+def test_a_bad_time_after_the_first_line_is_named(tmp_path: Path) -> None:
+    f = tmp_path / "t.csv"
+    f.write_text("a.png,0.1\nb.png,NaN\n")
+    with pytest.raises(InputError, match="not a time") as err:
+        read_timestamps_file(f)
+    assert err.value.line == 2

@@ -264,3 +264,49 @@ def test_an_identified_target_is_never_relabelled(tmp_path: Path) -> None:
     head = {"target": target_to_mapping(grid)}
     tags = (save("c.npz", G, head), save("d.npz", G, head))
     assert shared_board_flip(tags) is None
+
+
+def test_frames_rejected_on_their_poses_are_judged_again_on_their_corners(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """Partial views whose (noisier) poses the pose-based fit rejected come back into the
+    fixed-joint bundle when their corners fit; a frame taken with the joint moved by 2 cm
+    stays out. The section and the estimate's inliers count the frames used."""
+    s = _scene(rng, sigma_px=0.1, n=16)
+    corners = hide_corners(rng, s["obs"])
+    moved = 5  # a frame taken with the joint elsewhere: its corners fit no rotation
+    R = s["T"][moved, :3, :3]
+    x_cam = (BOARD - (s["p_w"] + np.array([0.02, -0.01, 0.0]))) @ R + s["o"]
+    corners[moved] = project_points(x_cam, s["intrinsics"]) + rng.normal(0, 0.1, (54, 2))
+    intr = IntrinsicsArtifact(
+        model="pinhole", image_size=(W, H), camera_matrix=s["K"], distortion=s["dist"]
+    )
+    header = make_header("intrinsics", {}, "test", {}, {})
+    dataclasses.replace(intr, header=header).save(tmp_path / "intrinsics.yaml")
+    turn = se3.matrix_from_rotvec(rng.normal(0, 0.003, (len(s["T"]), 3)))
+    T = np.matmul(s["T"], se3.transforms_from_rt(turn, rng.normal(0, 0.001, (len(turn), 3))))
+    PosesArtifact(
+        trajectory=Trajectory(np.arange(len(T)) / 30.0, T, "x", "npz", True),
+        corners=corners,
+        board_points=BOARD,
+        header=make_header("poses", {}, "test", {}, {})
+        | {"intrinsics_file": str(tmp_path / "intrinsics.yaml")},
+    ).save(tmp_path / "poses.npz")
+    est = estimate_joint_fixed(T)
+    rejected = np.zeros(len(T), dtype=bool)
+    rejected[[0, 2, 6, 10, moved]] = True  # partial views (even frames) and the moved one
+    est = dataclasses.replace(est, inliers={"a": ~rejected})
+    refined, section, notes = bundle_fixed_joint(tmp_path / "poses.npz", T, est, "a")
+    assert section is not None and not notes
+    expected = np.ones(len(T), dtype=bool)
+    expected[moved] = False
+    np.testing.assert_array_equal(refined.inliers["a"], expected)
+    assert section.frames == len(T) - 1
+    err = np.linalg.norm(refined.position_in_a - s["o"])
+    assert err < 4 * np.linalg.norm(refined.std_a), err
+    # the frames the poses kept alone determine the joint less well
+    only = bundle_adjust_fixed_joint(
+        corners[~rejected], None, BOARD, s["intrinsics"], T[~rejected], est.position_in_a,
+        est.position_in_world["a"],
+    )  # fmt: skip
+    assert np.linalg.norm(refined.std_a) < 0.95 * np.linalg.norm(only.joint_std)

@@ -1,0 +1,36 @@
+"""A wrong --board is named (issue 13): nearby and larger sizes found on drawn boards."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from acs_cli.core.board_hint import board_size_hint, larger_board_sizes, nearby_board_sizes
+
+
+def _board(cols: int, rows: int, square: int = 40) -> np.ndarray:
+    """A fronto-parallel board of ``cols x rows`` inner corners on a white 1200x900 image."""
+    img = np.full((900, 1200), 255, np.uint8)
+    x0, y0 = 150, 120
+    for j in range(rows + 1):
+        for i in range(cols + 1):
+            if (i + j) % 2 == 0:
+                img[
+                    y0 + j * square : y0 + (j + 1) * square, x0 + i * square : x0 + (i + 1) * square
+                ] = 0
+    return img
+
+
+def test_nearby_sizes_start_with_squares_counted_for_corners() -> None:
+    assert nearby_board_sizes(10, 7)[0] == (9, 6)
+    assert (10, 7) not in nearby_board_sizes(10, 7)
+    assert all(c >= 3 and r >= 3 for c, r in nearby_board_sizes(3, 3))
+    assert larger_board_sizes(8, 6) == [(9, 7), (9, 6), (8, 7)]
+
+
+def test_the_size_the_images_show_is_found() -> None:
+    images = [_board(9, 6), _board(9, 6, square=35)]
+    assert board_size_hint(images, nearby_board_sizes(10, 7)) == ((9, 6), 2)
+    # 8x6 is found inside a 9x6 board: the larger size says which board it is part of
+    assert board_size_hint(images, larger_board_sizes(8, 6)) == ((9, 6), 2)
+    # nothing of the kind on a blank image
+    assert board_size_hint([np.full((900, 1200), 128, np.uint8)], nearby_board_sizes(9, 6)) is None

@@ -1,0 +1,74 @@
+"""``acscal --help`` starts fast because it imports little (issue 12).
+
+What a fresh interpreter has imported after the CLI's help is the property that keeps the
+start-up within 2x ``python -c "import numpy"``; the timings themselves are in
+``benchmarks/bench_startup.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+#: Modules the help and the version must not import (each costs 20 ms to seconds).
+HEAVY = (
+    "numpy",
+    "scipy",
+    "cv2",
+    "pycolmap",
+    "yaml",
+    "matplotlib",
+    "pydantic",
+    "typer.rich_utils",
+    "rich.table",
+    "rich.progress",
+    "acs_cli.core",
+    "acs_cli.io",
+    "acs_cli.stages",
+)
+
+SCRIPT = """
+import contextlib, io, json, sys
+import acs_cli.cli.main as m
+for args in {argvs!r}:
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            m.main(args)
+        except SystemExit:
+            pass
+print(json.dumps(sorted(k for k in sys.modules if k in {heavy!r})))
+"""
+
+
+def imported_after(*argvs: list[str]) -> list[str]:
+    """The modules of :data:`HEAVY` a fresh interpreter holds after ``acscal ARGV...``."""
+    code = SCRIPT.format(argvs=list(argvs), heavy=set(HEAVY))
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_importing_the_cli_imports_nothing_heavy() -> None:
+    assert imported_after() == []
+
+
+@pytest.mark.parametrize(
+    "argv", [["--help"], ["joint", "--help"], ["run", "--help"], ["--version"]]
+)
+def test_help_and_version_import_nothing_heavy(argv: list[str]) -> None:
+    assert imported_after(argv) == []
+
+
+def test_the_version_is_read_only_when_asked() -> None:
+    code = "import sys, acs_cli; print('importlib.metadata' in sys.modules, acs_cli.__version__)"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    loaded, version = res.stdout.split()
+    assert loaded == "False" and version[0].isdigit()
+
+
+def test_a_command_that_runs_does_import_its_stage() -> None:
+    """The guard above is not vacuous: running a command loads what it needs."""
+    assert "acs_cli.stages" in imported_after(["joint", "--poses-a", "missing.tum", "-o", "x"])
