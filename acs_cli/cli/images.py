@@ -40,14 +40,21 @@ def parse_board(text: str) -> tuple[int, int]:
     Raises
     ------
     InputError
-        Not ``COLSxROWS`` with both at least 2.
+        Not ``COLSxROWS`` with both at least 2 and at most
+        :data:`~acs_cli.core.checkerboard.MAX_BOARD_CORNERS`.
     """
+    from acs_cli.core.checkerboard import MAX_BOARD_CORNERS
+
     m = _BOARD.match(text)
     if not m:
         raise InputError(f"--board must be COLSxROWS inner corners, e.g. 9x6; got {text!r}")
     cols, rows = int(m.group(1)), int(m.group(2))
     if cols < 2 or rows < 2:
         raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
+    if max(cols, rows) > MAX_BOARD_CORNERS:
+        raise InputError(
+            f"--board {cols}x{rows}: at most {MAX_BOARD_CORNERS} inner corners along a side"
+        )
     return cols, rows
 
 

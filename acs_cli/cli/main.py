@@ -434,10 +434,12 @@ def simulate(
     ] = 9,
     frames: Annotated[int, typer.Option("--frames", min=5, help="Transformations a trial.")] = 30,
     max_rot_deg: Annotated[
-        float, typer.Option("--max-rot-deg", min=0.0, help="Largest rotation noise, deg.")
+        float,
+        typer.Option("--max-rot-deg", min=0.0, max=180.0, help="Largest rotation noise, deg."),
     ] = 2.4,
     max_trans: Annotated[
-        float, typer.Option("--max-trans", min=0.0, help="Largest translation noise, m.")
+        float,
+        typer.Option("--max-trans", min=0.0, max=1000.0, help="Largest translation noise, m."),
     ] = 0.1,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the study.")] = 0,
     json_out: JsonOpt = False,
@@ -493,12 +495,18 @@ from acs_cli.cli.report import register as _register_report  # noqa: E402
 _register_report(app)
 
 
+#: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it).
+INTERRUPTED = 130
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
     args = sys.argv[1:] if argv is None else argv
     reset()
     try:
-        app(args=args, prog_name="acscal", standalone_mode=False)
+        # not standalone, Typer turns Ctrl-C into a returned 130 (and typer.Exit into its
+        # code): returned, not raised, so it must become the exit status here
+        code = app(args=args, prog_name="acscal", standalone_mode=False)
     except AcsError as exc:
         err.print(f"acscal: error: {exc.one_line()}", markup=False, soft_wrap=True)
         details = exc.details if isinstance(exc, DegenerateMotionError) else None
@@ -520,6 +528,13 @@ def main(argv: list[str] | None = None) -> None:
         err.print(f"acscal: error: {message}", markup=False, soft_wrap=True)
         emit_error(2, "OSError", message)
         raise SystemExit(2) from None
+    if code == INTERRUPTED:
+        message = "interrupted (no output is left half-written: each is whole or not written)"
+        err.print(f"acscal: {message}", markup=False, soft_wrap=True)
+        emit_error(INTERRUPTED, "Interrupted", message)
+        raise SystemExit(INTERRUPTED)
+    if isinstance(code, int) and not isinstance(code, bool) and code:
+        raise SystemExit(code)
 
 
 if __name__ == "__main__":  # pragma: no cover

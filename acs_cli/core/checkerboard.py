@@ -77,6 +77,9 @@ WINDOW_FRACTION = 0.3
 BLUR_SIGMA = 1.0
 #: X-junction fit radius as a fraction of the smallest corner spacing.
 FIT_FRACTION = 0.4
+#: Most inner corners along a board's side that acscal accepts (OpenCV's pattern sizes are
+#: 32-bit; no printable board comes near).
+MAX_BOARD_CORNERS = 1000
 #: Edge width ``s`` (pixels) of the X-junction model ``tanh(d / s)``.
 EDGE_WIDTH = 1.0
 #: Largest move (pixels) the X-junction fit may make from ``cornerSubPix``'s estimate.

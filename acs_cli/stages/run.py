@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 import acs_cli
+from acs_cli.core.checkerboard import MAX_BOARD_CORNERS
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
@@ -182,11 +183,12 @@ class _Checker:
     def board(self, value: Any) -> tuple[int, int, float]:
         """``board: {cols, rows, square}``: inner corners and the square's side (m)."""
         b = self.mapping(value, "board", required=("cols", "rows", "square"))
-        return (
-            self.integer(b["cols"], "board.cols", 2),
-            self.integer(b["rows"], "board.rows", 2),
-            self.positive(b["square"], "board.square"),
-        )
+        cols = self.integer(b["cols"], "board.cols", 2)
+        rows = self.integer(b["rows"], "board.rows", 2)
+        for key, n in (("board.cols", cols), ("board.rows", rows)):
+            if n > MAX_BOARD_CORNERS:
+                raise self.fail(key, f"at most {MAX_BOARD_CORNERS} inner corners, got {n}")
+        return cols, rows, self.positive(b["square"], "board.square")
 
     def target(self, value: Any) -> Target:
         """``target``: a target mapping (Kalibr's or OpenCV's names, as a target YAML), a
