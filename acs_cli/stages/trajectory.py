@@ -19,9 +19,9 @@ import numpy as np
 from acs_cli.core.acs_trajectory import AcsTrajectory, recover_trajectory
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, sha256_of, write_yaml_artifact
-from acs_cli.io.atomic import check_distinct_output
+from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.relpose import RelposeArtifact
-from acs_cli.io.trajectory import write_tum
+from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, write_tum
 from acs_cli.io.validate import TIME_TOL
 from acs_cli.stages.common import PairedTrajectories, StageRun, load_pair, pairing_section
 from acs_cli.stages.joint import read_joint
@@ -235,6 +235,8 @@ def run_trajectory(
     outputs = {key: out_dir / name for key, name in OUTPUT_NAMES.items()}
     for out in outputs.values():
         check_distinct_output(out, inputs.values())
+    for out in outputs.values():  # all of them before the first is replaced
+        check_writable(out)
     art = read_relpose(relpose)
     pair_by, max_dt = cfg.pair_by, cfg.max_dt
     recorded = art.quality.pairing
@@ -248,9 +250,13 @@ def run_trajectory(
     if n_rej:
         warnings.append(f"{n_rej} frame(s) were rejected as outliers by relpose (marked)")
 
-    write_tum(outputs["cam_a"], pair.a.timestamps, traj.T_r_a)
-    write_tum(outputs["cam_b"], pair.b.timestamps, traj.T_r_b)
-    write_tum(outputs["joint"], pair.a.timestamps, traj.T_r_joint)
+    for key, times, T in (
+        ("cam_a", pair.a, traj.T_r_a),
+        ("cam_b", pair.b, traj.T_r_b),
+        ("joint", pair.a, traj.T_r_joint),
+    ):
+        note = None if times.time_unit == "s" else f"{FRAME_NUMBERS_NOTE}, not seconds"
+        write_tum(outputs[key], times.timestamps, T, timestamps_ns=times.timestamps_ns, note=note)
 
     d = traj.consistency
     used = ~rec.rejected if (~rec.rejected).any() else np.ones_like(rec.rejected)

@@ -324,3 +324,21 @@ def test_overlap_cameras_labelling_the_board_in_opposite_orders(
         assert np.linalg.norm(np.array(off) - rig.o_a) > 0.05
     else:
         assert res.returncode == 3, res.stderr
+
+
+def test_trajectory_writes_nothing_when_an_output_cannot_be_written(
+    rig_files: dict, tmp_path: Path
+) -> None:
+    """Issue 13: `trajectory` replaced cam_a.tum before it found that joint.tum could not be
+    written; every output is now checked first."""
+    rel = tmp_path / "relpose.yaml"
+    poses = ["--poses-a", rig_files["general_a"], "--poses-b", rig_files["general_b"]]
+    res = acscal("relpose", "--self-calibrate", *poses, "-o", rel)
+    assert res.returncode == 0, res.stderr
+    out = tmp_path / "traj"
+    (out / "joint.tum").mkdir(parents=True)  # a folder where the third output goes
+    (out / "cam_a.tum").write_text("# an earlier trajectory\n")
+    res = acscal("trajectory", "--relpose", rel, *poses, "-o", out)
+    assert res.returncode == 2 and "joint.tum" in res.stderr, res.stderr
+    assert (out / "cam_a.tum").read_text() == "# an earlier trajectory\n"
+    assert not (out / "cam_b.tum").exists()
