@@ -20,6 +20,8 @@ from acs_cli.cli.output import JsonOpt, artifact_result, emit, err, out, warn
 from acs_cli.errors import InputError
 
 if TYPE_CHECKING:
+    from rich.progress import Progress
+
     from acs_cli.core.targets import MarkerTarget
     from acs_cli.stages.poses import PosesRun, SfmPosesRun
 
@@ -58,13 +60,9 @@ def parse_board(text: str) -> tuple[int, int]:
     return cols, rows
 
 
-@contextmanager
-def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
-    """A rich progress bar on stderr; yields the ``progress(done, total)`` callback.
-
-    Off when stderr is not a terminal: a log or a pipe then holds only the messages (a
-    transient bar would still leave an empty line there).
-    """
+def _bar() -> Progress:
+    """A transient rich bar on stderr (its task's description, the count, the time left);
+    off when stderr is not a terminal: a log or a pipe then holds only the messages."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -73,10 +71,20 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
         TimeRemainingColumn,
     )
 
-    with Progress(
-        TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-        console=err, transient=True, disable=not err.is_terminal,
-    ) as bar:  # fmt: skip
+    return Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
+    )  # fmt: skip
+
+
+@contextmanager
+def _progress(label: str) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar on stderr; yields the ``progress(done, total)`` callback.
+
+    Off when stderr is not a terminal: a log or a pipe then holds only the messages (a
+    transient bar would still leave an empty line there).
+    """
+    with _bar() as bar:
         task = bar.add_task(label, total=None)
 
         def update(done: int, total: int) -> None:
@@ -240,18 +248,7 @@ def _phase_progress() -> Iterator[Callable[[str, int, int], None]]:
     Yields the ``progress(phase, done, total)`` callback. The bar is off when stderr is not
     a terminal; the phase lines are always printed.
     """
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-    )
-
-    with Progress(
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-        TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
-    ) as bar:  # fmt: skip
+    with _bar() as bar:
         task = bar.add_task("", total=None)
         current = [""]
 

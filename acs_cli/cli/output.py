@@ -162,6 +162,13 @@ def warn(warnings: Iterable[str], prefix: str = "warning") -> None:
         err.print(Text.assemble((f"{prefix}:", "yellow"), " ", w))
 
 
+def _document(exit_code: int, **body: Any) -> dict[str, Any]:
+    """The ``acscal/cli-result`` document: its header, ``ok`` and ``exit_code``, then
+    ``body`` (``result`` or ``error``, ``written``, ``warnings``)."""
+    head = {"schema": JSON_SCHEMA, "schema_version": 1, "command": _MODE.command}
+    return head | {"ok": exit_code == 0, "exit_code": exit_code} | body
+
+
 def emit(
     result: Mapping[str, Any],
     *,
@@ -182,18 +189,8 @@ def emit(
     """
     if not _MODE.active:
         return
-    _print_document(
-        {
-            "schema": JSON_SCHEMA,
-            "schema_version": 1,
-            "command": _MODE.command,
-            "ok": True,
-            "exit_code": 0,
-            "result": dict(result),
-            "written": [str(p) for p in written],
-            "warnings": list(warnings),
-        }
-    )
+    paths = [str(p) for p in written]
+    _print_document(_document(0, result=dict(result), written=paths, warnings=list(warnings)))
 
 
 def emit_error(
@@ -214,18 +211,8 @@ def emit_error(
     """
     if not _MODE.active:
         return
-    _print_document(
-        {
-            "schema": JSON_SCHEMA,
-            "schema_version": 1,
-            "command": _MODE.command,
-            "ok": False,
-            "exit_code": exit_code,
-            "error": {"type": kind, "message": message, "details": dict(details or {})},
-            "written": [],
-            "warnings": [],
-        }
-    )
+    error = {"type": kind, "message": message, "details": dict(details or {})}
+    _print_document(_document(exit_code, error=error, written=[], warnings=[]))
 
 
 def artifact_result(doc: Mapping[str, Any]) -> dict[str, Any]:

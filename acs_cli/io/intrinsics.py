@@ -33,7 +33,40 @@ from acs_cli.io.validate import (
     optional_number,
 )
 
-__all__ = ["BoardSpec", "DroppedView", "ImagesUsed", "IntrinsicsArtifact"]
+__all__ = ["BoardSpec", "DroppedView", "ImagesUsed", "IntrinsicsArtifact", "check_camera"]
+
+
+def check_camera(
+    model: str,
+    camera_matrix: Any,
+    distortion: Any,
+    image_size: tuple[int, int],
+    path: str | Path | None,
+    prefix: str = "",
+) -> None:
+    """Check a camera's intrinsics as an artifact holds them (keys named with ``prefix``).
+
+    Raises
+    ------
+    InputError
+        A camera matrix that is not 3x3 and finite with positive ``fx``, ``fy``; a
+        distortion vector of another length than ``model``'s or not finite; an image size
+        that is not positive.
+    """
+    K = np.asarray(camera_matrix, dtype=float)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError(f"'{prefix}camera_matrix' must be 3x3 with positive fx, fy", path=path)
+    n = len(DISTORTION_NAMES[model])
+    D = np.asarray(distortion, dtype=float)
+    if D.shape != (n,) or not np.all(np.isfinite(D)):
+        raise InputError(
+            f"'{prefix}distortion' must hold {n} finite numbers for the {model} model, got "
+            f"shape {D.shape}",
+            path=path,
+        )
+    w, h = image_size
+    if w <= 0 or h <= 0:
+        raise InputError(f"'{prefix}image_size' must be [width, height] in pixels", path=path)
 
 
 @dataclass(frozen=True)
@@ -212,20 +245,7 @@ class IntrinsicsArtifact(YamlArtifact):
         p = self.source
         if self.model not in MODELS:
             raise InputError(f"unknown camera model {self.model!r}", path=p)
-        K = np.asarray(self.camera_matrix, dtype=float)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise InputError("'camera_matrix' must be a 3x3 matrix with positive fx, fy", path=p)
-        n = len(DISTORTION_NAMES[self.model])
-        D = np.asarray(self.distortion, dtype=float)
-        if D.shape != (n,) or not np.all(np.isfinite(D)):
-            raise InputError(
-                f"'distortion' must hold {n} finite numbers for the {self.model} model, got "
-                f"{D.size}",
-                path=p,
-            )
-        w, h = self.image_size
-        if w <= 0 or h <= 0:
-            raise InputError("'image_size' must be [width, height] in pixels", path=p)
+        check_camera(self.model, self.camera_matrix, self.distortion, self.image_size, p)
 
     @classmethod
     def from_doc(cls, doc: dict[str, Any], path: Path) -> IntrinsicsArtifact:

@@ -29,9 +29,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from acs_cli.core.intrinsics import DISTORTION_NAMES, MODELS
+from acs_cli.core.intrinsics import MODELS
 from acs_cli.errors import InputError
 from acs_cli.io.base import Artifact
+from acs_cli.io.intrinsics import check_camera
 from acs_cli.io.trajectory import (
     BoardObservations,
     Trajectory,
@@ -165,20 +166,14 @@ class SfmSummary:
                 f"{self.intrinsics_source!r}",
                 path=path,
             )
-        K = np.asarray(self.camera_matrix, dtype=float)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise InputError("'sfm_camera_matrix' must be 3x3 with positive fx, fy", path=path)
-        k = len(DISTORTION_NAMES[self.intrinsics_model])
-        D = np.asarray(self.distortion, dtype=float)
-        if D.shape != (k,) or not np.all(np.isfinite(D)):
-            raise InputError(
-                f"'sfm_distortion' must be {k} finite numbers for the {self.intrinsics_model} "
-                f"model, got shape {D.shape}",
-                path=path,
-            )
-        w, h = self.image_size
-        if w <= 0 or h <= 0:
-            raise InputError("'sfm_image_size' must be [width, height] in pixels", path=path)
+        check_camera(
+            self.intrinsics_model,
+            self.camera_matrix,
+            self.distortion,
+            self.image_size,
+            path,
+            prefix="sfm_",
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The ``sfm_*`` arrays to write (:data:`SFM_KEYS`)."""

@@ -29,9 +29,8 @@ def _copy(pattern: str, dest: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Both cameras calibrated and their poses solved (once for the module)."""
-    if not DATA.is_dir():
-        pytest.skip(f"OpenCV sample photographs not found at {DATA}")
+    """Both cameras calibrated and their poses solved (once for the module; every test that
+    uses it is marked ``needs_data``)."""
     d = tmp_path_factory.mktemp("stereo")
     files: dict[str, Path] = {"dir": d}
     for cam in ("left", "right"):

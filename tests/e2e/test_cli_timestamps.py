@@ -17,12 +17,14 @@ DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "opencv_
 #: EuRoC-like names (nanoseconds, 50 ms apart with odd digits at the end)
 NS0 = 1403636579763555584
 
+pytestmark = pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"OpenCV sample photographs not found at {DATA}"
+)
+
 
 @pytest.fixture(scope="module")
 def left(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """OpenCV's left photographs, calibrated once."""
-    if not DATA.is_dir():
-        pytest.skip(f"OpenCV sample photographs not found at {DATA}")
     d = tmp_path_factory.mktemp("times")
     imgs = d / "frames"
     imgs.mkdir()
