@@ -7,7 +7,11 @@ from ``../shared/data`` (relative to the repository; ``--data`` to point elsewhe
   camera's frames converted to grey: its demosaicing leaves 2-pixel periodic patterns along
   the edges);
 - ``opencv_chessboard``: OpenCV's 13 ``left*.jpg`` and 13 ``right*.jpg`` samples, 640x480
-  JPEG, a 9x6 board, two cameras (two data sets).
+  JPEG, a 9x6 board, two cameras (two data sets);
+- ``blank`` (not in the default ``--sets``): every sixth ``rwhe_kuka1`` frame with the board
+  painted over (its grid extended by two squares each side, filled with the frame's median
+  grey; located by ``findChessboardCorners``), real clutter without a board, to time the
+  frames a detector must reject (the plain loop takes about a second on each).
 
 Methods, each in a plain loop over the frames (already decoded in memory):
 
@@ -39,7 +43,7 @@ Accuracy, on the frames every method detects (same frames, same model):
 Prints one Markdown table. Exits 0 with a message when the data is absent.
 
     .venv/bin/python benchmarks/bench_detection_real.py [--repeat 3] [--threads 1|default]
-        [--sets kuka,left,right] [--methods acscal,classic,classic_fast,sb]
+        [--sets kuka,left,right,blank] [--methods acscal,classic,classic_fast,sb]
         [--data ../shared/data]
 """
 
@@ -81,12 +85,14 @@ class DataSet:
     cols: int
     rows: int
     square: float  # metres (OpenCV's samples do not state it: any value gives the same RMS)
+    blank: bool = False  # every sixth frame, the board painted over
 
 
 SETS = {
     "kuka": DataSet("kuka", "rwhe_kuka1", "*.png", 28, 17, 0.020),
     "left": DataSet("left", "opencv_chessboard", "left*.jpg", 9, 6, 0.025),
     "right": DataSet("right", "opencv_chessboard", "right*.jpg", 9, 6, 0.025),
+    "blank": DataSet("blank", "rwhe_kuka1", "*.png", 28, 17, 0.020, blank=True),
 }
 
 
@@ -205,7 +211,22 @@ def load(ds: DataSet, data: Path) -> list[np.ndarray]:
         images.append(np.asarray(im))
     if not images:
         raise SystemExit(f"no images {data / ds.folder / ds.pattern}")
-    return images
+    return [paint_over_board(im, ds) for im in images[::6]] if ds.blank else images
+
+
+def paint_over_board(gray: np.ndarray, ds: DataSet) -> np.ndarray:
+    """The frame with its board, grid extended by two squares, filled with its median."""
+    ok, c = cv2.findChessboardCorners(gray, (ds.cols, ds.rows))
+    if not ok:
+        raise SystemExit("blank set: a frame's board was not found, cannot paint it over")
+    j, i = np.mgrid[0 : ds.rows, 0 : ds.cols]
+    grid = np.column_stack([i.ravel(), j.ravel()]).astype(np.float32)
+    H = cv2.findHomography(grid, np.asarray(c, np.float32).reshape(-1, 2))[0]
+    ext = [[-2, -2], [ds.cols + 1, -2], [ds.cols + 1, ds.rows + 1], [-2, ds.rows + 1]]
+    quad = cv2.perspectiveTransform(np.array(ext, np.float32).reshape(-1, 1, 2), H)
+    out = gray.copy()
+    cv2.fillConvexPoly(out, np.round(quad.reshape(-1, 2)).astype(np.int32), int(np.median(gray)))
+    return out
 
 
 def run_set(ds: DataSet, data: Path, repeat: int, keys: list[str]) -> list[str]:
@@ -244,7 +265,8 @@ def run_set(ds: DataSet, data: Path, repeat: int, keys: list[str]) -> list[str]:
         else:
             acc = "n/a | n/a | n/a | n/a"
         rows.append(
-            f"| {ds.folder} {ds.pattern} ({len(images)} x {w}x{h}, {ds.cols}x{ds.rows}) "
+            f"| {ds.folder} {ds.pattern}{', board painted over' if ds.blank else ''} "
+            f"({len(images)} x {w}x{h}, {ds.cols}x{ds.rows}) "
             f"| {METHODS[key][0]} | {hits}/{len(images)} | {acc} | {total:.2f} "
             f"| {1000 * total / len(images):.1f} | {total / ref:.2f}x |"
         )
@@ -262,7 +284,9 @@ def run_set(ds: DataSet, data: Path, repeat: int, keys: list[str]) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
-    ap.add_argument("--sets", default="kuka,left,right", help="comma-separated: kuka,left,right")
+    ap.add_argument(
+        "--sets", default="kuka,left,right", help="comma-separated: kuka,left,right,blank"
+    )
     ap.add_argument("--repeat", type=int, default=3, help="runs per method; the median is shown")
     ap.add_argument(
         "--methods",

@@ -286,3 +286,31 @@ def smooth_general_sequence(
         T_wb_w = seq.T_wb_b[0] @ se3.invert_transforms(T_w_a[0] @ T_a_b[0])
         seq = replace(seq, T_wb_b=T_wb_w @ T_w_a_b @ T_a_b_b)
     return seq
+
+
+def pluslib_stylus_recording(
+    rng: np.random.Generator, frames: int = 100, outliers: int = 5
+) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    """PlusLib's stylus test (vtkStylusCalibrationTest.cxx), in millimetres: a stylus
+    turning about its 210 mm tip (``frames`` tracker poses, 0.1 deg / 0.25 mm noise), with
+    ``outliers`` of them replaced by random poses (rotations about x, y, z uniform in +-160
+    degrees, translations uniform in +-1000 mm).
+
+    Returns
+    -------
+    T_world_cam : ndarray, shape (frames, 4, 4)
+    bad : ndarray of int, shape (outliers,)
+        The replaced frames.
+    tip : ndarray, shape (3,)
+        The tip in the stylus' frame (mm).
+    """
+    tip = random_unit_vectors(rng, 1)[0] * 210.0
+    rig = SyntheticRig(o_a=tip, o_b=tip, R0=np.eye(3))
+    T = fixed_joint_sequence(rng, rig, frames, max_rotation_deg=40.0).T_wa_a
+    T = add_pose_noise(rng, T, 0.1, 0.25)
+    bad = rng.choice(frames, size=outliers, replace=False)
+    angles = np.radians(rng.uniform(-160.0, 160.0, size=(outliers, 3)))
+    rx, ry, rz = (se3.matrix_from_rotvec(np.eye(3)[j] * angles[:, j : j + 1]) for j in range(3))
+    T[bad, :3, :3] = rx @ ry @ rz
+    T[bad, :3, 3] = rng.uniform(-1000.0, 1000.0, size=(outliers, 3))
+    return T, bad, tip

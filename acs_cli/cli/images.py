@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from acs_cli.cli.help_format import AcsCommand
-from acs_cli.cli.output import JsonOpt, artifact_result, emit, err, out, warn
+from acs_cli.cli.output import AcceptWeakOpt, JsonOpt, artifact_result, emit, err, out, warn
 from acs_cli.errors import InputError
 
 if TYPE_CHECKING:
@@ -182,6 +182,7 @@ def intrinsics(
         ),
     ] = "camera",
     workers: WorkersOpt = None,
+    accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate a camera's intrinsics from checkerboard (or AprilGrid, ChArUco) images.
@@ -214,6 +215,7 @@ def intrinsics(
         camera_name=camera_name,
         workers=workers,
         target=tgt,
+        accept_weak=accept_weak,
     )
     with _progress("detecting") as progress:
         run = run_intrinsics(images_dir, output, cfg, progress)

@@ -17,6 +17,7 @@ import typer
 import acs_cli
 from acs_cli.cli.help_format import AcsCommand, AcsGroup
 from acs_cli.cli.output import (
+    AcceptWeakOpt,
     JsonOpt,
     artifact_result,
     emit,
@@ -26,6 +27,7 @@ from acs_cli.cli.output import (
     reset,
     warn,
 )
+from acs_cli.cli.report import positive_seconds
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 
 # Imports here are light (typer, rich's console): numpy, the stages and what they import
@@ -99,7 +101,7 @@ MaxDtOpt = Annotated[
         "--max-dt",
         help="Largest timestamp difference of a pair, seconds (default: half the median "
         "frame interval).",
-        min=0.0,
+        callback=positive_seconds,
     ),
 ]
 UnitOpt = Annotated[
@@ -158,6 +160,7 @@ def joint(
     pair_by: PairByOpt = PairBy.auto,
     max_dt: MaxDtOpt = None,
     length_unit: UnitOpt = "m",
+    accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Locate the joint in each camera's frame.
@@ -185,6 +188,7 @@ def joint(
         max_dt=max_dt,
         length_unit=length_unit,
         bundle=bundle,
+        accept_weak=accept_weak,
     )
     run = run_joint(poses_a, poses_b, output, cfg)
     est = run.estimate
@@ -237,7 +241,11 @@ def relpose(
     ] = False,
     reference: Annotated[
         int,
-        typer.Option("--reference", help="Index of the paired frame at which T_b_a is reported."),
+        typer.Option(
+            "--reference",
+            min=0,
+            help="Index (from 0) of the paired frame at which T_b_a is reported.",
+        ),
     ] = 0,
     method: MethodOpt = Method.refined,
     bundle: BundleOpt = True,
@@ -258,6 +266,7 @@ def relpose(
         float,
         typer.Option("--max-offset", min=0.0, help="Largest clock offset searched, seconds."),
     ] = 0.5,
+    accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Relative pose T_b_a of two cameras joined by a joint (no overlap needed).
@@ -300,6 +309,7 @@ def relpose(
         bundle=bundle,
         estimate_time_offset=estimate_time_offset,
         max_offset=max_offset,
+        accept_weak=accept_weak,
     )
     run = run_relpose(poses_a, poses_b, joint_file or joint_metric, output, cfg)
     est = run.estimate
@@ -502,6 +512,8 @@ INTERRUPTED = 130
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
     args = sys.argv[1:] if argv is None else argv
+    if not args:  # a bare `acscal`: the help (the command list), as git and kubectl do
+        args = ["--help"]
     reset()
     try:
         # not standalone, Typer turns Ctrl-C into a returned 130 (and typer.Exit into its

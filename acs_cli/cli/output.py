@@ -124,6 +124,15 @@ def json_option_callback(ctx: typer.Context, value: bool) -> bool:
     return value
 
 
+AcceptWeakOpt = Annotated[
+    bool,
+    typer.Option(
+        "--accept-weak",
+        help="Write a result the data hardly determine (past a refusal level of "
+        "docs/degeneracy.md) instead of exiting 3; the artifact and every export of it are "
+        "marked weak.",
+    ),
+]
 JsonOpt = Annotated[
     bool,
     typer.Option(

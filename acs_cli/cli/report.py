@@ -16,7 +16,15 @@ from acs_cli.cli.help_format import AcsCommand
 from acs_cli.cli.output import JsonOpt, artifact_result, emit, out, warn
 from acs_cli.errors import InputError
 
-__all__ = ["register", "report", "trajectory"]
+__all__ = ["positive_seconds", "register", "report", "trajectory"]
+
+
+def positive_seconds(value: float | None) -> float | None:
+    """``--max-dt``'s check: a positive number of seconds (a pair's largest time
+    difference; 0 would pair only identical timestamps, NaN nothing)."""
+    if value is not None and not value > 0:
+        raise typer.BadParameter(f"must be a positive number of seconds, got {value}")
+    return value
 
 
 class _Format(str, Enum):
@@ -94,7 +102,7 @@ def trajectory(
         typer.Option(
             "--max-dt",
             help="Largest timestamp difference of a pair, seconds (default: as relpose did).",
-            min=0.0,
+            callback=positive_seconds,
         ),
     ] = None,
     json_out: JsonOpt = False,

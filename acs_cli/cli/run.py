@@ -5,6 +5,7 @@ Thin Typer command over :mod:`acs_cli.stages.run`; :func:`register` adds it to t
 
 from __future__ import annotations
 
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -12,7 +13,7 @@ from typing import Annotated
 import typer
 
 from acs_cli.cli.help_format import AcsCommand
-from acs_cli.cli.output import JsonOpt, emit, out, warn
+from acs_cli.cli.output import AcceptWeakOpt, JsonOpt, emit, out, warn
 
 __all__ = ["register", "run"]
 
@@ -39,6 +40,7 @@ def run(
             "--only", help="Run only this stage (the others' outputs must exist already)."
         ),
     ] = None,
+    accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Run intrinsics, poses, joint and relpose as a config file says.
@@ -57,6 +59,8 @@ def run(
     from acs_cli.stages.run import StageResult, load_run_config, run_pipeline
 
     cfg = load_run_config(config)
+    if accept_weak:
+        cfg = replace(cfg, accept_weak=True)
 
     def progress(res: StageResult) -> None:
         extra = f" ({res.seconds:.1f} s)" if res.status == "ran" else ""

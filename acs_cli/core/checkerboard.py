@@ -17,21 +17,29 @@ The detector (:func:`detect_checkerboard`) works in three steps:
    ``CALIB_CB_FAST_CHECK``. Frames without a board fail in tens of milliseconds instead of
    the seconds a full search takes (clutter of many equal blobs, such as a tiled wall, can
    pass the check and cost a search).
-2. **Gradient refinement** at full resolution with ``cornerSubPix`` on a copy of the
-   board's region blurred by :data:`BLUR_SIGMA` pixels (which removes the pixel-periodic
-   demosaicing and aliasing patterns of real cameras that bias gradients), its window sized
-   from the board's square size in pixels (:data:`WINDOW_FRACTION` of the smallest corner
-   spacing) instead of a fixed 11x11: a fixed large window reaches into the neighbouring
-   squares on small boards and biases the corners.
-3. **X-junction fit** (:func:`refine_x_junction`): around each corner, within a radius of
-   :data:`FIT_FRACTION` of the corner spacing, the unblurred image is fitted by least
-   squares with the model of a blurred checkerboard corner, ``m + a tanh(d1 / s)
+2. **X-junction fit** (:func:`refine_x_junction`) at full resolution: around each corner,
+   within a radius of :data:`FIT_FRACTION` of the corner spacing, the image is fitted by
+   least squares with the model of a blurred checkerboard corner, ``m + a tanh(d1 / s)
    tanh(d2 / s)`` (``d1``, ``d2`` the distances to the board's two edge lines through the
    corner), and the corner moved to the fitted junction. It uses every pixel of the
    corner's neighbourhood, not only its gradients, and on real photographs reaches a lower
    calibration RMS than ``findChessboardCornersSB`` with ``CALIB_CB_ACCURACY``
-   (``benchmarks/bench_detection_real.py``). A corner the fit moves more than
-   :data:`MAX_FIT_SHIFT` pixels from step 2's estimate keeps step 2's estimate.
+   (``benchmarks/bench_detection_real.py``). When the search level is at most 2x
+   downscaled the fit starts at the coarse corners (``findChessboardCorners`` refines them
+   on its level), each corner until a round moves it less than :data:`FIT_STOP` pixels
+   (at most :data:`FIT_ROUNDS` rounds).
+3. **Gradient refinement**, where the fit cannot start at the coarse corners:
+   ``cornerSubPix`` on a copy of the board's region blurred by :data:`BLUR_SIGMA` pixels
+   (which removes the pixel-periodic demosaicing and aliasing patterns of real cameras
+   that bias gradients), its window sized from the board's square size in pixels
+   (:data:`WINDOW_FRACTION` of the smallest corner spacing) instead of a fixed 11x11 (a
+   fixed large window reaches into the neighbouring squares on small boards and biases the
+   corners). It runs before the fit when the search level is 4x or more downscaled (with
+   a wider window first), on the corners the fit moved more than :data:`MAX_FIT_SHIFT`
+   pixels of the search level from their start (blurred frames, where the coarse corners
+   can be pixels off; these are fitted again from there and keep ``cornerSubPix``'s
+   estimate if the fit moves them more than :data:`MAX_FIT_SHIFT` pixels), and alone with
+   ``fit=False``.
 
 :func:`refine_saddle` (a quadratic surface fitted around each corner, moved to its saddle
 point) is the refinement of detectors before ``acscal-checkerboard-5``, kept for the corners
@@ -67,7 +75,7 @@ __all__ = [
 ]
 
 #: Recorded in detection caches: bump when the detector's output can change.
-DETECTOR_VERSION = "acscal-checkerboard-5"
+DETECTOR_VERSION = "acscal-checkerboard-6"
 #: Width (pixels) about which the coarse search runs (the first pyramid level at least
 #: :data:`LEVEL_SLACK` times as wide), unless the board's squares need a wider one.
 COARSE_WIDTH = 640
@@ -82,7 +90,13 @@ FIT_FRACTION = 0.4
 MAX_BOARD_CORNERS = 1000
 #: Edge width ``s`` (pixels) of the X-junction model ``tanh(d / s)``.
 EDGE_WIDTH = 1.0
-#: Largest move (pixels) the X-junction fit may make from ``cornerSubPix``'s estimate.
+#: Most rounds of the X-junction fit in :func:`detect_checkerboard`: from the coarse
+#: corners on blurred images its steps fall short and take several rounds to converge.
+FIT_ROUNDS = 4
+#: A corner's fit stops when a round moves it less than this (pixels).
+FIT_STOP = 0.01
+#: Largest move the X-junction fit may make from its start, in pixels of the image the
+#: start comes from (the search level for coarse corners, else full resolution).
 MAX_FIT_SHIFT = 0.75
 
 #: Width (pixels) of the image of the first quick "is there a board?" check.
@@ -268,6 +282,33 @@ def _disc_samples(radius: float, spacing: float) -> tuple[NDArray[np.float32], N
     return u, v
 
 
+def _tanh_inplace(x: NDArray[np.float32]) -> NDArray[np.float32]:
+    """``tanh(x)`` in place, as ``2 / (1 + exp(-2 x)) - 1``: ``cv2.exp`` is vectorised,
+    several times faster than ``np.tanh`` on float32 (overflow to inf gives -1, exactly)."""
+    x *= np.float32(-2.0)
+    cv2.exp(x, x)
+    x += np.float32(1.0)
+    np.divide(np.float32(2.0), x, out=x)
+    x -= np.float32(1.0)
+    return x
+
+
+def _step_gain(first: NDArray[np.float64], second: NDArray[np.float64]) -> float:
+    """The factor the fit's steps should be scaled by, from two rounds' steps.
+
+    On an image blurred more than the model, each step covers a fraction ``g`` of the way
+    to the junction (the same on the whole board), so the second step is about ``1 - g``
+    times the first: ``1 / g`` from the median ratio over the corners whose first step
+    stands above the noise (0.05 px); 1 if fewer than 4 do, at most 4.
+    """
+    norm2 = np.sum(first * first, axis=1)
+    big = norm2 > 0.05**2
+    if np.count_nonzero(big) < 4:
+        return 1.0
+    ratio = float(np.median(np.sum(first[big] * second[big], axis=1) / norm2[big]))
+    return 1.0 / (1.0 - min(max(ratio, 0.0), 0.75))
+
+
 def refine_x_junction(
     gray: NDArray[np.generic],
     corners: NDArray[np.floating],
@@ -278,6 +319,7 @@ def refine_x_junction(
     edge_width: float = EDGE_WIDTH,
     iterations: int = 3,
     sample_spacing: float | None = None,
+    tolerance: float = 1e-3,
 ) -> NDArray[np.float64]:
     """Fit the model of a blurred checkerboard corner to the image around each corner.
 
@@ -290,7 +332,11 @@ def refine_x_junction(
     ``c`` (one Gauss-Newton step); the corner moves, the disc is sampled again (bilinear)
     and the step repeated. The edge lines' directions and ``s`` stay fixed: the model and
     a corner's image are both symmetric under a half turn about the corner, so errors in
-    them do not move the fitted junction to first order. All corners are fitted at once.
+    them do not move the fitted junction to first order. All corners are fitted at once;
+    a corner stops when a round moves it less than ``tolerance``. On an image blurred more
+    than the model the steps fall short of the junction by a factor common to the board:
+    from the third round on they are scaled by the gain :func:`_step_gain` reads from the
+    first two rounds' steps (1 on sharp images).
 
     Samples lie on a sunflower spiral and its mirror image, one per 1.5 x 1.5 px (1 x 1 px
     when ``radius`` is under 6 px): not on a square grid, which would see edges along the
@@ -300,10 +346,12 @@ def refine_x_junction(
     Parameters
     ----------
     gray : ndarray, shape (h, w)
-        Single-channel image (any numeric dtype), not blurred.
+        Single-channel image (any numeric dtype), not blurred. An 8-bit image is sampled
+        as it is, its interpolated values rounded to whole grey levels (0.3 grey levels RMS
+        of added noise, well below a camera's; cheaper than converting it).
     corners : ndarray, shape (cols * rows, 2)
         Start positions row by row, pixels; within about ``radius / 4`` of the truth (the
-        output of ``cornerSubPix``).
+        corners of a coarse search at most 2x downscaled, or ``cornerSubPix``'s).
     cols, rows : int
         Inner corners along the board's x and y axes (>= 2 each).
     radius : float
@@ -311,10 +359,12 @@ def refine_x_junction(
     edge_width : float
         The model's edge width ``s``, pixels (> 0).
     iterations : int
-        Fit-and-move rounds (>= 1).
+        Most fit-and-move rounds (>= 1).
     sample_spacing : float, optional
         One sample per ``sample_spacing^2`` square pixels (> 0); default 1.5 px, or 1 px
         when ``radius`` is under 6 px.
+    tolerance : float
+        A corner stops when a round moves it less than this along both axes (pixels).
 
     Returns
     -------
@@ -336,62 +386,79 @@ def refine_x_junction(
             f"need radius >= 2, edge_width > 0, iterations >= 1, sample_spacing > 0; got "
             f"{radius}, {edge_width}, {iterations}, {sample_spacing}"
         )
-    img = np.asarray(gray, dtype=np.float32)
+    img = np.asarray(gray)
+    if img.dtype != np.uint8:  # 8-bit images are sampled as they are: cheaper
+        img = img.astype(np.float32)
     if sample_spacing is None:
         sample_spacing = 1.5 if radius >= 6 else 1.0
     u, v = _disc_samples(radius, sample_spacing)
-    w = np.exp(-(u**2 + v**2) / (2.0 * (radius / 1.5) ** 2)).astype(np.float32)
+    # the second half of the samples mirrors the first: the model's terms are computed on
+    # the first half only (the shape and the constant are even about the corner, the
+    # derivatives odd), the image's samples folded into their even and odd parts
+    half = u.shape[1] // 2
+    uh, vh = u[:, :half], v[:, :half]
+    w = np.exp(-(uh**2 + vh**2) / (2.0 * (radius / 1.5) ** 2)).astype(np.float32)
     t1, t2 = _edge_normals(c, cols, rows)
     n1x, n1y, n2x, n2y = (
-        np.asarray(f(t), np.float32)[:, None] for t in (t1, t2) for f in (np.cos, np.sin)
+        np.asarray(f(t) / edge_width, np.float32)[:, None]
+        for t in (t1, t2)
+        for f in (np.cos, np.sin)
     )
-    inv_s = np.float32(1.0 / edge_width)
-    e1 = np.tanh((n1x * inv_s) * u + (n1y * inv_s) * v)
-    e2 = np.tanh((n2x * inv_s) * u + (n2y * inv_s) * v)
-    # derivatives of tanh(d1/s) tanh(d2/s) with respect to the corner (d = n . (p - c))
-    g1 = (1.0 - e1 * e1) * e2
-    g2 = (1.0 - e2 * e2) * e1
+    e1 = _tanh_inplace(n1x * uh + n1y * vh)  # tanh(d1 / s)
+    e2 = _tanh_inplace(n2x * uh + n2y * vh)
     shape = e1 * e2
-    jx = (g1 * (-n1x * inv_s)) - g2 * (n2x * inv_s)
-    jy = (g1 * (-n1y * inv_s)) - g2 * (n2y * inv_s)
-    # On the disc, symmetric about the corner, the model's shape and the constant are even
-    # and its derivatives odd: the normal equations split into two 2x2 systems, one for
-    # (m, a), one for a times the shift.
+    # derivatives of tanh(d1/s) tanh(d2/s) with respect to the corner (d = n . (p - c)):
+    # (1 - e1^2) e2 = e2 - e1 shape, and the same for e2
+    g1 = e2 - e1 * shape
+    g2 = e1 - e2 * shape
+    jx = g1 * -n1x - g2 * n2x
+    jy = g1 * -n1y - g2 * n2y
+    # On the disc the normal equations split into two 2x2 systems, one for (m, a), one for
+    # a times the shift; the mirrored halves' factors 2 cancel in each solution.
     w_s, w_x, w_y = w * shape, w * jx, w * jy
 
     def dot(p: NDArray[np.float32], q: NDArray[np.float32]) -> NDArray[np.float64]:
         return np.asarray(np.einsum("ij,ij->i", p, q), np.float64)  # per corner, no temporary
 
     sw = float(np.sum(w))
-    s1, ss = np.sum(w_s, axis=1, dtype=np.float64), dot(w_s, shape)
+    s1, ss = np.asarray(shape @ w[0], np.float64), dot(w_s, shape)
     xx, xy, yy = dot(w_x, jx), dot(w_x, jy), dot(w_y, jy)
     det_a = sw * ss - s1 * s1
     det_s = xx * yy - xy * xy
     good = (det_a > 1e-9 * sw * ss) & (det_s > 1e-9 * xx * yy)
-    det_a, det_s = np.where(good, det_a, 1.0), np.where(good, det_s, 1.0)
-
-    def col(x: NDArray[np.float64]) -> NDArray[np.float32]:
-        return np.asarray(x, np.float32)[:, None]
-
-    # rows of the inverse normal equations giving a, a * shift_x and a * shift_y
-    row_a = col(sw / det_a) * w_s - col(s1 / det_a) * w
-    row_x = col(yy / det_s) * w_x - col(xy / det_s) * w_y
-    row_y = col(xx / det_s) * w_y - col(xy / det_s) * w_x
-    proj = (row_a, row_x, row_y)
-    for _ in range(iterations):
-        c32 = c.astype(np.float32)
+    per_corner = np.column_stack([s1, det_a, xx, xy, yy, det_s])
+    active = np.flatnonzero(good)  # the corners still moving
+    steps = np.zeros((2, c.shape[0], 2))  # each corner's first two moves
+    gain = 1.0
+    for k in range(iterations):
+        if active.size == 0:
+            break
+        every = active.size == c.shape[0]
+        ws, wx, wy = (t if every else t[active] for t in (w_s, w_x, w_y))
+        s1_, da, xx_, xy_, yy_, ds = (per_corner if every else per_corner[active]).T
+        c32 = c[active].astype(np.float32)
         mx, my = c32[:, 0, None] + u, c32[:, 1, None] + v
         patch = np.asarray(
             cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), np.float32
         )
-        amp, sx, sy = (dot(q, patch) for q in proj)
-        ok = good & (np.abs(amp) >= 1.0)
+        even = patch[:, :half] + patch[:, half:]
+        odd = patch[:, :half] - patch[:, half:]
+        p0, ps = np.asarray(even @ w[0], np.float64), dot(ws, even)
+        px, py = dot(wx, odd), dot(wy, odd)
+        amp = (sw * ps - s1_ * p0) / da
+        sx = (yy_ * px - xy_ * py) / ds  # a times the shift
+        sy = (xx_ * py - xy_ * px) / ds
+        ok = np.abs(amp) >= 1.0
         safe = np.where(ok, amp, 1.0)
-        shift = np.clip(np.column_stack([sx / safe, sy / safe]), -1.0, 1.0)
+        shift = np.column_stack([sx / safe, sy / safe]) * gain
+        shift = np.clip(shift, -1.0, 1.0)
         shift[~ok] = 0.0
-        c += shift
-        if np.abs(shift).max() < 1e-3:
-            break
+        c[active] += shift
+        if k < 2:
+            steps[k, active] = shift
+        if k == 1:
+            gain = _step_gain(steps[0], steps[1])
+        active = active[np.abs(shift).max(axis=1) >= tolerance]
     return c
 
 
@@ -533,6 +600,44 @@ def _coarse_search(
     return None
 
 
+def _subpix(
+    roi: NDArray[np.uint8],
+    corners: NDArray[np.float64],
+    windows: tuple[int, ...],
+    criteria: tuple[int, int, float],
+) -> NDArray[np.float64]:
+    """``cornerSubPix`` on ``roi`` blurred by :data:`BLUR_SIGMA`, one pass per half-window.
+
+    The last pass uses ``criteria``, the others full convergence. Returns the corners,
+    shape (n, 2), float64.
+    """
+    blurred = np.asarray(cv2.GaussianBlur(roi, (0, 0), BLUR_SIGMA), np.uint8)
+    pts = np.asarray(corners, np.float32).reshape(-1, 1, 2)
+    for i, win in enumerate(windows):
+        crit = criteria if i == len(windows) - 1 else _SUBPIX_CRITERIA
+        pts = np.asarray(cv2.cornerSubPix(blurred, pts, (win, win), (-1, -1), crit), np.float32)
+    return np.asarray(pts, dtype=float).reshape(-1, 2)
+
+
+def _fit(
+    roi: NDArray[np.uint8],
+    start: NDArray[np.float64],
+    cols: int,
+    rows: int,
+    radius: float,
+    tolerance: float,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`refine_x_junction` (:data:`FIT_ROUNDS`, :data:`FIT_STOP`) from ``start``; a
+    corner it moves more than ``tolerance`` pixels stays at ``start``. Returns the corners
+    and where they stayed."""
+    out = refine_x_junction(
+        roi, start, cols, rows, radius, iterations=FIT_ROUNDS, tolerance=FIT_STOP
+    )
+    far = np.linalg.norm(out - start, axis=1) > tolerance
+    out[far] = start[far]
+    return out, far
+
+
 def detect_checkerboard(
     image: NDArray[np.generic],
     cols: int,
@@ -553,7 +658,8 @@ def detect_checkerboard(
         Width (pixels) about which the coarse search runs (see :func:`check_widths`);
         images at most this wide are searched at full resolution.
     fit : bool
-        Run the X-junction fit (:func:`refine_x_junction`) after ``cornerSubPix``.
+        Refine with the X-junction fit (:func:`refine_x_junction`); if False, with
+        ``cornerSubPix`` alone.
 
     Returns
     -------
@@ -581,25 +687,29 @@ def detect_checkerboard(
     half = int(np.clip(round(WINDOW_FRACTION * spacing), 2, 25))
     wide = int(np.clip(round(0.45 * spacing), half, 40))
     radius = float(np.clip(FIT_FRACTION * spacing, 2.0, 20.0))
-    # the board's region (corners, windows and blur margin), blurred once
+    # the board's region (corners, windows and blur margin)
     margin = max(wide, int(np.ceil(radius))) + 2 + int(np.ceil(3 * BLUR_SIGMA))
     x0, y0 = (max(int(np.floor(v)) - margin, 0) for v in c.min(axis=0))
     x1 = min(int(np.ceil(c[:, 0].max())) + margin + 1, gray.shape[1])
     y1 = min(int(np.ceil(c[:, 1].max())) + margin + 1, gray.shape[0])
     roi = gray[y0:y1, x0:x1]
-    blurred = np.asarray(cv2.GaussianBlur(roi, (0, 0), BLUR_SIGMA), np.uint8)
     offset = np.array([x0, y0], dtype=float)
-    local = (c - offset).astype(np.float32).reshape(-1, 1, 2)
+    coarse_local = c - offset
     # coarse corners from a 4x or more downscaled image are off by a few px: a wide pass first
-    if scale > 2.5:
-        local = cv2.cornerSubPix(blurred, local, (wide, wide), (-1, -1), _SUBPIX_CRITERIA)
-    criteria = _SUBPIX_COARSE_CRITERIA if fit else _SUBPIX_CRITERIA
-    local = cv2.cornerSubPix(blurred, local, (half, half), (-1, -1), criteria)
-    out = np.asarray(local, dtype=float).reshape(-1, 2)
-    if fit:
-        fitted = refine_x_junction(roi, out, cols, rows, radius, iterations=2)
-        keep = np.linalg.norm(fitted - out, axis=1) <= MAX_FIT_SHIFT
-        out = np.where(keep[:, None], fitted, out)
+    windows = (wide, half) if scale > 2.5 else (half,)
+    if not fit:
+        out = _subpix(roi, coarse_local, windows, _SUBPIX_CRITERIA)
+    elif scale > 2.5:
+        start = _subpix(roi, coarse_local, windows, _SUBPIX_COARSE_CRITERIA)
+        out = _fit(roi, start, cols, rows, radius, MAX_FIT_SHIFT)[0]
+    else:
+        # from a level at most 2x downscaled the fit starts at the coarse corners, within
+        # about MAX_FIT_SHIFT pixels of that level from the truth
+        out, far = _fit(roi, coarse_local, cols, rows, radius, MAX_FIT_SHIFT * scale)
+        if np.any(far):  # further off (blurred frames): cornerSubPix first, then the fit
+            start = coarse_local.copy()
+            start[far] = _subpix(roi, coarse_local[far], windows, _SUBPIX_COARSE_CRITERIA)
+            out[far] = _fit(roi, start, cols, rows, radius, MAX_FIT_SHIFT)[0][far]
     out += offset
     if not np.all(np.isfinite(out)):
         return None

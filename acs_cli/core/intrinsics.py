@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -52,6 +53,8 @@ __all__ = [
     "calibrate",
     "calibrate_robust",
     "degenerate_distortion",
+    "distinct_poses",
+    "honest_std",
     "intrinsics_covariance",
     "outlier_views",
     "std_from_covariance",
@@ -64,8 +67,15 @@ DISTORTION_NAMES = {
     "rational": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
     "fisheye": ("k1", "k2", "k3", "k4"),
 }
-#: Fewest board views a calibration accepts.
+#: Fewest board views a calibration accepts: distinct board poses (:func:`distinct_poses`).
 MIN_VIEWS = 3
+#: Two views show the board in the same pose when their homographies place its outline
+#: within this fraction of its image diagonal (RMS over the outline's corners and centre):
+#: 0.5% is about 2.5 degrees of tilt about the board's centre, or 1% of its distance.
+DISTINCT_FRACTION = 0.005
+#: ... or within this many pixels (a small board's floor: corner noise of 0.1-0.5 px moves
+#: the outline of a homography fitted on many corners by 0.1-0.4 px).
+DISTINCT_MIN_PX = 0.5
 #: The coefficients :func:`calibrate` holds for each model (``CALIB_FIX_K3`` for pinhole).
 CALIBRATION_HELD = {"pinhole": ("k3",), "rational": (), "fisheye": ()}
 #: A distortion coefficient above this magnitude (unitless) whose standard deviation exceeds
@@ -109,6 +119,8 @@ class CalibrationResult:
         Indices of the views this calibration used.
     first_pass_per_view_rms : ndarray, shape (n_views_given,)
         Per-view RMS of the first calibration, before any view was dropped.
+    distinct : int
+        Distinct board poses among the views used (:func:`distinct_poses`).
     """
 
     model: str
@@ -123,6 +135,7 @@ class CalibrationResult:
     dropped: tuple[int, ...] = ()
     used: tuple[int, ...] = ()
     first_pass_per_view_rms: FloatArray = field(default_factory=lambda: np.zeros(0))
+    distinct: int = 0
 
 
 def board_points(cols: int, rows: int, square: float) -> FloatArray:
@@ -201,6 +214,79 @@ def _fisheye_calibrate(
     return rms, Kf, Df, rv, tv, np.array(errs, dtype=np.float64), {}
 
 
+def _outline(object_points: Sequence[NDArray[np.floating]]) -> FloatArray | None:
+    """The board's bounding rectangle's corners and centre, ``(5, 2)`` in the board plane,
+    or None when a view's points are not on the plane ``z = 0``."""
+    pts = [np.asarray(p, dtype=float).reshape(-1, 3) for p in object_points]
+    allp = np.concatenate(pts)
+    span = float(np.ptp(allp[:, :2], axis=0).max())
+    if span <= 0.0 or np.abs(allp[:, 2]).max() > 1e-9 * span:
+        return None
+    (x0, y0), (x1, y1) = allp[:, :2].min(axis=0), allp[:, :2].max(axis=0)
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [(x0 + x1) / 2, (y0 + y1) / 2]])
+
+
+def distinct_poses(
+    object_points: Sequence[NDArray[np.floating]],
+    image_points: Sequence[NDArray[np.floating]],
+) -> NDArray[np.intp]:
+    """Group the views that show the board in the same pose (frames of a tripod video).
+
+    Each view's board-to-image homography maps the board's outline (bounding rectangle and
+    centre) into the image; a view joins the first earlier group whose first view places the
+    outline within :data:`DISTINCT_FRACTION` of the outline's image diagonal (or
+    :data:`DISTINCT_MIN_PX`), RMS. Homographies need no intrinsics, so duplicates are found
+    before the calibration (which they would make degenerate). Views of a non-planar target,
+    or with too few points for a homography, each count as distinct.
+
+    Parameters
+    ----------
+    object_points : sequence of ndarray, shape (m_i, 3)
+        Board points of each view (board frame, ``z = 0``).
+    image_points : sequence of ndarray, shape (m_i, 2)
+        Their detections, pixels.
+
+    Returns
+    -------
+    ndarray of int, shape (n_views,)
+        A group label per view, ``0 .. k-1`` in order of first appearance (``k`` the
+        number of distinct poses).
+    """
+    n = len(image_points)
+    labels = np.arange(n)
+    outline = _outline(object_points) if n else None
+    if outline is None:
+        return labels
+    mapped: list[FloatArray | None] = []
+    for obj, img in zip(object_points, image_points, strict=True):
+        src = np.asarray(obj, dtype=np.float64).reshape(-1, 3)[:, :2]
+        dst = np.asarray(img, dtype=np.float64).reshape(-1, 2)
+        H = None if src.shape[0] < 4 else cv2.findHomography(src, dst, 0)[0]
+        if H is None or not np.all(np.isfinite(H)):
+            mapped.append(None)
+            continue
+        h = np.column_stack([outline, np.ones(5)]) @ np.asarray(H, dtype=np.float64).T
+        mapped.append(h[:, :2] / h[:, 2:] if np.all(np.abs(h[:, 2]) > 1e-12) else None)
+    groups = 0
+    firsts: list[FloatArray] = []  # the outline of each group's first view
+    first_label: list[int] = []
+    for i, q in enumerate(mapped):
+        if q is not None and firsts:
+            diag = max(np.linalg.norm(q[2] - q[0]), np.linalg.norm(q[3] - q[1]))
+            tol = max(DISTINCT_FRACTION * float(diag), DISTINCT_MIN_PX)
+            rms = np.sqrt(np.mean(np.sum((np.asarray(firsts) - q) ** 2, axis=2), axis=1))
+            near = np.flatnonzero(rms < tol)
+            if near.size:
+                labels[i] = first_label[int(near[0])]
+                continue
+        labels[i] = groups
+        if q is not None:
+            firsts.append(q)
+            first_label.append(groups)
+        groups += 1
+    return labels
+
+
 def calibrate(
     object_points: Sequence[NDArray[np.floating]],
     image_points: Sequence[NDArray[np.floating]],
@@ -228,7 +314,8 @@ def calibrate(
     ValueError
         An unknown model or mismatched inputs (a programming error).
     DegenerateMotionError
-        Fewer than :data:`MIN_VIEWS` views, or OpenCV cannot calibrate from them.
+        Fewer than :data:`MIN_VIEWS` views or distinct board poses (:func:`distinct_poses`),
+        or OpenCV cannot calibrate from them.
     """
     if model not in MODELS:
         raise ValueError(f"unknown camera model {model!r}")
@@ -239,6 +326,15 @@ def calibrate(
         raise DegenerateMotionError(
             f"only {n} view(s) of the board: calibration needs at least {MIN_VIEWS}, "
             "taken at different distances and tilts"
+        )
+    distinct = int(distinct_poses(object_points, image_points).max()) + 1
+    if distinct < MIN_VIEWS:
+        raise DegenerateMotionError(
+            f"{n} views of the board, but they show it from only {distinct} distinct "
+            f"pose{'s' if distinct > 1 else ''} (a tripod video?): calibration needs at least "
+            f"{MIN_VIEWS}; move the board or the camera between images: different distances "
+            "and tilts",
+            details={"views": n, "distinct_poses": distinct},
         )
     w, h = int(image_size[0]), int(image_size[1])
     threads = cv2.getNumThreads()
@@ -296,6 +392,7 @@ def calibrate(
         tvecs=tv,
         used=tuple(range(n)),
         first_pass_per_view_rms=errs,
+        distinct=distinct,
     )
 
 
@@ -331,6 +428,7 @@ def calibrate_robust(
         dropped=tuple(int(i) for i in bad),
         used=tuple(keep),
         first_pass_per_view_rms=first.per_view_rms,
+        distinct=second.distinct,
     )
 
 
@@ -421,6 +519,42 @@ def std_from_covariance(covariance: NDArray[np.floating]) -> dict[str, object]:
         "cy": float(s[3]),
         "distortion": [float(v) for v in s[4:]],
     }
+
+
+def honest_std(result: CalibrationResult, covariance: NDArray[np.floating]) -> dict[str, object]:
+    """The standard deviations to report: per parameter the larger of OpenCV's and the
+    covariance's (:func:`std_from_covariance`), times ``sqrt(views / distinct poses)``.
+
+    OpenCV's come out far too small when the views are nearly degenerate (one pose seen 20
+    times: 0.2 px on an fx 150 px off); and repeated views of one pose share their corner
+    errors (same blur, same light), so they do not average them down as independent views
+    would: a pose seen ``r`` times counts once.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        Its ``std_intrinsics`` (empty for fisheye), ``used`` and ``distinct``.
+    covariance : ndarray, shape (4 + m, 4 + m)
+        :func:`intrinsics_covariance` of it.
+
+    Returns
+    -------
+    dict
+        The layout of :attr:`CalibrationResult.std_intrinsics`.
+    """
+    ours = std_from_covariance(covariance)
+    theirs = result.std_intrinsics
+    views = len(result.used) or result.rvecs.shape[0]
+    inflate = float(np.sqrt(views / result.distinct)) if result.distinct else 1.0
+
+    def pick(key: str) -> Any:
+        a, b = ours[key], theirs.get(key, ours[key])
+        if isinstance(a, list):
+            b = list(b) if isinstance(b, list) and len(b) == len(a) else a
+            return [inflate * max(float(x), float(y)) for x, y in zip(a, b, strict=True)]
+        return inflate * max(float(a), float(b))  # type: ignore[arg-type]
+
+    return {key: pick(key) for key in ("fx", "fy", "cx", "cy", "distortion")}
 
 
 def degenerate_distortion(

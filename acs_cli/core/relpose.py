@@ -37,6 +37,7 @@ from acs_cli.core.joint import (
     MIN_ROTATION_SPREAD,
     lever_shapes,
 )
+from acs_cli.core.quality import JOINT_STD, OVERRIDE_HINT, largest_std, length_scale
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
@@ -55,7 +56,7 @@ SINGLE_AXIS_RATIO = 0.05
 #: 2.4 deg / 0.1 m pose noise): about 5% for general motion, 14-30% for a rigid or hinged
 #: joint, whatever the noise level (the information along the free direction then comes
 #: from the noise itself).
-UNDETERMINED_STD_FRACTION = 0.10
+UNDETERMINED_STD_FRACTION = JOINT_STD.refuse
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,10 @@ def _check_inputs(
     Ta, Tb = se3.check_paired_transforms(T_wa_a, T_wb_b, "relpose")
     n = Ta.shape[0]
     if not -n <= reference < n:
-        raise InputError(f"reference frame {reference} is outside the {n} paired frames")
+        raise InputError(
+            f"reference frame {reference} is outside the {n} paired frames (0 to {n - 1}): "
+            "give --reference (relpose.reference in a run config) within them"
+        )
     return Ta, Tb
 
 
@@ -379,6 +383,7 @@ def estimate_relpose(
     reference: int = 0,
     method: str = "refined",
     reject_outliers: bool = True,
+    accept_weak: bool = False,
 ) -> RelposeEstimate:
     """Relative pose (and scale) of two cameras joined by a joint, from general motion.
 
@@ -394,6 +399,11 @@ def estimate_relpose(
     reference : int
         Frame index at which ``T_b_a`` is reported (negative counts from the end).
     method : {"refined", "paper"}
+    reject_outliers : bool
+    accept_weak : bool
+        Return a self-calibrated joint a narrow motion hardly determines instead of refusing
+        it (``--accept-weak``; the stage marks the result weak); a joint that hardly bends
+        or bends about one axis is refused whatever it says.
 
     Returns
     -------
@@ -438,7 +448,7 @@ def estimate_relpose(
     if method == "paper":
         return _estimate_paper(Ta, Tb, prior, unknown_scale, reference)
     est = _estimate_refined(Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers)
-    _check_determined(est, Ta, Tb)
+    _check_determined(est, Ta, Tb, accept_weak)
     return est
 
 
@@ -475,11 +485,15 @@ def motion_diagnosis(
     return out
 
 
-def _check_determined(est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray) -> None:
+def _check_determined(
+    est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray, accept_weak: bool = False
+) -> None:
     """Refuse a self-calibrated joint whose standard deviation says the motion did not
     determine it (more than :data:`UNDETERMINED_STD_FRACTION` of its distance from the
     camera). ``T_b_a``'s own spread is dominated by the reference poses' noise and is
-    reported, not refused."""
+    reported, not refused. ``accept_weak`` lets a merely narrow motion through, never a
+    joint that hardly bends or bends about one axis (:func:`motion_diagnosis`): its point
+    is then arbitrary, not weak."""
     if not est.self_calibrated:
         return
     worst = {}
@@ -487,16 +501,16 @@ def _check_determined(est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray) -> N
         ("the joint in A", est.position_in_a, est.covariance_a, Ta),
         ("the joint in B", est.position_in_b, est.covariance_b, Tb),
     ):
-        std = float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
         # the rig's length scale: |O|, or a tenth of the camera's travel for a joint near
         # the optical centre (a pan-tilt head), whose std does not shrink with |O|
-        travel = float(np.sqrt(np.mean(np.sum((T[:, :3, 3] - T[:, :3, 3].mean(0)) ** 2, 1))))
-        worst[key] = std / max(float(np.linalg.norm(o)), 0.1 * travel, 1e-12)
+        worst[key] = largest_std(cov) / length_scale(o, T)
     bad = {k: v for k, v in worst.items() if v > UNDETERMINED_STD_FRACTION}
     if not bad:
         return
     R_w = se3.project_to_rotation(est.T_wb_wa[:3, :3])[0]
     notes = motion_diagnosis(Ta, Tb, R_w)
+    if accept_weak and not notes["joint"]:
+        return
     why = "; ".join(v for v in notes.values() if v) or "the motion is too narrow for the noise"
     text = ", ".join(f"{k} (std {100 * v:.0f}% of |O|)" for k, v in bad.items())
     raise DegenerateMotionError(
@@ -507,7 +521,7 @@ def _check_determined(est: RelposeEstimate, Ta: FloatArray, Tb: FloatArray) -> N
             if est.self_calibrated
             else ""
         )
-        + ".",
+        + ("." if notes["joint"] else f"; {OVERRIDE_HINT}."),
         details={"relative_std": worst, "diagnosis": notes},
     )
 

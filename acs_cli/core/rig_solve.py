@@ -41,6 +41,7 @@ from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
+from acs_cli.core.quality import OVERRIDE_HINT
 from acs_cli.core.relpose import (
     SINGLE_AXIS_RATIO,
     UNDETERMINED_STD_FRACTION,
@@ -783,6 +784,7 @@ def estimate_rig(
     reference_frame: int = 0,
     priors: dict[str, EdgePrior] | None = None,
     reject_outliers: bool = True,
+    accept_weak: bool = False,
 ) -> RigEstimate:
     """Calibrate a rig from every camera's general motion: one maximum-likelihood solve.
 
@@ -797,6 +799,9 @@ def estimate_rig(
     priors : dict of EdgePrior, optional
         Joints known beforehand, by joint name (reference units).
     reject_outliers : bool
+    accept_weak : bool
+        Return joints whose std alone is past the refusal level instead of refusing them
+        (``--accept-weak``); exact degeneracies are refused whatever it says.
 
     Returns
     -------
@@ -931,7 +936,7 @@ def estimate_rig(
     cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev)
     est.warnings.extend(check_joint_types(st, x))
-    _check_determined(st, x, H, cov, est, travel)
+    _check_determined(st, x, H, cov, est, travel, accept_weak)
     return est
 
 
@@ -1155,9 +1160,19 @@ def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
 
 
 def _check_determined(
-    st: _State, x: FloatArray, H: FloatArray, cov: FloatArray, est: RigEstimate, travel: float
+    st: _State,
+    x: FloatArray,
+    H: FloatArray,
+    cov: FloatArray,
+    est: RigEstimate,
+    travel: float,
+    accept_weak: bool = False,
 ) -> None:
-    """Name each edge whose part of the rig the motion leaves undetermined (exit 3)."""
+    """Name each edge whose part of the rig the motion leaves undetermined (exit 3).
+
+    A joint whose only fault is a std past :data:`UNDETERMINED_STD_FRACTION` is let through
+    with ``accept_weak`` (the stage marks the result weak); a null direction or planar
+    motion is refused whatever the flag: there is no answer to write."""
     topo, L = st.topo, st.L
     with_prior = {name for name, *_ in st.priors}
     d = np.sqrt(np.maximum(np.diag(H), 1e-300))
@@ -1169,6 +1184,7 @@ def _check_determined(
     problems: list[str] = []
     details: dict[str, object] = {}
     flagged: set[str] = set()
+    overridable = True  # every problem is a std past the level (not a null direction)
     for step in topo.tree_order():  # parents first: a problem upstream explains the rest
         j = step.joint
         p, q = j.between
@@ -1202,8 +1218,11 @@ def _check_determined(
         planar = "" if j.name in with_prior else planar_offset(st, x, j)
         if planar:
             what, in_null = planar, 1.0
-        elif in_null < 0.5 and worst <= UNDETERMINED_STD_FRACTION:
+            overridable = False
+        elif in_null < 0.5 and (worst <= UNDETERMINED_STD_FRACTION or accept_weak):
             continue
+        else:
+            overridable &= in_null < 0.5
         f = st.frames[j.name]
         Rst = np.einsum("nji,njk->nik", G[p][0][f], G[q][0][f])
         bends = (
@@ -1239,6 +1258,8 @@ def _check_determined(
         details[j.name] = {"relative_std": worst, "null_share": in_null}
     if problems:
         raise DegenerateMotionError(
-            "the motion does not determine the rig: " + " | ".join(problems) + ".",
+            "the motion does not determine the rig: "
+            + " | ".join(problems)
+            + (f"; {OVERRIDE_HINT}." if overridable else "."),
             details=details,
         )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,8 @@ import yaml
 
 import acs_cli
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import atomic_write_text
+from acs_cli.io.atomic import MAX_YAML_BYTES, atomic_write_text, read_input_bytes
+from acs_cli.io.validate import short_repr
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -47,12 +48,20 @@ def _hash_file(path: Path, h: Any) -> None:
             h.update(chunk)
 
 
-def sha256_of(path: str | Path) -> str:
+def sha256_of(path: str | Path, *, exclude: Iterable[str | Path] = ()) -> str:
     """SHA-256 (hex) of a file's content, or of a folder's files.
 
     For a folder, the hash covers every regular file below it (symlinked folders are not
     followed) in sorted order of relative POSIX path: each contributes its path, a NUL and
     the SHA-256 of its content.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file or folder.
+    exclude : iterable of str or Path
+        Folders below ``path`` left out of a folder's hash (a run's output folder inside
+        its own image folder: its outputs must not change its inputs' fingerprint).
 
     Raises
     ------
@@ -60,11 +69,12 @@ def sha256_of(path: str | Path) -> str:
         If the path does not exist or cannot be read.
     """
     p = Path(path)
+    skip = {os.path.realpath(e) for e in exclude}
     try:
         if p.is_dir():
             files: list[tuple[str, Path]] = []
             for root, dirs, names in os.walk(p):
-                dirs.sort()
+                dirs[:] = sorted(d for d in dirs if os.path.realpath(Path(root) / d) not in skip)
                 for name in names:
                     f = Path(root) / name
                     if f.is_file():
@@ -223,9 +233,67 @@ def get_path(
     return node
 
 
+#: Most values aliases may add to a YAML document (its size with every alias expanded,
+#: less its own nodes): a few merged defaults pass, an alias bomb ("billion laughs") not.
+YAML_ALIAS_BUDGET = 10_000
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """Nodes of ``node``'s tree with every alias expanded (shared nodes counted per use)."""
+    done = memo.get(id(node))
+    if done is not None:
+        return done
+    memo[id(node)] = 1  # a recursive alias (a node inside itself) counts once
+    size = 1
+    if isinstance(node, yaml.SequenceNode):
+        size += sum(_expanded_size(child, memo) for child in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        size += sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+    memo[id(node)] = size
+    return size
+
+
+def _distinct_nodes(node: yaml.Node, seen: set[int]) -> None:
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if id(n) in seen:
+            continue
+        seen.add(id(n))
+        if isinstance(n, yaml.SequenceNode):
+            stack.extend(n.value)
+        elif isinstance(n, yaml.MappingNode):
+            stack.extend(x for pair in n.value for x in pair)
+
+
 class _StrictLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` that refuses a key repeated in one mapping (YAML forbids it;
-    PyYAML would silently keep the last value)."""
+    PyYAML would silently keep the last value) and aliases that expand the document by
+    more than :data:`YAML_ALIAS_BUDGET` values (an alias bomb: a few kilobytes that
+    every walk over the data, or a message quoting it, sees as gigabytes)."""
+
+    def compose_document(self) -> Any:
+        node = super().compose_document()
+        if node is not None and self._saw_alias:
+            seen: set[int] = set()
+            _distinct_nodes(node, seen)
+            extra = _expanded_size(node, {}) - len(seen)
+            if extra > YAML_ALIAS_BUDGET:
+                raise yaml.composer.ComposerError(
+                    None,
+                    None,
+                    f"aliases (*name) expand the document by {extra} values, more than the "
+                    f"{YAML_ALIAS_BUDGET} allowed (an alias bomb?)",
+                    node.start_mark,
+                )
+        return node
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            self._saw_alias = True
+        return super().compose_node(parent, index)
+
+    _saw_alias = False
 
 
 def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
@@ -242,7 +310,7 @@ def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[An
             raise yaml.constructor.ConstructorError(
                 None,
                 None,
-                f"duplicate key {str(key)[:60]!r} (first on line {first + 1})",
+                f"duplicate key {short_repr(key)} (first on line {first + 1})",
                 key_node.start_mark,
             )
         seen[key] = key_node.start_mark.line
@@ -262,14 +330,7 @@ def load_yaml_file(path: str | Path, what: str = "a YAML file") -> Any:
         What the file should be, for the message when it is a folder.
     """
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except FileNotFoundError as exc:
-        raise InputError("no such file", path=p) from exc
-    except IsADirectoryError as exc:
-        raise InputError(f"is a folder, expected {what}", path=p) from exc
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
+    data = read_input_bytes(p, what, MAX_YAML_BYTES)
     try:
         return yaml.load(data, Loader=_StrictLoader)  # a SafeLoader: no arbitrary objects
     except yaml.MarkedYAMLError as exc:
@@ -329,7 +390,7 @@ def check_yaml_artifact(
         )
     version = doc.get("schema_version")
     if isinstance(version, bool) or not isinstance(version, int):
-        raise InputError(f"'schema_version' must be an integer, got {version!r}", path=p)
+        raise InputError(f"'schema_version' must be an integer, got {short_repr(version)}", path=p)
     if version > SCHEMA_VERSION:
         raise InputError(
             f"schema_version {version} was written by a newer acscal (this one reads up to "

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acs_cli.io.atomic import atomic_path
+from acs_cli.io.trajectory import check_npz_members
 
 __all__ = [
     "CACHE_SCHEMA",
@@ -98,6 +99,7 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
     try:
         # Open the file ourselves: np.load leaks its handle when the archive is corrupt.
         with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+            check_npz_members(z, p)  # a huge declared array: not a cache of ours
             if str(z["schema"]) != CACHE_SCHEMA or int(z["schema_version"]) > CACHE_SCHEMA_VERSION:
                 return {}
             keys = [str(k) for k in z["keys"]]

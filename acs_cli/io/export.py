@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import gzip
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -21,7 +22,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import atomic_path, atomic_write_text
+from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text
 
 __all__ = [
     "ROS_DISTORTION_MODELS",
@@ -94,7 +95,8 @@ def write_opencv_yaml(
     ----------
     path : str or Path
         Destination; the format follows its suffix when it is ``.yaml``/``.yml``/``.xml``/
-        ``.json``, else YAML.
+        ``.json``, else YAML. A name ending in ``.gz`` (``relpose.xml.gz``) is written
+        gzip-compressed, as ``cv2.FileStorage`` does (and reads back).
     mats : mapping of str to ndarray, float, int, str or mapping
         Values by key. Arrays (at most 2-D is customary, e.g. ``K`` (3, 3), ``T_b_a``
         (4, 4)) are stored as ``opencv-matrix`` (float64, or int32 for integers). A mapping
@@ -112,26 +114,32 @@ def write_opencv_yaml(
         The destination cannot be written.
     """
     dest = Path(path)
-    suffix = dest.suffix.lower() if dest.suffix.lower() in _OPENCV_SUFFIXES else ".yaml"
+    gz = dest.suffix.lower() == ".gz"
+    inner = Path(dest.stem).suffix.lower() if gz else dest.suffix.lower()
+    suffix = inner if inner in _OPENCV_SUFFIXES else ".yaml"
     values = _cv_values(mats)
-    with atomic_path(dest, suffix=suffix) as tmp:
-        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-        try:
-            if not fs.isOpened():
-                raise InputError("cannot write (OpenCV could not open the file)", path=dest)
-            if suffix != ".json":
-                for line in comments:
-                    fs.writeComment(" ".join(str(line).split()))
-            for key, value in values.items():
-                if isinstance(value, dict):
-                    fs.startWriteStruct(key, cv2.FileNode_MAP)
-                    for k, v in value.items():
-                        fs.write(k, v)
-                    fs.endWriteStruct()
-                else:
-                    fs.write(key, value)
-        finally:
-            fs.release()
+    # Written in memory (the format chosen by the suffix), then by the one atomic writer,
+    # which checks every byte reached the disk: cv2.FileStorage's own file writes ignore
+    # a full disk or a file-size limit.
+    fs = cv2.FileStorage("out" + suffix, cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    try:
+        if not fs.isOpened():  # pragma: no cover - memory storage always opens
+            raise InputError("cannot write (OpenCV could not start the file)", path=dest)
+        if suffix != ".json":
+            for line in comments:
+                fs.writeComment(" ".join(str(line).split()))
+        for key, value in values.items():
+            if isinstance(value, dict):
+                fs.startWriteStruct(key, cv2.FileNode_MAP)
+                for k, v in value.items():
+                    fs.write(k, v)
+                fs.endWriteStruct()
+            else:
+                fs.write(key, value)
+        data = fs.releaseAndGetString().encode("utf-8")
+    finally:
+        fs.release()
+    atomic_write_bytes(dest, gzip.compress(data, mtime=0) if gz else data)
 
 
 def _camera_arrays(

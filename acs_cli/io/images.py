@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acs_cli.errors import InputError
+from acs_cli.io.atomic import MAX_IMAGE_BYTES, read_input_bytes
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -151,12 +152,7 @@ def read_gray(path: str | Path) -> tuple[NDArray[np.uint8], str]:
         chunk) or undecodable file.
     """
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except FileNotFoundError as exc:
-        raise InputError("no such image", path=p) from exc
-    except OSError as exc:
-        raise InputError(f"cannot read image ({exc.strerror or exc})", path=p) from exc
+    data = read_input_bytes(p, "an image", MAX_IMAGE_BYTES)
     if not data:
         raise InputError("empty image file", path=p)
     sha = hashlib.sha256(data).hexdigest()

@@ -32,6 +32,7 @@ from acs_cli.io.validate import (
     as_str_list,
     optional_number,
 )
+from acs_cli.io.verdict import VerdictSection
 
 __all__ = ["BoardSpec", "DroppedView", "ImagesUsed", "IntrinsicsArtifact", "check_camera"]
 
@@ -240,6 +241,7 @@ class IntrinsicsArtifact(YamlArtifact):
     warnings: list[str] = field(default_factory=list)
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    verdict: VerdictSection | None = None
 
     def validate(self) -> None:
         p = self.source
@@ -299,6 +301,9 @@ class IntrinsicsArtifact(YamlArtifact):
             warnings=as_str_list(doc.get("warnings"), "warnings", path),
             header=header_of(doc),
             source=str(path),
+            verdict=None
+            if doc.get("verdict") is None
+            else VerdictSection.parse(doc["verdict"], path),
         )
         return art
 
@@ -318,6 +323,7 @@ class IntrinsicsArtifact(YamlArtifact):
             "detector": self.detector,
             "detections_cache": self.detections_cache,
             "exports": dict(self.exports),
+            **({} if self.verdict is None else {"verdict": self.verdict.to_plain()}),
             "warnings": list(self.warnings),
         }
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.validate import (
     FloatArray,
+    as_bool,
     as_int,
     as_mapping,
     as_matrix,
@@ -33,6 +34,7 @@ from acs_cli.io.validate import (
     optional_number,
     optional_vector,
 )
+from acs_cli.io.verdict import VerdictSection
 
 __all__ = [
     "BundleSection",
@@ -40,10 +42,16 @@ __all__ = [
     "JointArtifact",
     "JointQuality",
     "JointSection",
+    "MotionQuality",
     "Pairing",
     "PoseNoise",
+    "load_joint_artifact",
     "load_joint_section",
 ]
+
+if TYPE_CHECKING:
+    from acs_cli.core.joint import MotionSummary
+    from acs_cli.io.relpose import RelposeArtifact
 
 Source = Path | str | None
 
@@ -173,6 +181,78 @@ class PoseNoise:
 
     def to_plain(self) -> dict[str, float]:
         return {"sigma_trans": self.sigma_trans, "sigma_rot_deg": self.sigma_rot_deg}
+
+
+@dataclass(frozen=True)
+class MotionQuality:
+    """``quality.motion.<a/b>`` (fixed joint): how the camera turned and where the joint is
+    weakest (:class:`acs_cli.core.joint.MotionSummary`).
+
+    Attributes
+    ----------
+    dominant_axis : ndarray, shape (3,)
+        The axis the camera turned about most, in its frame (a near-hinge's hinge axis).
+    other_axes : ndarray, shape (2, 3)
+        The two other principal rotation axes (rows), in the camera's frame.
+    rotation_spread_deg : ndarray, shape (3,)
+        RMS rotation about the dominant axis and the two others, degrees.
+    rotation_ratio : float
+        Weakest over strongest singular value of the stacked, centred rotations.
+    near_hinge : bool
+        ``rotation_ratio`` below the hinge rule's ``HINGE_RATIO`` (and not refused).
+    weak_direction : ndarray, shape (3,)
+        Unit direction, camera frame, along which the joint is least determined.
+    weak_std : float
+        The joint's standard deviation along it (length unit).
+    """
+
+    dominant_axis: FloatArray
+    other_axes: FloatArray
+    rotation_spread_deg: FloatArray
+    rotation_ratio: float
+    near_hinge: bool
+    weak_direction: FloatArray
+    weak_std: float
+
+    @classmethod
+    def from_motion(cls, motion: MotionSummary, covariance: FloatArray) -> MotionQuality:
+        """From a camera's motion summary and its joint's covariance ``(3, 3)``."""
+        from acs_cli.core.joint import weakest_direction
+
+        weak, std = weakest_direction(covariance)
+        return cls(
+            np.asarray(motion.dominant_axis, dtype=float),
+            np.asarray(motion.axes[1:], dtype=float),
+            np.asarray(motion.spread_deg, dtype=float),
+            float(motion.ratio),
+            bool(motion.near_hinge),
+            weak,
+            std,
+        )
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> MotionQuality:
+        d = as_mapping(value, key, path)
+        return cls(
+            as_vector(d.get("dominant_axis"), f"{key}.dominant_axis", path),
+            as_matrix(d.get("other_axes"), (2, 3), f"{key}.other_axes", path),
+            as_vector(d.get("rotation_spread_deg"), f"{key}.rotation_spread_deg", path),
+            as_number(d.get("rotation_ratio"), f"{key}.rotation_ratio", path, non_negative=True),
+            as_bool(d.get("near_hinge"), f"{key}.near_hinge", path),
+            as_vector(d.get("weak_direction"), f"{key}.weak_direction", path),
+            as_number(d.get("weak_std"), f"{key}.weak_std", path, non_negative=True),
+        )
+
+    def to_plain(self) -> dict[str, Any]:
+        return {
+            "dominant_axis": self.dominant_axis,
+            "other_axes": self.other_axes,
+            "rotation_spread_deg": self.rotation_spread_deg,
+            "rotation_ratio": self.rotation_ratio,
+            "near_hinge": self.near_hinge,
+            "weak_direction": self.weak_direction,
+            "weak_std": self.weak_std,
+        }
 
 
 @dataclass(frozen=True)
@@ -366,22 +446,63 @@ class JointSection:
         return cov
 
     def validate(self, path: Source) -> None:
-        """Re-check shapes and finiteness (for an object built in memory)."""
+        """Re-check shapes and finiteness, the covariances (symmetric, positive
+        semi-definite) and that each std agrees with its covariance's diagonal."""
         as_vector(self.position_in_a, "joint.position_in_a", path)
         for cam in ("a", "b"):
             optional_vector(self.position(cam), f"joint.position_in_{cam}", path)
-            optional_vector(self.std(cam), f"joint.position_in_{cam}_std", path)
-            optional_covariance3(
+            std = optional_vector(self.std(cam), f"joint.position_in_{cam}_std", path)
+            cov = optional_covariance3(
                 self.covariance_a if cam == "a" else self.covariance_b,
                 f"joint.covariance_{cam}",
                 path,
             )
+            if std is not None and np.any(std < 0):
+                raise InputError(f"'joint.position_in_{cam}_std' must not be negative", path=path)
+            if std is not None and cov is not None:
+                _check_std_matches(std, cov, cam, path)
+
+    def scaled(self, factor: float, units: str) -> JointSection:
+        """The section with its lengths multiplied by ``factor`` (a change of unit to
+        ``units``): positions and stds by ``factor``, covariances by its square."""
+
+        def mul(x: FloatArray | None, f: float) -> FloatArray | None:
+            return None if x is None else np.asarray(x, dtype=float) * f
+
+        return JointSection(
+            np.asarray(self.position_in_a, dtype=float) * factor,
+            mul(self.position_in_b, factor),
+            mul(self.position_in_a_std, factor),
+            mul(self.position_in_b_std, factor),
+            mul(self.covariance_a, factor**2),
+            mul(self.covariance_b, factor**2),
+            units,
+            self.source,
+        )
 
     def summary_lines(self, unit: str) -> list[str]:
         lines = [f"  joint in A: {_fmt(self.position_in_a, self.position_in_a_std)} {unit}"]
         if self.position_in_b is not None:
             lines.append(f"  joint in B: {_fmt(self.position_in_b, self.position_in_b_std)} {unit}")
         return lines
+
+
+#: Largest difference between a std and the root of its covariance's diagonal, relative to
+#: the largest of them (stds rounded by hand to two digits pass).
+STD_TOL = 0.05
+
+
+def _check_std_matches(std: FloatArray, cov: FloatArray, cam: str, path: Source) -> None:
+    """An ``InputError`` when ``position_in_<cam>_std`` is not ``sqrt(diag(covariance_<cam>))``
+    (within :data:`STD_TOL` of the largest): the file says two things about one sigma."""
+    root = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    if np.abs(std - root).max() > STD_TOL * max(float(np.abs(std).max()), float(root.max())):
+        raise InputError(
+            f"'joint.position_in_{cam}_std' {_fmt(std, None, 6)} disagrees with the square "
+            f"roots of the diagonal of 'joint.covariance_{cam}' {_fmt(root, None, 6)}: correct "
+            "one, or remove the std (it is then taken from the covariance)",
+            path=path,
+        )
 
 
 @dataclass(frozen=True)
@@ -402,6 +523,8 @@ class JointQuality:
         Refined method only.
     bundle_adjustment : dict of str to BundleSection
         Per camera, when the corners were adjusted.
+    motion : dict of str to MotionQuality
+        Fixed joint only: how each camera turned, and where its joint is weakest.
     """
 
     frames: dict[str, FramesUsed] = field(default_factory=dict)
@@ -410,6 +533,7 @@ class JointQuality:
     joint_in_world: dict[str, FloatArray] = field(default_factory=dict)
     estimated_pose_noise: dict[str, PoseNoise] = field(default_factory=dict)
     bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
+    motion: dict[str, MotionQuality] = field(default_factory=dict)
 
     @classmethod
     def parse(cls, value: Any, path: Source) -> JointQuality:
@@ -441,6 +565,10 @@ class JointQuality:
                 for k, v in noise.items()
             },
             _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
+            {
+                k: MotionQuality.parse(v, f"quality.motion.{k}", path)
+                for k, v in as_mapping(d.get("motion") or {}, "quality.motion", path).items()
+            },
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -459,6 +587,8 @@ class JointQuality:
             out["estimated_pose_noise"] = {
                 k: n.to_plain() for k, n in self.estimated_pose_noise.items()
             }
+        if self.motion:
+            out["motion"] = {k: m.to_plain() for k, m in self.motion.items()}
         return out
 
 
@@ -477,6 +607,8 @@ class JointArtifact(YamlArtifact):
     joint : JointSection
         Positions in camera A's and B's frames (``units`` their length unit).
     quality : JointQuality
+    verdict : VerdictSection or None
+        How well the data determined the result (:mod:`acs_cli.core.quality`).
     warnings : list of str
     header : dict
     source : str or None
@@ -491,6 +623,7 @@ class JointArtifact(YamlArtifact):
     warnings: list[str] = field(default_factory=list)
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    verdict: VerdictSection | None = None
 
     @property
     def length_unit(self) -> str:
@@ -506,6 +639,14 @@ class JointArtifact(YamlArtifact):
                 path=self.source,
             )
         self.joint.validate(self.source)
+        header_unit = self.units.get("length")
+        if self.joint.units is not None and header_unit is not None:
+            if str(header_unit) != self.joint.units:
+                raise InputError(
+                    f"'joint.units' ({self.joint.units}) and the header's 'units.length' "
+                    f"({header_unit}) differ: the positions' unit is ambiguous",
+                    path=self.source,
+                )
 
     @classmethod
     def from_doc(cls, doc: dict[str, Any], path: Path) -> JointArtifact:
@@ -513,6 +654,9 @@ class JointArtifact(YamlArtifact):
             scenario=str(doc.get("scenario", "fixed_joint")),
             joint=JointSection.parse(doc.get("joint"), path),
             quality=JointQuality.parse(doc.get("quality"), path),
+            verdict=None
+            if doc.get("verdict") is None
+            else VerdictSection.parse(doc["verdict"], path),
             warnings=as_str_list(doc.get("warnings"), "warnings", path),
             header=header_of(doc),
             source=str(path),
@@ -523,6 +667,7 @@ class JointArtifact(YamlArtifact):
             "scenario": self.scenario,
             "joint": self.joint.to_plain(),
             "quality": self.quality.to_plain(),
+            **({} if self.verdict is None else {"verdict": self.verdict.to_plain()}),
             "warnings": list(self.warnings),
         }
 
@@ -539,8 +684,9 @@ class JointArtifact(YamlArtifact):
         return "\n".join(lines)
 
 
-def load_joint_section(path: str | Path) -> JointSection:
-    """The joint of a ``joint.yaml``, or of a ``relpose.yaml`` (its estimated joint).
+def load_joint_artifact(path: str | Path) -> JointArtifact | RelposeArtifact:
+    """A ``joint.yaml``, or a ``relpose.yaml`` with a joint (``relpose --joint`` takes either);
+    the caller reads the joint's unit from it (``length_unit``, ``unknown_scale``).
 
     Raises
     ------
@@ -549,7 +695,7 @@ def load_joint_section(path: str | Path) -> JointSection:
     """
     p = Path(path)
     try:
-        return JointArtifact.load(p).joint
+        return JointArtifact.load(p)
     except InputError as exc:
         if "acscal/relpose" not in exc.message:
             raise
@@ -558,4 +704,19 @@ def load_joint_section(path: str | Path) -> JointSection:
     rel = RelposeArtifact.load(p)
     if rel.joint is None:
         raise InputError("missing key 'joint.position_in_a'", path=p)
-    return rel.joint
+    return rel
+
+
+def load_joint_section(path: str | Path) -> JointSection:
+    """The joint of a ``joint.yaml``, or of a ``relpose.yaml`` (its estimated joint), in the
+    file's own units (:func:`load_joint_artifact`).
+
+    Raises
+    ------
+    InputError
+        Neither kind, or a joint that is missing or malformed.
+    """
+    joint = load_joint_artifact(path).joint
+    if joint is None:  # load_joint_artifact refuses this; the check keeps the type
+        raise InputError("missing key 'joint.position_in_a'", path=path)
+    return joint

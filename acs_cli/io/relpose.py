@@ -37,6 +37,7 @@ from acs_cli.io.validate import (
     optional_number,
     optional_vector,
 )
+from acs_cli.io.verdict import VerdictSection
 
 __all__ = ["RelativePose", "RelposeArtifact", "RelposeQuality", "Scale"]
 
@@ -262,6 +263,8 @@ class RelposeArtifact(YamlArtifact):
     scale : Scale or None
         Under unknown scale only.
     quality : RelposeQuality
+    verdict : VerdictSection or None
+        How well the data determined the result (:mod:`acs_cli.core.quality`).
     warnings : list of str
     scenario : str
         ``general``.
@@ -283,6 +286,7 @@ class RelposeArtifact(YamlArtifact):
     time_offset: TimeOffsetSection | None = None
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    verdict: VerdictSection | None = None
 
     @property
     def unknown_scale(self) -> bool:
@@ -323,6 +327,9 @@ class RelposeArtifact(YamlArtifact):
             joint=None if joint is None else JointSection.parse(joint, path),
             scale=None if doc.get("scale") is None else Scale.parse(doc["scale"], path),
             quality=RelposeQuality.parse(doc.get("quality"), path),
+            verdict=None
+            if doc.get("verdict") is None
+            else VerdictSection.parse(doc["verdict"], path),
             warnings=as_str_list(doc.get("warnings"), "warnings", path),
             scenario=str(doc.get("scenario", "general")),
             time_offset=None
@@ -344,6 +351,8 @@ class RelposeArtifact(YamlArtifact):
         if self.time_offset is not None:
             out["time_offset"] = self.time_offset.to_plain()
         out["quality"] = self.quality.to_plain()
+        if self.verdict is not None:
+            out["verdict"] = self.verdict.to_plain()
         out["warnings"] = list(self.warnings)
         return out
 

@@ -50,6 +50,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector, optional_number
+from acs_cli.io.verdict import VerdictSection
 
 KIND = "rig"
 
@@ -108,6 +109,8 @@ class RigArtifact(YamlArtifact):
     bundle_adjustment : dict of BundleSection
         Per camera, when the rig was refined on its board corners (refined intrinsics,
         reprojection RMS); empty when solved from poses.
+    verdict : VerdictSection or None
+        How well the data determined each joint (:mod:`acs_cli.core.quality`).
     header : dict
         The artifact header (tool, inputs, method, units, frames); set when loaded or saved.
     """
@@ -121,6 +124,7 @@ class RigArtifact(YamlArtifact):
     bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    verdict: VerdictSection | None = None
 
     KIND: ClassVar[str] = KIND
     REQUIRED: ClassVar[tuple[str, ...]] = ("reference.camera", "cameras", "joints")
@@ -212,6 +216,8 @@ class RigArtifact(YamlArtifact):
         }
         if self.bundle_adjustment:
             out["bundle_adjustment"] = {c: b.to_plain() for c, b in self.bundle_adjustment.items()}
+        if self.verdict is not None:
+            out["verdict"] = self.verdict.to_plain()
         out["warnings"] = list(self.warnings)
         return out
 
@@ -327,6 +333,7 @@ class RigArtifact(YamlArtifact):
             joints=joints,
             warnings=[str(w) for w in warnings],
             bundle_adjustment=bundle,
+            verdict=None if doc.get("verdict") is None else VerdictSection.parse(doc["verdict"], p),
             header=header_of(doc),
             source=str(p),
         )

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acs_cli.errors import InputError
+from acs_cli.io.atomic import MAX_TEXT_BYTES, read_input_bytes
 from acs_cli.io.images import IMAGE_SUFFIXES
 
 __all__ = [
@@ -207,11 +208,10 @@ def read_timestamps_file(path: str | Path) -> dict[str, int]:
         finite number, a repeated name, a time beyond int64 nanoseconds, or no entries.
     """
     p = Path(path)
+    data = read_input_bytes(p, "a timestamps file", MAX_TEXT_BYTES)
     try:
-        text = p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError as exc:
-        raise InputError("no such timestamps file", path=p) from exc
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
         raise InputError(f"cannot read the timestamps file ({exc})", path=p) from exc
     lines = text.splitlines()
     sample = "\n".join(ln for ln in lines[:20] if ln.strip() and not ln.lstrip().startswith("#"))

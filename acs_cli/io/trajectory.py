@@ -22,9 +22,17 @@ from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import atomic_path, atomic_write_text
+from acs_cli.io.atomic import (
+    MAX_NPZ_BYTES,
+    MAX_NPZ_MEMBER_BYTES,
+    MAX_TEXT_BYTES,
+    atomic_path,
+    atomic_write_text,
+    read_input_bytes,
+)
 from acs_cli.io.images import natural_key
 from acs_cli.io.timestamps import image_times
+from acs_cli.io.validate import check_magnitude
 
 __all__ = [
     "FORMATS",
@@ -35,6 +43,7 @@ __all__ = [
     "QUAT_NORM_TOL",
     "TIME_UNITS",
     "Trajectory",
+    "check_npz_members",
     "read_colmap",
     "read_kitti",
     "read_npz_header",
@@ -153,6 +162,7 @@ class Trajectory:
             se3.check_transforms(T, name="T_world_cam")
         except InputError as exc:
             raise InputError(exc.message, path=src) from exc
+        check_magnitude(T[:, :3, 3], "translations", src, extent=True)
         object.__setattr__(self, "timestamps", t)
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "names", tuple(str(s) for s in self.names))
@@ -198,14 +208,7 @@ class Trajectory:
 
 def _read_text(path: Path) -> str:
     """The file's text (UTF-8, optional BOM); every failure is an InputError."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError as exc:
-        raise InputError("no such file", path=path) from exc
-    except IsADirectoryError as exc:
-        raise InputError("is a folder, expected a file", path=path) from exc
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or exc})", path=path) from exc
+    data = read_input_bytes(path, "a trajectory file", MAX_TEXT_BYTES)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -635,14 +638,30 @@ def read_colmap(path: str | Path) -> Trajectory:
 
 def _read_bytes_npz(path: Path) -> bytes:
     """The bytes of an NPZ file; a missing file or a folder is an InputError."""
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    if path.is_dir():
-        raise InputError("is a folder, expected an NPZ file", path=path)
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror or exc})", path=path) from exc
+    return read_input_bytes(path, "an NPZ file", MAX_NPZ_BYTES)
+
+
+def check_npz_members(z: np.lib.npyio.NpzFile, path: Path) -> None:
+    """Refuse an archive whose arrays declare more than :data:`MAX_NPZ_MEMBER_BYTES` each
+    (read from each ``.npy`` header, before any array is loaded)."""
+    archive = z.zip
+    if archive is None:  # pragma: no cover - an open NpzFile holds its archive
+        return
+    for info in archive.infolist():
+        with archive.open(info) as fp:
+            version = np.lib.format.read_magic(fp)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fp)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fp)
+        size = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if size > MAX_NPZ_MEMBER_BYTES:
+            name = info.filename.removesuffix(".npy")
+            raise InputError(
+                f"the array '{name[:60]}' declares {size} bytes, more than the "
+                f"{MAX_NPZ_MEMBER_BYTES >> 20} MiB acscal reads from one NPZ array",
+                path=path,
+            )
 
 
 def npz_arrays_from_bytes(data: bytes, path: Path) -> dict[str, np.ndarray]:
@@ -653,6 +672,7 @@ def npz_arrays_from_bytes(data: bytes, path: Path) -> dict[str, np.ndarray]:
         if not isinstance(z, np.lib.npyio.NpzFile):
             raise InputError("is a single .npy array, not an NPZ archive", path=path)
         with z:
+            check_npz_members(z, path)
             return {str(k): np.asarray(z[k]) for k in z.files}
     except InputError:
         raise
@@ -809,8 +829,8 @@ def parse_npz_header(arrays: Mapping[str, np.ndarray], p: Path) -> dict[str, Any
         return {}
     try:
         header = json.loads(_npz_scalar_str(arrays, "header_json", p))
-    except ValueError as exc:
-        raise InputError("'header_json' is not valid JSON", path=p) from exc
+    except (ValueError, RecursionError) as exc:  # RecursionError: nested too deeply
+        raise InputError("'header_json' is not valid JSON (or nested too deeply)", path=p) from exc
     if not isinstance(header, dict):
         raise InputError("'header_json' is not a mapping", path=p)
     return header
@@ -974,9 +994,10 @@ def _sniff(path: Path) -> str:
     if path.is_dir() or path.name == "images.txt":
         return "colmap"
     try:
-        with open(path, "rb") as fh:
-            if fh.read(4) == b"PK\x03\x04":  # a zip archive: an NPZ under another name
-                return "npz"
+        if path.is_file():  # not a FIFO or a device: opening one may block; _read_text says
+            with open(path, "rb") as fh:
+                if fh.read(4) == b"PK\x03\x04":  # a zip archive: an NPZ under another name
+                    return "npz"
     except OSError:
         pass  # _read_text names the problem
     lines, numbers = _data_lines(_read_text(path))
@@ -1033,7 +1054,7 @@ def read_trajectory(path: str | Path, fmt: str = "auto") -> Trajectory:
     p = Path(path)
     if fmt not in FORMATS:
         raise InputError(f"unknown trajectory format {fmt!r}; use one of {', '.join(FORMATS)}")
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():  # a symlink loop: the reader says so
         raise InputError("no such file or folder", path=p)
     kind = _sniff(p) if fmt == "auto" else fmt
     return _READERS[kind](p)

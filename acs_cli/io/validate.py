@@ -9,6 +9,7 @@ value.
 
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,8 @@ from acs_cli.errors import InputError
 
 __all__ = [
     "COV_TOL",
+    "MAX_MAGNITUDE",
+    "MIN_EXTENT",
     "TIME_TOL",
     "as_bool",
     "as_covariance3",
@@ -29,11 +32,13 @@ __all__ = [
     "as_number",
     "as_str_list",
     "as_vector",
+    "check_magnitude",
     "listed_mask",
     "optional_covariance3",
     "optional_matrix",
     "optional_number",
     "optional_vector",
+    "short_repr",
 ]
 
 FloatArray = NDArray[np.floating[Any]]
@@ -43,6 +48,64 @@ Source = str | Path | None
 TIME_TOL = 1e-6
 #: Relative tolerance of a covariance's symmetry and of its smallest eigenvalue (PSD).
 COV_TOL = 1e-6
+#: Largest magnitude of a length (a translation, a joint position) or an angle acscal
+#: reads, in the file's units: 1e10 holds UTM coordinates in millimetres; beyond, a value
+#: is a wrong unit or a corrupt file, and the estimators' squares and products overflow.
+MAX_MAGNITUDE = 1e10
+#: Smallest non-zero extent of a trajectory (its largest translation component), in its
+#: units: smaller, the estimators' fourth powers underflow (they fail near 1e-50).
+MIN_EXTENT = 1e-20
+
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel = 2
+_REPR.maxlist = _REPR.maxtuple = _REPR.maxdict = _REPR.maxset = 4
+_REPR.maxstring = _REPR.maxother = 40
+
+
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` for a message, bounded: at most ``limit`` characters, computed
+    without building the whole repr of a huge value (a long list, a deep mapping)."""
+    text = _REPR.repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def check_magnitude(values: Any, key: str, path: Source, *, extent: bool = False) -> None:
+    """Refuse finite values beyond :data:`MAX_MAGNITUDE` (NaN and inf are left to the
+    caller); with ``extent``, also a non-zero set of values all below :data:`MIN_EXTENT`
+    (a trajectory's translations).
+
+    Parameters
+    ----------
+    values : array_like of float
+        The numbers (any shape).
+    key : str
+        What they are (``"translations"``, ``"joint.position_in_a"``), for the message.
+    path : str or Path or None
+        Their file, for the message.
+    extent : bool
+        Also check the smallest scale.
+
+    Raises
+    ------
+    InputError
+        Naming ``key``, the offending value and the range.
+    """
+    arr = np.abs(np.asarray(values, dtype=float))
+    finite = arr[np.isfinite(arr)]
+    largest = float(finite.max(initial=0.0))
+    if largest > MAX_MAGNITUDE:
+        raise InputError(
+            f"'{key}' holds {largest:.3g}, beyond the {MAX_MAGNITUDE:.0e} in size acscal "
+            "accepts (in the file's units): a wrong unit, or a corrupt file?",
+            path=path,
+        )
+    if extent and 0.0 < largest < MIN_EXTENT:
+        raise InputError(
+            f"'{key}' are all below {MIN_EXTENT:.0e} in size (the largest is {largest:.3g}), "
+            "too small to compute with: give them in a larger unit",
+            path=path,
+        )
 
 
 def _floats(value: Any) -> FloatArray | None:
@@ -101,7 +164,7 @@ def as_number(
         else:
             ok = allow_nan or bool(np.isfinite(v))
     if not ok:
-        raise InputError(f"'{key}' must be a finite number, got {str(value)[:40]!r}", path=path)
+        raise InputError(f"'{key}' must be a finite number, got {short_repr(value)}", path=path)
     if positive and not v > 0:
         raise InputError(f"'{key}' must be a positive number, got {v!r}", path=path)
     if non_negative and not v >= 0:
@@ -129,7 +192,7 @@ def as_int(value: Any, key: str, path: Source, *, minimum: int | None = None) ->
         v = float(value)
         ok = bool(np.isfinite(v)) and v.is_integer() and abs(v) < 2**31
     if not ok:
-        raise InputError(f"'{key}' must be an integer, got {str(value)[:40]!r}", path=path)
+        raise InputError(f"'{key}' must be an integer, got {short_repr(value)}", path=path)
     n = int(value)
     if minimum is not None and n < minimum:
         raise InputError(f"'{key}' must be at least {minimum}, got {n}", path=path)
@@ -139,7 +202,7 @@ def as_int(value: Any, key: str, path: Source, *, minimum: int | None = None) ->
 def as_bool(value: Any, key: str, path: Source) -> bool:
     """A YAML boolean (``true``/``false``)."""
     if not isinstance(value, (bool, np.bool_)):
-        raise InputError(f"'{key}' must be true or false, got {str(value)[:40]!r}", path=path)
+        raise InputError(f"'{key}' must be true or false, got {short_repr(value)}", path=path)
     return bool(value)
 
 
@@ -190,12 +253,14 @@ def as_vector(
     Raises
     ------
     InputError
-        Not ``n`` finite numbers; the message names ``key`` and the file.
+        Not ``n`` finite numbers, or one beyond :data:`MAX_MAGNITUDE`; the message names
+        ``key`` and the file.
     """
     arr = _floats(value)
     if arr is None or arr.shape != (n,) or not (allow_nan or np.all(np.isfinite(arr))):
         words = {3: "three"}.get(n, str(n))
         raise InputError(f"'{key}' must be {words} finite numbers", path=path)
+    check_magnitude(arr, key, path)
     return arr
 
 
@@ -207,8 +272,11 @@ def optional_vector(
 
 
 def as_covariance3(value: Any, key: str, path: Source) -> FloatArray:
-    """A 3x3 covariance: finite, symmetric and positive semi-definite (within :data:`COV_TOL`
-    of its largest entry).
+    """A 3x3 covariance: finite, symmetric and positive semi-definite.
+
+    Both checks are made on the correlation matrix ``C_ij / (s_i s_j)`` (``s_i`` the standard
+    deviations, floored at ``sqrt(COV_TOL)`` times the largest), within :data:`COV_TOL`: a
+    covariance whose axes differ by orders of magnitude is judged on each axis's own scale.
 
     Raises
     ------
@@ -216,12 +284,21 @@ def as_covariance3(value: Any, key: str, path: Source) -> FloatArray:
         Not a finite 3x3 matrix, not symmetric, or with a negative eigenvalue.
     """
     C = as_matrix(value, (3, 3), key, path)
-    scale = float(np.abs(C).max())
-    if scale == 0.0:
+    diag = np.diag(C)
+    top = float(diag.max())
+    if top <= 0.0:
+        if np.any(C != 0.0):
+            raise InputError(
+                f"'{key}' must be a positive semi-definite 3x3 covariance (its diagonal is "
+                "not positive)",
+                path=path,
+            )
         return C
-    if np.abs(C - C.T).max() > COV_TOL * scale:
+    s = np.sqrt(np.maximum(diag, COV_TOL * top))
+    R = C / np.outer(s, s)
+    if np.abs(R - R.T).max() > COV_TOL:
         raise InputError(f"'{key}' must be a symmetric 3x3 covariance", path=path)
-    if np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -COV_TOL * scale:
+    if diag.min() < 0.0 or np.linalg.eigvalsh(0.5 * (R + R.T)).min() < -COV_TOL:
         raise InputError(
             f"'{key}' must be a positive semi-definite 3x3 covariance (it has a negative "
             "eigenvalue)",

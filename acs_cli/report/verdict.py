@@ -14,6 +14,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Literal
 
+from acs_cli.core.quality import JOINT_STD, LEVELS, REPROJECTION, RESIDUAL
+
 __all__ = [
     "COVERAGE_GRID",
     "STATUSES",
@@ -22,6 +24,7 @@ __all__ = [
     "StageVerdict",
     "Status",
     "Threshold",
+    "artifact_verdict_check",
     "classify",
     "expected_joint_residual",
     "joint_checks",
@@ -88,11 +91,12 @@ THRESHOLDS: dict[str, Threshold] = {
     "reprojection_rms_px": Threshold(
         "reprojection RMS",
         "px",
-        0.5,
-        1.0,
+        REPROJECTION.warn,
+        REPROJECTION.refuse,
         description="RMS distance between the detected corners and the calibrated model's "
         "projection of the board. Sharp checkerboard corners reach 0.1-0.3 px; above 1 px a "
-        "detection, the camera model or the board's geometry is wrong.",
+        "detection, the camera model or the board's geometry is likely wrong. The limits are "
+        "the warning and refusal levels of docs/degeneracy.md (reprojection_rms_px).",
     ),
     "coverage": Threshold(
         "image coverage",
@@ -118,21 +122,33 @@ THRESHOLDS: dict[str, Threshold] = {
     "joint_residual_over_distance": Threshold(
         "joint residual / joint distance",
         "%",
-        0.01,
-        0.03,
+        RESIDUAL.warn,
+        RESIDUAL.refuse,
         scale=100.0,
         description="RMS of the joint-constraint residual relative to the joint's distance "
-        "from the camera.",
+        "from the camera. The limits are the warning and refusal levels of the one policy "
+        "for weak results (docs/degeneracy.md, residual_fraction).",
     ),
     "joint_std_over_distance": Threshold(
         "joint std / joint distance",
         "%",
-        0.02,
-        0.05,
+        JOINT_STD.warn,
+        JOINT_STD.refuse,
         scale=100.0,
-        description="The joint's one-sigma uncertainty (the norm of its x, y, z stds) relative "
+        description="The joint's largest one-sigma uncertainty (from its covariance) relative "
         "to its distance from the camera: above a few percent the motion did not excite the "
-        "joint enough (more rotation about it is needed).",
+        "joint enough (more rotation about it is needed). The limits are the warning and "
+        "refusal levels of docs/degeneracy.md (joint_std_fraction), whose scale is also at "
+        "least a tenth of the camera's travel: for a joint near the optical centre the "
+        "artifact's own verdict is the one to read.",
+    ),
+    "artifact_verdict": Threshold(
+        "the artifact's own verdict (0 good, 1 weak, 2 refused and written with --accept-weak)",
+        "",
+        0.0,
+        1.0,
+        description="The verdict section each joint, relpose and rig artifact carries "
+        "(docs/degeneracy.md): weak past a warning level, refused past a refusal level.",
     ),
     "warnings": Threshold(
         "warnings",
@@ -275,6 +291,13 @@ def reprojection_checks(
     return out
 
 
+def artifact_verdict_check(level: str | None, subject: str = "") -> list[Check]:
+    """The check of an artifact's own ``verdict.level`` (none for an artifact without one)."""
+    if level is None:
+        return []
+    return [Check("artifact_verdict", float(LEVELS.index(level)), subject)]
+
+
 def joint_checks(
     residual_rms: float | None,
     distance: float,
@@ -292,7 +315,7 @@ def joint_checks(
     distance : float
         The joint's distance from the camera (same unit); no check without it (<= 0).
     std : iterable of float, optional
-        One sigma of the joint's x, y, z.
+        The stds whose norm is judged (the report passes the largest std alone).
     noise : (sigma_trans, sigma_rot_deg), optional
         The estimated pose noise (:func:`expected_joint_residual`).
     cameras : int

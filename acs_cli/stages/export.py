@@ -40,6 +40,8 @@ from acs_cli.io.export import (
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.relpose import RelposeArtifact
+from acs_cli.io.validate import MAX_MAGNITUDE
+from acs_cli.io.verdict import weak_marks
 
 __all__ = [
     "EXPORT_FORMATS",
@@ -133,8 +135,11 @@ def _check_output(output: Path, fmt: str, inputs: Sequence[Path]) -> None:
 
 
 def _check_scale(scale: float | None) -> None:
-    if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise InputError(f"--scale must be a positive number of metres per unit, got {scale}")
+    if scale is not None and not (math.isfinite(scale) and 0 < scale <= MAX_MAGNITUDE):
+        raise InputError(
+            f"--scale must be a positive number of metres per unit (at most "
+            f"{MAX_MAGNITUDE:.0e}), got {scale}"
+        )
 
 
 # --------------------------------------------------------------------------------------
@@ -287,6 +292,17 @@ def _known(cams: Mapping[str, IntrinsicsArtifact | None]) -> dict[str, Intrinsic
     return {c: v for c, v in cams.items() if v is not None}
 
 
+def _weak_intrinsics(
+    cams: Mapping[str, IntrinsicsArtifact | None], sources: Mapping[str, str]
+) -> list[str]:
+    """Marks for the cameras whose intrinsics file is a weak result."""
+    out: list[str] = []
+    for c, intr in cams.items():
+        if intr is not None:
+            out += weak_marks(f"the intrinsics of {c} ({sources.get(c, '')})", intr.verdict)
+    return out
+
+
 def _warning_notes(artifact: str, warnings: Sequence[str]) -> list[str]:
     """Comment lines that mark a result exported despite its artifact's warnings."""
     if not warnings:
@@ -397,13 +413,15 @@ def run_rig_export(
                 rig.bundle_adjustment.get(cam),
                 rig_file,
             )
-    notes = _warning_notes(rig_file.name, rig.warnings)
+    notes = weak_marks(rig_file.name, rig.verdict) + _warning_notes(rig_file.name, rig.warnings)
+    notes += _weak_intrinsics(cams, sources)
     info: dict[str, Any] = {
         "format": fmt,
         "output": str(output),
         "keys": list(rig.cameras),
         "intrinsics": sources,
         "warnings": list(rig.warnings),
+        "verdict": "good" if rig.verdict is None else rig.verdict.level,
     }
     if fmt == "ros":
         names = {c: (camera_names or {}).get(c, c) for c in rig.cameras}
@@ -519,13 +537,15 @@ def run_export(
             art.quality.bundle_adjustment.get(x),
             relpose,
         )
-    notes = _warning_notes(relpose.name, art.warnings)
+    notes = weak_marks(relpose.name, art.verdict) + _warning_notes(relpose.name, art.warnings)
+    notes += _weak_intrinsics(cams, sources)
     info: dict[str, Any] = {
         "format": fmt,
         "output": str(output),
         "keys": [names["a"], names["b"]],
         "intrinsics": {names[x]: sources[x] for x in PAIR_CAMERAS},
         "warnings": list(art.warnings),
+        "verdict": "good" if art.verdict is None else art.verdict.level,
     }
     if fmt == "ros":
         written = _write_ros(output, cams, names, sources, notes)
@@ -571,6 +591,10 @@ def run_export(
     mats["length_unit"] = "m"
     if art.warnings:  # also as a key: a JSON FileStorage has no comments
         mats["warnings"] = "; ".join(art.warnings)
+    if art.verdict is not None and art.verdict.weak:
+        mats["verdict"] = art.verdict.level + (
+            " (--accept-weak)" if art.verdict.accepted_weak else ""
+        )
     for x in PAIR_CAMERAS:
         intr = cams[x]
         if intr is not None:

@@ -26,9 +26,10 @@ from acs_cli.core.intrinsics import (
     board_points,
     calibrate_robust,
     degenerate_distortion,
+    honest_std,
     intrinsics_covariance,
-    std_from_covariance,
 )
+from acs_cli.core.quality import intrinsics_measures, judge
 from acs_cli.core.targets import (
     MIN_POSE_CORNERS,
     TARGETS_DETECTOR_VERSION,
@@ -56,6 +57,7 @@ from acs_cli.io.export import (
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, DroppedView, ImagesUsed, IntrinsicsArtifact
 from acs_cli.io.target import target_to_mapping
+from acs_cli.io.verdict import VerdictSection, weak_marks
 
 __all__ = [
     "EXPORTS",
@@ -107,6 +109,7 @@ class IntrinsicsConfig:
     camera_name: str = "camera"
     workers: int | None = None
     target: MarkerTarget | None = None
+    accept_weak: bool = False
 
 
 @dataclass(frozen=True)
@@ -615,7 +618,16 @@ def run_intrinsics(
         warnings.append(degenerate)
 
     dist_names = DISTORTION_NAMES[config.model]
-    std = dict(calib.std_intrinsics) or std_from_covariance(cov)  # fisheye: OpenCV gives none
+    std = honest_std(calib, cov)
+    verdict = judge(intrinsics_measures(calib.camera_matrix, calib.rms_px, std), config.accept_weak)
+    repeats = len(calib.used) - calib.distinct
+    if repeats >= max(3, len(calib.used) // 4):
+        warnings.append(
+            f"{len(calib.used)} views show the board from only {calib.distinct} distinct poses "
+            f"({repeats} near-duplicates, a video?): repeats add little, and the stds count "
+            "each pose once; move the board or the camera between images"
+        )
+    warnings += verdict.warnings()
     calibrator = "cv2.fisheye.calibrate" if config.model == "fisheye" else "calibrateCameraExtended"
     header = make_header(
         "intrinsics",
@@ -665,13 +677,17 @@ def run_intrinsics(
         warnings=warnings,
         header=header,
         source=str(output),
+        verdict=VerdictSection.from_verdict(verdict),
     )
     art.save(output)
     camera = (calib.camera_matrix, calib.distortion, fd.image_size, config.model)
+    marks = weak_marks(output.name, art.verdict)
     if "ros" in exports:
-        write_ros_camera_info(exports["ros"], *camera, config.camera_name)
+        write_ros_camera_info(exports["ros"], *camera, config.camera_name, comments=marks)
     if "opencv" in exports:
         write_opencv_yaml(
-            exports["opencv"], {**opencv_camera_values(*camera), "rms_px": calib.rms_px}
+            exports["opencv"],
+            {**opencv_camera_values(*camera), "rms_px": calib.rms_px},
+            comments=marks,
         )
     return IntrinsicsRun(calib, to_plain(art.to_doc()), output, exports, fd, warnings)

@@ -2,13 +2,31 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
-from acs_cli.errors import DegenerateMotionError, InputError
+from acs_cli.core.diagnose import (
+    Diagnosis,
+    TimedPair,
+    diagnose_fixed_joint,
+    diagnose_overlap,
+    fit_is_suspicious,
+    paper_method_misfit,
+)
+from acs_cli.core.joint import (
+    JointEstimate,
+    estimate_joint_fixed,
+    estimate_joint_overlap,
+    estimate_pivot,
+    fixed_joint_warnings,
+)
+from acs_cli.core.quality import Measure, joint_measures, judge, length_scale
+from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.joint import (
@@ -17,10 +35,14 @@ from acs_cli.io.joint import (
     JointArtifact,
     JointQuality,
     JointSection,
+    MotionQuality,
     Pairing,
     PoseNoise,
+    load_joint_artifact,
     load_joint_section,
 )
+from acs_cli.io.trajectory import Trajectory
+from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap, shared_board_flip
 from acs_cli.stages.common import (
     PairedTrajectories,
@@ -64,6 +86,9 @@ class JointConfig:
         the joint and the intrinsics by bundle adjustment on them (per camera for the fixed
         joint, both cameras together for the overlap). Trajectories without corners are
         used as they are.
+    accept_weak : bool
+        Write a result past a refusal level of :mod:`acs_cli.core.quality` anyway, marked
+        weak (``--accept-weak``).
     """
 
     scenario: str = "fixed_joint"
@@ -74,6 +99,7 @@ class JointConfig:
     max_dt: float | None = None
     length_unit: str = "m"
     bundle: bool = True
+    accept_weak: bool = False
 
 
 JointRun = StageRun[JointEstimate]
@@ -161,6 +187,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     pairing: Pairing | None = None
     frames: dict[str, FramesUsed] = {}
     in_world: dict[str, np.ndarray] = {}
+    poses_by_key: dict[str, np.ndarray] = {}
     if config.scenario == "overlap":
         if poses_b is None:
             raise InputError("--overlap needs both --poses-a and --poses-b")
@@ -180,6 +207,8 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             bundles = sections or {}
         pairing = pairing_section(pair.pairing, config.pair_by)
         frames["ab"] = FramesUsed.from_inliers(est.inliers["ab"], pair.a.timestamps)
+        # B's poses in A's frame: the articulation, whose travel sets the overlap's scale
+        poses_by_key["ab"] = np.linalg.solve(pair.a.T_world_cam, pair.b.T_world_cam)
     else:
         ta = load_trajectory(poses_a, config.format_a)
         tb = None if poses_b is None else load_trajectory(poses_b, config.format_b)
@@ -195,15 +224,24 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
                     bundles[cam] = section
                 warnings += notes
         frames["a"] = FramesUsed.from_inliers(est.inliers["a"], ta.timestamps)
+        poses_by_key["a"] = ta.T_world_cam
         if tb is not None:
             frames["b"] = FramesUsed.from_inliers(est.inliers["b"], tb.timestamps)
+            poses_by_key["b"] = tb.T_world_cam
         in_world = {k: np.asarray(v, dtype=float) for k, v in est.position_in_world.items()}
+        warnings += fixed_joint_warnings(est, config.length_unit)
     for key, fr in frames.items():
         if fr.rejected:
             warnings.append(
                 f"{len(fr.rejected)} frame(s) of {key.upper()} rejected as outliers "
                 f"(timestamps {fr.rejected[:10]})"
             )
+    if config.scenario == "overlap":
+        findings = overlap_findings(est, pair, config.length_unit)
+    else:
+        findings = fixed_joint_findings(est, {"a": ta, "b": tb}, config.length_unit)
+    verdict = judge(joint_verdict_measures(est, poses_by_key), config.accept_weak, findings)
+    warnings += verdict.warnings()
     quality = JointQuality(
         frames=frames,
         residual_rms=dict(est.residual_rms),
@@ -214,6 +252,11 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             for k, v in est.noise.items()
         },
         bundle_adjustment=bundles,
+        motion={
+            k: MotionQuality.from_motion(m, cov)
+            for k, m in est.motion.items()
+            if (cov := est.covariance_of(k)) is not None
+        },
     )
     header = make_header(
         "joint",
@@ -237,6 +280,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         scenario=config.scenario,
         joint=joint_section(est, config.length_unit),
         quality=quality,
+        verdict=VerdictSection.from_verdict(verdict),
         warnings=warnings,
         header=header,
         source=str(output),
@@ -245,7 +289,201 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     return StageRun(est, to_plain(art.to_doc()), output, warnings)
 
 
+#: Trajectory formats whose rotations are read from quaternions (their order can be wrong).
+QUATERNION_FORMATS = ("tum", "colmap")
+
+
+def timed_pair(pair: PairedTrajectories) -> TimedPair | None:
+    """Both paired trajectories with their times, when both are in seconds (for the
+    diagnosis' clock check)."""
+    a, b = pair.a, pair.b
+    if not (a.has_timestamps and b.has_timestamps) or "frame" in (a.time_unit, b.time_unit):
+        return None
+    return TimedPair(a.timestamps, a.T_world_cam, b.timestamps, b.T_world_cam)
+
+
+def fixed_joint_findings(
+    est: JointEstimate, trajectories: dict[str, Trajectory | None], unit: str
+) -> list[str]:
+    """What a usual cause explains (:func:`acs_cli.core.diagnose.diagnose_fixed_joint`) for
+    each camera whose residual is suspicious against its length scale."""
+    out = []
+    for key, traj in trajectories.items():
+        position = est.position_in_a if key == "a" else est.position_in_b
+        rms = est.residual_rms.get(key)
+        if traj is None or position is None or rms is None:
+            continue
+        if not fit_is_suspicious(rms, length_scale(position, traj.T_world_cam)):
+            continue
+        found = paper_misfit(
+            est.method, rms, partial(estimate_pivot, traj.T_world_cam, "refined", key), key, unit
+        )
+        if found is None:
+            found = diagnose_fixed_joint(
+                traj.T_world_cam,
+                quaternion_source=traj.format in QUATERNION_FORMATS,
+                current_rms=rms,
+                camera=key,
+                unit=unit,
+            )
+        if found is not None:
+            out.append(found.message)
+    return out
+
+
+def paper_misfit(
+    method: str, rms: float, refined: Callable[[], Any], key: str, unit: str
+) -> Diagnosis | None:
+    """With the paper's method: its fit thrown by outliers, when the refined method on the
+    same poses (``refined()``, anything with ``residual_rms``: a float, or a dict with
+    ``key``) fits much better (:func:`acs_cli.core.diagnose.paper_method_misfit`)."""
+    if method != "paper":
+        return None
+    try:
+        got = refined().residual_rms
+    except AcsError:
+        return None
+    rms_refined = float(got[key] if isinstance(got, dict) else got)
+    return paper_method_misfit(rms, rms_refined, key, unit)
+
+
+def overlap_findings(est: JointEstimate, pair: PairedTrajectories, unit: str) -> list[str]:
+    """What a usual cause explains (:func:`acs_cli.core.diagnose.diagnose_overlap`) when the
+    overlap fit's residual is suspicious against the rig's length scale."""
+    rms = est.residual_rms.get("ab")
+    T_a_b = np.linalg.solve(pair.a.T_world_cam, pair.b.T_world_cam)
+    if rms is None or not fit_is_suspicious(rms, length_scale(est.position_in_a, T_a_b)):
+        return []
+    found = paper_misfit(
+        est.method,
+        rms,
+        lambda: estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, "refined"),
+        "ab",
+        unit,
+    )
+    if found is not None:
+        return [found.message]
+    found = diagnose_overlap(
+        pair.a.T_world_cam,
+        pair.b.T_world_cam,
+        quaternion_source=(
+            pair.a.format in QUATERNION_FORMATS,
+            pair.b.format in QUATERNION_FORMATS,
+        ),
+        current_rms=rms,
+        timed=timed_pair(pair),
+        unit=unit,
+    )
+    return [] if found is None else [found.message]
+
+
+def joint_verdict_measures(est: JointEstimate, poses: dict[str, np.ndarray]) -> list[Measure]:
+    """The quality measures of a joint estimate (:mod:`acs_cli.core.quality`).
+
+    ``poses`` maps the estimate's keys to the poses that set each length scale: ``a``/``b``
+    the cameras' ``T_world_cam`` (fixed joint), ``ab`` B's poses in A's frame (overlap,
+    whose residual is in A's frame).
+    """
+    out: list[Measure] = []
+    for key, T in poses.items():
+        cam = "a" if key == "ab" else key
+        position = est.position_in_a if cam == "a" else est.position_in_b
+        cov = est.covariance_a if cam == "a" else est.covariance_b
+        if position is None or cov is None:
+            continue
+        out += joint_measures(
+            position,
+            cov,
+            T,
+            est.residual_rms.get(key),
+            est.inliers.get(key),
+            f"the joint in {cam.upper()}",
+        )
+    if "ab" in poses and est.position_in_b is not None and est.covariance_b is not None:
+        T_b_a = np.linalg.inv(poses["ab"])
+        out += joint_measures(
+            est.position_in_b, est.covariance_b, T_b_a, None, None, "the joint in B"
+        )
+    return out
+
+
 def read_joint(path: Path) -> JointSection:
     """The joint of a ``joint.yaml`` (or of a ``relpose.yaml``), checked
     (:func:`acs_cli.io.joint.load_joint_section`)."""
     return load_joint_section(path)
+
+
+def read_joint_in_units(
+    path: Path,
+    length_unit: str,
+    *,
+    unknown_scale: bool = False,
+    metric: bool = False,
+    poses: tuple[Path, Path] | None = None,
+) -> tuple[JointSection, list[str]]:
+    """The joint of a ``joint.yaml`` or ``relpose.yaml`` in the unit the trajectories need,
+    and the warnings of a conversion.
+
+    The unit needed is ``length_unit`` (known scale), metres (``metric``: ``--joint-metric``
+    under unknown scale), or the trajectories' own (unknown scale without ``metric``: not
+    checked, as before). A joint in another unit of
+    :data:`~acs_cli.stages.export.METRES_PER_UNIT` is converted, with a warning; any other
+    unit is refused. An unknown-scale ``relpose.yaml``'s joint is in the units of the two
+    trajectories it was estimated from (A's for ``position_in_a``, B's for
+    ``position_in_b``): it is taken as ``--joint`` only with those same two trajectories
+    (``poses``, compared by SHA-256), never as metric.
+
+    Raises
+    ------
+    InputError
+        The joint file is malformed, or its unit cannot be converted to the one needed.
+    """
+    from acs_cli.io.artifacts import sha256_of
+    from acs_cli.io.relpose import RelposeArtifact
+    from acs_cli.stages.export import METRES_PER_UNIT
+
+    art = load_joint_artifact(path)
+    joint = art.joint
+    if joint is None:  # load_joint_artifact refuses this; the check keeps the type
+        raise InputError("missing key 'joint.position_in_a'", path=path)
+    if isinstance(art, RelposeArtifact) and art.unknown_scale:
+        same = poses is not None and all(
+            isinstance(rec := art.inputs.get(role), dict) and rec.get("sha256") == sha256_of(given)
+            for role, given in zip(("poses_a", "poses_b"), poses, strict=True)
+        )
+        if same and not metric:
+            return joint, []
+        made_with = art.inputs.get("joint")
+        hint = (
+            f" (this one was estimated with {made_with['path']})"
+            if isinstance(made_with, dict) and made_with.get("path")
+            else ""
+        )
+        raise InputError(
+            "is an unknown-scale relpose.yaml: its joint is in the units of the two "
+            "trajectories it was estimated from (position_in_a in A's, position_in_b in B's), "
+            + ("not metres" if metric else "and these are other trajectories")
+            + ". Give a metric joint.yaml from a fixed-joint session (acscal joint) with "
+            f"--joint-metric{hint}, or --self-calibrate; its joint can be reused as --joint "
+            "only with the same two trajectories",
+            path=path,
+        )
+    if unknown_scale and not metric:
+        return joint, []
+    have = art.length_unit
+    need = "m" if metric else length_unit
+    if have == need:
+        return joint, []
+    if have in METRES_PER_UNIT and need in METRES_PER_UNIT:
+        factor = METRES_PER_UNIT[have] / METRES_PER_UNIT[need]
+        return joint.scaled(factor, need), [
+            f"the joint ({path}) is in {have} and the trajectories in {need}: its positions "
+            f"and covariances were converted to {need} (x {factor:g})"
+        ]
+    raise InputError(
+        f"the joint is in '{have}' but the trajectories are in '{need}'"
+        + (" (--joint-metric needs metres)" if metric else " (--length-unit)")
+        + f": give a joint in {need}, or the --length-unit of the trajectories; only "
+        f"{', '.join(METRES_PER_UNIT)} are converted",
+        path=path,
+    )

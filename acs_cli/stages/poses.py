@@ -14,6 +14,7 @@ image indices.
 from __future__ import annotations
 
 import contextlib
+import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
@@ -246,7 +247,7 @@ def run_poses(
     inputs = [images_dir, intrinsics, *list_images(images_dir)]
     for o in outputs:
         check_distinct_output(o, inputs)
-    if config.tum is not None and Path(config.tum).resolve() == output.resolve():
+    if config.tum is not None and os.path.realpath(config.tum) == os.path.realpath(output):
         raise InputError("--tum and -o name the same file", path=output)
     for o in [*outputs, cache_path_for(output)]:
         check_writable(o)  # before the detection, and before the first output is replaced
@@ -631,7 +632,7 @@ def run_sfm_poses(
     inputs = [images_dir, *paths] + ([intrinsics] if intrinsics is not None else [])
     for o in outputs:
         check_distinct_output(o, inputs)
-    if config.tum is not None and Path(config.tum).resolve() == output.resolve():
+    if config.tum is not None and os.path.realpath(config.tum) == os.path.realpath(output):
         raise InputError("--tum and -o name the same file", path=output)
     for o in outputs:
         check_writable(o)

@@ -4,12 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from acs_cli.core.diagnose import diagnose_relpose, fit_is_suspicious
 from acs_cli.core.pairing import PairingResult
+from acs_cli.core.quality import (
+    Measure,
+    joint_measures,
+    judge,
+    length_scale,
+    relative_pose_measures,
+)
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.time_offset import (
@@ -30,9 +39,15 @@ from acs_cli.io.relpose import (
     TimeOffsetSection,
 )
 from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import bundle_general
 from acs_cli.stages.common import PairedTrajectories, StageRun, pair_loaded, pairing_section
-from acs_cli.stages.joint import read_joint
+from acs_cli.stages.joint import (
+    QUATERNION_FORMATS,
+    paper_misfit,
+    read_joint_in_units,
+    timed_pair,
+)
 
 #: Default largest time offset searched, seconds.
 DEFAULT_MAX_OFFSET = 0.5
@@ -64,6 +79,9 @@ class RelposeConfig:
         (:mod:`acs_cli.core.time_offset`); both trajectories need timestamps.
     max_offset : float
         Largest offset searched, seconds.
+    accept_weak : bool
+        Write a result past a refusal level of :mod:`acs_cli.core.quality` anyway, marked
+        weak (``--accept-weak``).
     """
 
     method: str = "refined"
@@ -79,17 +97,32 @@ class RelposeConfig:
     bundle: bool = True
     estimate_time_offset: bool = False
     max_offset: float = DEFAULT_MAX_OFFSET
+    accept_weak: bool = False
 
 
 RelposeRun = StageRun[RelposeEstimate]
 
 
-def load_prior(path: Path, metric: bool) -> JointPrior:
-    """A :class:`JointPrior` from a ``joint.yaml`` (or a ``relpose.yaml``'s joint).
+def load_prior(
+    path: Path,
+    metric: bool,
+    *,
+    length_unit: str = "m",
+    unknown_scale: bool = False,
+    poses: tuple[Path, Path] | None = None,
+    warnings: list[str] | None = None,
+) -> JointPrior:
+    """A :class:`JointPrior` from a ``joint.yaml`` (or a ``relpose.yaml``'s joint), in the
+    trajectories' unit (:func:`acs_cli.stages.joint.read_joint_in_units`; a conversion's
+    note is appended to ``warnings``).
 
     A position without a covariance takes the squares of its standard deviations.
     """
-    joint = read_joint(path)
+    joint, notes = read_joint_in_units(
+        path, length_unit, unknown_scale=unknown_scale, metric=metric, poses=poses
+    )
+    if warnings is not None:
+        warnings += notes
     return JointPrior(
         position_in_a=joint.position_in_a,
         position_in_b=joint.position_in_b,
@@ -140,7 +173,19 @@ def run_relpose(
         inputs["joint"] = joint
     check_distinct_output(output, inputs.values())
     check_writable(output)
-    prior = None if joint is None else load_prior(joint, config.joint_metric)
+    joint_notes: list[str] = []
+    prior = (
+        None
+        if joint is None
+        else load_prior(
+            joint,
+            config.joint_metric,
+            length_unit=config.length_unit,
+            unknown_scale=config.unknown_scale,
+            poses=(poses_a, poses_b),
+            warnings=joint_notes,
+        )
+    )
     traj_a = read_trajectory(poses_a, config.format_a)
     traj_b = read_trajectory(poses_b, config.format_b)
 
@@ -155,7 +200,7 @@ def run_relpose(
         pair, offset = _pair_with_offset(traj_a, traj_b, config, fit)
     else:
         pair = pair_loaded(traj_a, traj_b, config.pair_by, config.max_dt)
-    warnings = list(pair.warnings)
+    warnings = joint_notes + list(pair.warnings)
     est = estimate_relpose(
         pair.a.T_world_cam,
         pair.b.T_world_cam,
@@ -163,6 +208,7 @@ def run_relpose(
         unknown_scale=config.unknown_scale,
         reference=config.reference,
         method=config.method,
+        accept_weak=config.accept_weak,
     )
     if offset is None and config.method == "refined":
         warnings += _synchronisation(traj_a, traj_b, fit)
@@ -213,6 +259,9 @@ def run_relpose(
     frames = FramesUsed.from_inliers(est.inliers, pair.a.timestamps)
     if frames.rejected:
         warnings.append(f"{len(frames.rejected)} frame(s) rejected as outliers")
+    findings = relpose_findings(est, pair, prior, config, timed=offset is None)
+    verdict = judge(relpose_verdict_measures(est, pair), config.accept_weak, findings)
+    warnings += verdict.warnings()
     quality = RelposeQuality(
         residual_rms=float(est.residual_rms),
         frames=frames,
@@ -262,6 +311,7 @@ def run_relpose(
         joint=joint_sec,
         scale=scale,
         quality=quality,
+        verdict=VerdictSection.from_verdict(verdict),
         warnings=warnings,
         time_offset=None
         if offset is None
@@ -276,6 +326,60 @@ def run_relpose(
     )
     art.save(output)
     return StageRun(est, to_plain(art.to_doc()), output, warnings)
+
+
+def relpose_findings(
+    est: RelposeEstimate,
+    pair: PairedTrajectories,
+    prior: JointPrior | None,
+    config: RelposeConfig,
+    timed: bool,
+) -> list[str]:
+    """What a usual cause explains (:func:`acs_cli.core.diagnose.diagnose_relpose`) when the
+    residual is suspicious against the rig's length scale in B (the verdict's scale);
+    ``timed``: also try the clocks (not when the offset was estimated)."""
+    Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
+    if not fit_is_suspicious(est.residual_rms, length_scale(est.position_in_b, Tb)):
+        return []
+    unit = "B units" if config.unknown_scale else config.length_unit
+    refined = partial(estimate_relpose, Ta, Tb, prior, unknown_scale=config.unknown_scale)
+    found = paper_misfit(est.method, est.residual_rms, refined, "ab", unit)
+    if found is not None:
+        return [found.message]
+    found = diagnose_relpose(
+        Ta,
+        Tb,
+        prior,
+        current_rms=est.residual_rms,
+        unknown_scale=config.unknown_scale,
+        quaternion_source=(
+            pair.a.format in QUATERNION_FORMATS,
+            pair.b.format in QUATERNION_FORMATS,
+        ),
+        timed=timed_pair(pair) if timed else None,
+        max_offset=config.max_offset,
+        unit=unit,
+    )
+    return [] if found is None else [found.message]
+
+
+def relpose_verdict_measures(est: RelposeEstimate, pair: PairedTrajectories) -> list[Measure]:
+    """The quality measures of a relative pose (:mod:`acs_cli.core.quality`): the joint in
+    each camera (B's with the residual, which is in B's units, and the rejected share), and
+    ``T_b_a`` (and ``phi_ba`` under unknown scale)."""
+    Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
+    out = joint_measures(est.position_in_a, est.covariance_a, Ta, None, None, "the joint in A")
+    out += joint_measures(
+        est.position_in_b, est.covariance_b, Tb, est.residual_rms, est.inliers, "the joint in B"
+    )
+    out += relative_pose_measures(
+        est.T_b_a,
+        est.covariance,
+        length_scale(est.position_in_b, Tb),
+        est.phi_ba if est.unknown_scale else None,
+        est.phi_std if est.unknown_scale else None,
+    )
+    return out
 
 
 def _pair_with_offset(

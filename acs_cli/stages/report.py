@@ -30,15 +30,23 @@ from acs_cli.core.acs_trajectory import (
     overlap_residuals,
     recover_trajectory,
 )
+from acs_cli.core.quality import largest_std
 from acs_cli.errors import AcsError, InputError
 from acs_cli.io.artifacts import sha256_of
-from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text, check_distinct_output
+from acs_cli.io.atomic import (
+    atomic_write_bytes,
+    atomic_write_text,
+    check_distinct_output,
+    check_writable,
+    resolve_output,
+)
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection, FramesUsed, JointArtifact, JointSection, PoseNoise
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.verdict import VerdictSection
 from acs_cli.report import figures as F
 from acs_cli.report import verdict as V
 from acs_cli.report.corners import corner_residuals
@@ -713,6 +721,11 @@ def _warning_check(found: _Found, *sources: str) -> V.Check:
     return V.Check("warnings", float(sum(src in sources for src, _ in found.warnings)))
 
 
+def _level(verdict: VerdictSection | None) -> str | None:
+    """An artifact's ``verdict.level`` (None for one written before verdicts)."""
+    return None if verdict is None else verdict.level
+
+
 def _norm(v: np.ndarray | None) -> float:
     """The length of ``v`` (0 for None: no distance, no check)."""
     return 0.0 if v is None else float(np.linalg.norm(v))
@@ -738,13 +751,14 @@ def _bundle_verdicts(
 
 
 def _joint_std_checks(joint: JointSection) -> list[V.Check]:
-    """The std-against-distance check of a joint section, per camera."""
+    """The std-against-distance check of a joint section, per camera: its largest std (the
+    verdict's measure, :func:`acs_cli.core.quality.largest_std`) over its distance."""
     checks = []
     for cam in CAMERAS:
-        o = joint.position(cam)
-        if o is not None:
+        o, cov = joint.position(cam), joint.covariance(cam)
+        if o is not None and cov is not None:
             checks += V.joint_checks(
-                None, _norm(o), joint.std(cam), subject=f"joint in {cam.upper()}"
+                None, _norm(o), [largest_std(cov)], subject=f"joint in {cam.upper()}"
             )
     return checks
 
@@ -757,6 +771,7 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
         if intr is not None:
             src = found.rel(intr.source)
             checks = V.reprojection_checks(intr.rms_px, coverage.get(cam))
+            checks += V.artifact_verdict_check(_level(intr.verdict))
             out.append(
                 V.StageVerdict(
                     f"intrinsics, camera {cam.upper()}", src, [*checks, _warning_check(found, src)]
@@ -796,6 +811,7 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
                 "residual" if key == "ab" else f"camera {cam.upper()}",
             )
         checks += _joint_std_checks(joint.joint)
+        checks += V.artifact_verdict_check(_level(joint.verdict))
         out.append(V.StageVerdict("joint", src, [*checks, _warning_check(found, src)]))
         out += _bundle_verdicts("joint.yaml", src, q.bundle_adjustment)
     rp = found.relpose
@@ -812,6 +828,7 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
                 "joint from A and from B",
             )
             checks += _joint_std_checks(rp.joint)
+        checks += V.artifact_verdict_check(_level(rp.verdict))
         out.append(V.StageVerdict("relpose", src, [*checks, _warning_check(found, src)]))
         out += _bundle_verdicts("relpose.yaml", src, rp.quality.bundle_adjustment)
     rig = found.rig
@@ -824,6 +841,7 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
                 checks += V.joint_checks(
                     j.residual_rms, _norm(o), j.position_std_in.get(j.between[0]), subject=name
                 )
+        checks += V.artifact_verdict_check(_level(rig.verdict))
         out.append(V.StageVerdict("rig", src, [*checks, _warning_check(found, src)]))
         out += _bundle_verdicts("rig.yaml", src, rig.bundle_adjustment)
     return out
@@ -1062,6 +1080,33 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     return model
 
 
+def _check_html_output(output: Path) -> None:
+    """Refuse to replace anything but an HTML file (an earlier report): ``-o`` naming a
+    run's NPZ, YAML or cache by mistake must not turn it into HTML.
+
+    Raises
+    ------
+    InputError
+        ``output`` exists and is not an HTML file (or cannot be read to tell).
+    """
+    check_writable(output)  # a folder, a device, a symlink loop: named there
+    target = resolve_output(output)
+    if not target.exists():
+        return
+    try:
+        with open(target, "rb") as fh:
+            head = fh.read(512)
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror or exc})", path=output) from exc
+    start = head.lstrip(b"\xef\xbb\xbf \t\r\n").lower()
+    if not (start.startswith(b"<!doctype html") or start.startswith(b"<html")):
+        raise InputError(
+            "exists and is not an HTML file (an earlier report); the report replaces only "
+            "HTML: choose a new .html path",
+            path=output,
+        )
+
+
 def run_report(run_dir: Path, output: Path, config: ReportConfig | None = None) -> ReportRun:
     """Write ``output`` (HTML) and its figures (``<name>_files/*.png``) for a run folder.
 
@@ -1089,6 +1134,7 @@ def run_report(run_dir: Path, output: Path, config: ReportConfig | None = None) 
     cfg = config or ReportConfig()
     run_dir = Path(run_dir)
     output = Path(output)
+    _check_html_output(output)
     model = build_report(run_dir, cfg.extra_warnings)
     inputs = [run_dir / f"cam_{c}" / "intrinsics.yaml" for c in CAMERAS]
     inputs += [run_dir / "joint.yaml", run_dir / "relpose.yaml"]

@@ -32,6 +32,15 @@ import numpy as np
 from acs_cli.core import se3
 from acs_cli.core.intrinsics import MODELS
 from acs_cli.core.pairing import PAIR_BY, common_timeline
+from acs_cli.core.quality import (
+    JOINT_STD,
+    REJECTED,
+    RESIDUAL,
+    Measure,
+    judge,
+    largest_std,
+    length_scale,
+)
 from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
@@ -48,6 +57,7 @@ from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
+from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
     CornerViews,
     bundle_frames,
@@ -120,6 +130,8 @@ class RigRunConfig:
     max_offset: float = 0.5
     #: options of the cameras with ``front_end: sfm`` (``acscal poses --sfm``'s)
     sfm: dict[str, Any] = field(default_factory=dict)
+    #: write joints past a refusal level, marked weak (``acscal run --accept-weak``)
+    accept_weak: bool = False
 
 
 def is_rig_config(doc: Any) -> bool:
@@ -503,6 +515,30 @@ def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> Rig
     )
 
 
+def rig_verdict_measures(est: RigEstimate, reference: CameraTrack) -> list[Measure]:
+    """The quality measures of a rig (:mod:`acs_cli.core.quality`): per ball or hinge
+    joint, its position in each camera and its residual against the rig's length scale
+    (the joint's distance, or a tenth of the reference camera's travel, as
+    :func:`~acs_cli.core.rig_solve.estimate_rig` judges it); per joint, its rejected
+    share."""
+    T_ref = reference.T_w_c[reference.valid]
+    out: list[Measure] = []
+    for name, e in est.edges.items():
+        total = e.frames_used + e.frames_rejected
+        if total:
+            out.append(Measure(REJECTED, e.frames_rejected / total, f"joint {name}"))
+        if e.joint.type == "rigid":
+            continue
+        for c, o in e.position_in.items():
+            std = largest_std(e.position_cov_in[c])
+            out.append(Measure(JOINT_STD, std / length_scale(o, T_ref), f"joint {name} in {c}"))
+        # the joint's residual (reference units) against its distance from its first camera
+        o_p = e.position_in[e.joint.between[0]]
+        scale = length_scale(o_p, T_ref)
+        out.append(Measure(RESIDUAL, e.residual_rms / scale, f"joint {name}"))
+    return out
+
+
 def run_rig(
     config: RigRunConfig, poses: dict[str, Path] | None = None, output: Path | None = None
 ) -> RigRun:
@@ -541,7 +577,11 @@ def run_rig(
         tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
         warnings += rig_synchronisation(config, trajectories, priors)
     est = estimate_rig(
-        config.topology, tracks, reference_frame=config.reference_frame, priors=priors
+        config.topology,
+        tracks,
+        reference_frame=config.reference_frame,
+        priors=priors,
+        accept_weak=config.accept_weak,
     )
     for name, e in est.edges.items():
         if e.frames_rejected:
@@ -555,7 +595,13 @@ def run_rig(
         warnings += notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
-    art = dataclasses.replace(rig_artifact(est, unit, warnings), bundle_adjustment=sections)
+    verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
+    warnings += verdict.warnings()
+    art = dataclasses.replace(
+        rig_artifact(est, unit, warnings),
+        bundle_adjustment=sections,
+        verdict=VerdictSection.from_verdict(verdict),
+    )
     if offsets:
         cams = {
             c: dataclasses.replace(r, time_offset_s=offsets[c][0], time_offset_s_std=offsets[c][1])

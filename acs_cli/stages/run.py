@@ -34,6 +34,7 @@ from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
 from acs_cli.io.images import list_images
+from acs_cli.io.validate import short_repr
 
 if TYPE_CHECKING:
     from acs_cli.core.targets import MarkerTarget, Target
@@ -124,6 +125,8 @@ class RunConfig:
     joint: JointSpec | None = None
     relpose: RelposeSpec | None = None
     workers: int | None = None
+    #: write results past a refusal level, marked weak (``acscal run --accept-weak``)
+    accept_weak: bool = False
 
 
 class _Checker:
@@ -228,8 +231,7 @@ class _Checker:
 def _describe(value: Any) -> str:
     if value is None:
         return "nothing (null)"
-    text = repr(value)
-    return f"{type(value).__name__} {text[:40]}"
+    return f"{type(value).__name__} {short_repr(value, 40)}"
 
 
 def parse_run_config(doc: Any, path: Path) -> RunConfig:
@@ -670,6 +672,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             model=cam.model,
             workers=config.workers,
             target=config.target,
+            accept_weak=config.accept_weak,
         )
 
         def do_intrinsics(
@@ -689,7 +692,12 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 f"intrinsics {name}",
                 "intrinsics",
                 {f"images_{k}": v for k, v in folders.items()},
-                {**board, "model": cam.model, "images_from": sorted(folders)},
+                {
+                    **board,
+                    "model": cam.model,
+                    "images_from": sorted(folders),
+                    "accept_weak": config.accept_weak,
+                },
                 [intr_out],
                 do_intrinsics,
             )
@@ -721,7 +729,12 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     if config.joint is not None:
         jspec = config.joint
         joint_file = out / "joint.yaml"
-        jcfg = JointConfig(scenario=jspec.scenario, method=jspec.method, bundle=jspec.bundle)
+        jcfg = JointConfig(
+            scenario=jspec.scenario,
+            method=jspec.method,
+            bundle=jspec.bundle,
+            accept_weak=config.accept_weak,
+        )
         pa, pb = poses["a"], poses.get("b")
         jout = joint_file
 
@@ -733,7 +746,12 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 "joint",
                 "joint",
                 {"poses_a": pa} | ({"poses_b": pb} if pb is not None else {}),
-                {"scenario": jspec.scenario, "method": jspec.method, "bundle": jspec.bundle},
+                {
+                    "scenario": jspec.scenario,
+                    "method": jspec.method,
+                    "bundle": jspec.bundle,
+                    "accept_weak": config.accept_weak,
+                },
                 [joint_file],
                 do_joint,
             )
@@ -746,6 +764,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             self_calibrate=rel.self_calibrate,
             reference=rel.reference,
             bundle=rel.bundle,
+            accept_weak=config.accept_weak,
         )
         rout = out / "relpose.yaml"
         ga, gb = general["a"], general["b"]
@@ -765,6 +784,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "self_calibrate": rel.self_calibrate,
                     "reference": rel.reference,
                     "bundle": rel.bundle,
+                    "accept_weak": config.accept_weak,
                 },
                 [rout],
                 do_relpose,
@@ -831,6 +851,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             model=cam.model,
             workers=config.workers,
             target=config.target,
+            accept_weak=config.accept_weak,
         )
         images = cam.images
 
@@ -844,7 +865,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 f"intrinsics {name}",
                 "intrinsics",
                 {"images": images},
-                {**board, "model": cam.model},
+                {**board, "model": cam.model, "accept_weak": config.accept_weak},
                 [intr_out],
                 do_intrinsics,
             )
@@ -881,7 +902,10 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             "rig",
             "rig",
             inputs | {"config": config.path},
-            {"reference": [config.reference_camera, config.reference_frame]},
+            {
+                "reference": [config.reference_camera, config.reference_frame],
+                "accept_weak": config.accept_weak,
+            },
             [rig_out, *traj_files],
             do_rig,
         )
@@ -961,7 +985,8 @@ def run_pipeline(
                 )
             report(StageResult(stage.stage, "not selected", stage.outputs))
             continue
-        hashes = {role: sha256_of(p) for role, p in stage.inputs.items()}
+        # the output folder may lie inside an image folder: its files are not inputs
+        hashes = {role: sha256_of(p, exclude=[out]) for role, p in stage.inputs.items()}
         stamp = _stamp(stage, hashes)
         if not force and _up_to_date(state.get(stage.stage), stamp, stage, out):
             report(

@@ -81,11 +81,20 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
     run_joint(*paths("overlap"), d / "overlap_joint.yaml", JointConfig(scenario="overlap"))
     run_relpose(*general, d / "overlap_joint.yaml", d / "ov.yaml", RelposeConfig())
     scaled = paths("general", "_scaled")
-    run_relpose(*scaled, joint, d / "unknown.yaml", RelposeConfig(unknown_scale=True))
+    # the metric joint taken as if in the trajectories' own units: a fit past the refusal
+    # level (issue 13), written with --accept-weak: a result that carries warnings
+    weak = RelposeConfig(unknown_scale=True, accept_weak=True)
+    run_relpose(*scaled, joint, d / "unknown.yaml", weak)
     metric = RelposeConfig(unknown_scale=True, joint_metric=True)
     run_relpose(*scaled, joint, d / "metric.yaml", metric)
-    for unit in ("mm", "furlong"):  # --length-unit: a label of the trajectories' unit
-        run_relpose(*general, joint, d / f"{unit}.yaml", RelposeConfig(length_unit=unit))
+    # --length-unit: the trajectories' unit. In mm: the metric joint is converted to it
+    for x, T in zip("ab", (seqs["general"].T_wa_a, seqs["general"].T_wb_b), strict=True):
+        write_tum(d / f"general_{x}_mm.tum", seqs["general"].timestamps,
+                  acs_sim.scale_translations(T, 1000.0))  # fmt: skip
+    run_relpose(*paths("general", "_mm"), joint, d / "mm.yaml", RelposeConfig(length_unit="mm"))
+    # a unit acscal cannot convert: a joint from the same recording (self-calibrated)
+    furlong = RelposeConfig(length_unit="furlong", self_calibrate=True)
+    run_relpose(*general, None, d / "furlong.yaml", furlong)
     _intrinsics_file(run / "cam_a" / "intrinsics.yaml", "pinhole", 600.0)
     _intrinsics_file(run / "cam_b" / "intrinsics.yaml", "fisheye", 420.0)
     for x in ("a", "b"):  # the variants take the run's intrinsics by path
@@ -184,6 +193,7 @@ def test_unknown_scale_is_never_exported_silently(pair: dict, tmp_path: Path) ->
     # ... and the artifact's warnings are marked in the export
     warnings = yaml.safe_load(unknown.read_text())["warnings"]
     assert warnings and all(f"# WARNING: {w}" in text for w in warnings)
+    assert "# WEAK RESULT: unknown.yaml was refused and written only with --accept-weak" in text
     # through the metric joint: mu_b
     out = tmp_path / "metric.yaml"
     run_export(metric, out, "kalibr", intrinsics={"a": pair["intr_a"], "b": pair["intr_b"]})

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import sys
 from pathlib import Path
 
@@ -15,6 +17,9 @@ from acs_cli.io.atomic import (
     atomic_write_bytes,
     atomic_write_text,
     check_distinct_output,
+    check_writable,
+    read_input_bytes,
+    resolve_output,
 )
 
 
@@ -117,3 +122,74 @@ def test_check_distinct_output(tmp_path: Path) -> None:
     # the output not existing yet but named like an input
     with pytest.raises(InputError):
         check_distinct_output(tmp_path / "new.txt", [tmp_path / "new.txt"])
+
+
+# --------------------------------------------------------------------------------------
+# Destinations that are not plain files; write errors; bounded reads
+
+
+def test_a_symlink_destination_is_written_through(tmp_path: Path) -> None:
+    target = tmp_path / "t" / "real.txt"
+    target.parent.mkdir()
+    target.write_text("old")
+    link = tmp_path / "link.txt"
+    link.symlink_to(target)
+    atomic_write_text(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+    assert resolve_output(link) == Path(os.path.realpath(target))
+    dangling = tmp_path / "dangling.txt"
+    dangling.symlink_to(tmp_path / "t" / "later.txt")
+    atomic_write_text(dangling, "x")
+    assert dangling.is_symlink() and (tmp_path / "t" / "later.txt").read_text() == "x"
+
+
+def test_a_fifo_or_a_symlink_loop_is_never_replaced(tmp_path: Path) -> None:
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(InputError, match="not a regular file"):
+        atomic_write_text(fifo, "x")
+    with pytest.raises(InputError, match="not a regular file"):
+        check_writable(fifo)
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    with pytest.raises(InputError, match="symlink loop"):
+        atomic_write_text(loop, "x")
+    with pytest.raises(InputError, match="symlink loop"):
+        check_writable(loop)
+    check_distinct_output(tmp_path / "out.txt", [loop])  # no RuntimeError from pathlib
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "loop"]
+
+
+def test_a_write_error_in_the_block_keeps_the_old_file(tmp_path: Path) -> None:
+    dest = tmp_path / "out.npz"
+    dest.write_text("precious")
+    with (
+        pytest.raises(InputError, match=r"cannot write \(No space left") as info,
+        atomic_path(dest) as tmp,
+    ):
+        tmp.write_text("partial")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert info.value.path == str(dest)
+    assert dest.read_text() == "precious"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.npz"]
+
+
+def test_read_input_bytes_refuses_what_is_not_a_bounded_regular_file(tmp_path: Path) -> None:
+    f = tmp_path / "a.txt"
+    f.write_bytes(b"x" * 100)
+    assert read_input_bytes(f, "a text", 100) == b"x" * 100
+    with pytest.raises(InputError, match="larger than the 50 bytes acscal reads as a text"):
+        read_input_bytes(f, "a text", 50)
+    with pytest.raises(InputError, match="is a folder, expected a text"):
+        read_input_bytes(tmp_path, "a text", 100)
+    with pytest.raises(InputError, match="no such file"):
+        read_input_bytes(tmp_path / "missing", "a text", 100)
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(InputError, match="not a regular file"):
+        read_input_bytes(fifo, "a text", 100)  # would block without the check
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    with pytest.raises(InputError, match="symlink loop"):
+        read_input_bytes(loop, "a text", 100)

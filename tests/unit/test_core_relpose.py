@@ -331,6 +331,10 @@ def test_self_calibration_refuses_what_the_motion_cannot_tell(
     with pytest.raises(DegenerateMotionError, match=message) as info:
         estimate_relpose(T_w_a, T_w_b)
     assert "--joint" in info.value.message
+    # not a weak answer but an arbitrary one: refused whatever --accept-weak says
+    with pytest.raises(DegenerateMotionError, match=message) as info:
+        estimate_relpose(T_w_a, T_w_b, accept_weak=True)
+    assert "--accept-weak" not in info.value.message
 
 
 @pytest.mark.parametrize(("turn", "bend"), [("none", "all"), ("one", "one"), ("one", "all")])

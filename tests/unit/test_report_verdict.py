@@ -8,6 +8,7 @@ import pytest
 
 from acs_cli.core import se3
 from acs_cli.core.intrinsics import board_points
+from acs_cli.core.quality import JOINT_STD, REPROJECTION, RESIDUAL
 from acs_cli.report.corners import corner_residuals
 from acs_cli.report.figures import coverage_fraction
 from acs_cli.report.verdict import (
@@ -27,11 +28,11 @@ from acs_cli.report.verdict import (
 @pytest.mark.parametrize(
     ("key", "good", "borderline", "bad"),
     [
-        ("reprojection_rms_px", 0.2, 0.7, 2.5),
+        ("reprojection_rms_px", 0.2, 2.5, 8.0),
         ("coverage", 0.8, 0.4, 0.1),
         ("joint_residual_over_noise", 1.1, 3.0, 10.0),
-        ("joint_residual_over_distance", 0.002, 0.02, 0.2),
-        ("joint_std_over_distance", 0.005, 0.03, 0.3),
+        ("joint_residual_over_distance", 0.002, 0.1, 0.5),
+        ("joint_std_over_distance", 0.005, 0.07, 0.3),
     ],
 )
 def test_classify_good_borderline_bad(key: str, good: float, borderline: float, bad: float) -> None:
@@ -54,14 +55,21 @@ def test_warnings_ask_for_a_check_but_never_fail() -> None:
 
 def test_thresholds_state_their_limits_in_shown_units() -> None:
     assert THRESHOLDS["coverage"].limits() == (">= 50%", ">= 25%", "< 25%")
-    assert THRESHOLDS["reprojection_rms_px"].limits() == ("<= 0.5 px", "<= 1 px", "> 1 px")
+    assert THRESHOLDS["reprojection_rms_px"].limits() == ("<= 0.5 px", "<= 5 px", "> 5 px")
     assert all(t.description and t.label for t in THRESHOLDS.values())
+    # one policy: the report grades by the levels the commands warn and refuse at
+    for key, rule in (
+        ("reprojection_rms_px", REPROJECTION),
+        ("joint_residual_over_distance", RESIDUAL),
+        ("joint_std_over_distance", JOINT_STD),
+    ):
+        assert (THRESHOLDS[key].pass_limit, THRESHOLDS[key].fail_limit) == (rule.warn, rule.refuse)
 
 
 def test_a_stage_is_its_worst_check() -> None:
     good = Check("reprojection_rms_px", 0.2, "camera A")
     half = Check("coverage", 0.3, "camera A")
-    bad = Check("reprojection_rms_px", 3.0)
+    bad = Check("reprojection_rms_px", 8.0)
     assert StageVerdict("intrinsics", "x.yaml", [good]).status == "pass"
     assert StageVerdict("intrinsics", "x.yaml", [good, half]).status == "check"
     assert StageVerdict("intrinsics", "x.yaml", [half, bad, good]).status == "fail"
@@ -102,11 +110,11 @@ def test_joint_checks_good_borderline_bad() -> None:
         "joint_residual_over_distance": "pass",
         "joint_std_over_distance": "pass",
     }
-    borderline = joint_checks(3.0 * e, d, [0.006, 0.006, 0.008], noise)
+    borderline = joint_checks(3.0 * e, d, [0.015, 0.015, 0.02], noise)
     assert set(_statuses(borderline).values()) == {"check", "pass"}
     assert _statuses(borderline)["joint_std_over_distance"] == "check"
     assert _statuses(borderline)["joint_residual_over_noise"] == "check"
-    bad = joint_checks(0.05, d, [0.05, 0.05, 0.1], noise)
+    bad = joint_checks(0.12, d, [0.05, 0.05, 0.1], noise)
     assert set(_statuses(bad).values()) == {"fail"}
     # without noise, std or a distance, the checks that need them are left out
     assert [c.key for c in joint_checks(1e-4, d)] == ["joint_residual_over_distance"]
