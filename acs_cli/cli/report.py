@@ -205,6 +205,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
     """``acscal trajectory --rig``: every camera and joint of a rig in the reference frame."""
     from acs_cli.io.rig import RigArtifact
     from acs_cli.io.trajectory import read_trajectory, write_tum
+    from acs_cli.io.verdict import weak_marks
     from acs_cli.stages.rig import trajectories_from_rig
 
     art = RigArtifact.load(rig_file)
@@ -223,10 +224,12 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
         files[name] = Path(path)
     trajectories = {c: read_trajectory(p) for c, p in files.items()}
     paths = trajectories_from_rig(art, trajectories)
+    marks = weak_marks(rig_file.name, art.verdict)
+    warn(marks)
     written = []
     for name, (times, T) in paths.items():
         f = output / f"{name}.tum"
-        write_tum(f, times, T)
+        write_tum(f, times, T, note="; ".join(marks) or None)
         written.append(f.name)
     out.print(
         f"wrote {len(written)} trajectories to {output} ({', '.join(written)}), in "
@@ -240,6 +243,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
             "trajectories": {name: output / f"{name}.tum" for name in paths},
         },
         written=[output / name for name in written],
+        warnings=marks,
     )
 
 

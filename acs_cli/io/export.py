@@ -25,6 +25,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.atomic import atomic_write_bytes, atomic_write_text
 
 __all__ = [
+    "METRES_PER_UNIT",
     "ROS_DISTORTION_MODELS",
     "check_ros_camera_name",
     "opencv_camera_values",
@@ -39,6 +40,9 @@ _OPENCV_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 #: camera_info_manager's rule for a camera name: letters, digits and underscores.
 _ROS_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 
+#: Metres per unit of the length units acscal converts by itself (``--length-unit`` of an
+#: export, a joint file in other units than its trajectories).
+METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
 #: ROS ``distortion_model`` (sensor_msgs/distortion_models.h) of each acscal camera model.
 ROS_DISTORTION_MODELS = {
     "pinhole": "plumb_bob",

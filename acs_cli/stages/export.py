@@ -32,6 +32,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.artifacts import load_yaml_file
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.export import (
+    METRES_PER_UNIT,
     check_ros_camera_name,
     opencv_camera_values,
     write_opencv_yaml,
@@ -58,8 +59,6 @@ __all__ = [
 EXPORT_FORMATS = ("kalibr", "opencv", "ros", "urdf")
 #: The formats of a rig (``rig.yaml``).
 RIG_FORMATS = ("kalibr", "ros", "urdf")
-#: Metres per unit of the length units (``--length-unit``) an export converts by itself.
-METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
 #: A relative pose's cameras: the key by which options name them, and their default names.
 PAIR_CAMERAS = {"a": "cam_a", "b": "cam_b"}
 

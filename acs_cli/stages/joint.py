@@ -427,7 +427,7 @@ def read_joint_in_units(
     The unit needed is ``length_unit`` (known scale), metres (``metric``: ``--joint-metric``
     under unknown scale), or the trajectories' own (unknown scale without ``metric``: not
     checked, as before). A joint in another unit of
-    :data:`~acs_cli.stages.export.METRES_PER_UNIT` is converted, with a warning; any other
+    :data:`~acs_cli.io.export.METRES_PER_UNIT` is converted, with a warning; any other
     unit is refused. An unknown-scale ``relpose.yaml``'s joint is in the units of the two
     trajectories it was estimated from (A's for ``position_in_a``, B's for
     ``position_in_b``): it is taken as ``--joint`` only with those same two trajectories
@@ -439,8 +439,8 @@ def read_joint_in_units(
         The joint file is malformed, or its unit cannot be converted to the one needed.
     """
     from acs_cli.io.artifacts import sha256_of
+    from acs_cli.io.export import METRES_PER_UNIT
     from acs_cli.io.relpose import RelposeArtifact
-    from acs_cli.stages.export import METRES_PER_UNIT
 
     art = load_joint_artifact(path)
     joint = art.joint

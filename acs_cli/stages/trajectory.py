@@ -23,6 +23,7 @@ from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, write_tum
 from acs_cli.io.validate import TIME_TOL
+from acs_cli.io.verdict import weak_marks
 from acs_cli.stages.common import PairedTrajectories, StageRun, load_pair, pairing_section
 from acs_cli.stages.joint import read_joint
 
@@ -249,13 +250,16 @@ def run_trajectory(
     n_rej = int(rec.rejected.sum())
     if n_rej:
         warnings.append(f"{n_rej} frame(s) were rejected as outliers by relpose (marked)")
+    marks = weak_marks(relpose.name, art.verdict)
+    warnings += marks
 
     for key, times, T in (
         ("cam_a", pair.a, traj.T_r_a),
         ("cam_b", pair.b, traj.T_r_b),
         ("joint", pair.a, traj.T_r_joint),
     ):
-        note = None if times.time_unit == "s" else f"{FRAME_NUMBERS_NOTE}, not seconds"
+        notes = marks + ([] if times.time_unit == "s" else [f"{FRAME_NUMBERS_NOTE}, not seconds"])
+        note = "; ".join(notes) or None
         write_tum(outputs[key], times.timestamps, T, timestamps_ns=times.timestamps_ns, note=note)
 
     d = traj.consistency

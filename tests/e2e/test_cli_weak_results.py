@@ -83,6 +83,15 @@ def test_a_joint_from_another_rig_is_refused_then_accepted_and_marked(
     text = exported.read_text()
     assert "WEAK RESULT" in text and "refused (--accept-weak)" in text
 
+    # ... and in the trajectories drawn from it
+    res = acscal(
+        "trajectory", "--relpose", rel, "--poses-a", files["general_a"], "--poses-b",
+        files["general_b"], "-o", tmp_path / "traj",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "WEAK RESULT: relpose.yaml" in (tmp_path / "traj" / "cam_a.tum").read_text()
+    assert "warning: WEAK RESULT" in res.stderr
+
 
 def test_quaternions_in_w_first_order_are_refused(files: dict[str, Path], tmp_path: Path) -> None:
     """A TUM file written with qw first: the joint does not fit the poses at all, and the
