@@ -120,6 +120,36 @@ def covariances(theta: FloatArray, L: FloatArray) -> FloatArray:
     return S
 
 
+def variance_component_information(
+    theta: FloatArray, L: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Twice the Fisher information of the variance components, and the inverse covariances.
+
+    ``F_kl = sum_i tr(S_i C_k S_i C_l)`` with ``S_i = Sigma_i^-1`` (:func:`covariances`),
+    ``C_0 = I`` and ``C_1 = L_i``; the information about ``theta`` is ``F / 2``.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (2,)
+        ``(theta_t, theta_r)``.
+    L : ndarray, shape (n, 3, 3)
+        Lever shapes.
+
+    Returns
+    -------
+    F : ndarray, shape (2, 2)
+    S : ndarray, shape (n, 3, 3)
+        ``Sigma_i^-1``.
+    """
+    Si = batched_inv3(covariances(np.asarray(theta, dtype=float), L))
+    SiL = np.matmul(Si, L)
+    off = float(np.sum(Si * np.swapaxes(SiL, 1, 2)))
+    F = np.array(
+        [[float(np.sum(Si * Si)), off], [off, float(np.sum(SiL * np.swapaxes(SiL, 1, 2)))]]
+    )
+    return F, Si
+
+
 def fit_variance_components(
     r: FloatArray,
     L: FloatArray,
@@ -163,16 +193,7 @@ def fit_variance_components(
         theta = np.maximum(np.asarray(theta0, dtype=float) / bias, 1e-300)
         iterations = min(iterations, 3)  # warm start: the caller iterates anyway
     for _ in range(iterations):
-        Si = batched_inv3(covariances(theta, L))
-        SiL = np.matmul(Si, L)
-        # Fisher information F_kl = sum_i tr(Si C_k Si C_l) with C_0 = I, C_1 = L
-        F = np.array(
-            [
-                [np.sum(Si * Si), np.sum(Si * np.swapaxes(SiL, 1, 2))],
-                [0.0, np.sum(SiL * np.swapaxes(SiL, 1, 2))],
-            ]
-        )
-        F[1, 0] = F[0, 1]
+        F, Si = variance_component_information(theta, L)
         u = np.matmul(Si, r[:, :, None])[:, :, 0]
         q = np.array([np.sum(u * u), np.sum(np.matmul(L, u[:, :, None])[:, :, 0] * u)])
         try:

@@ -411,7 +411,7 @@ def calibrate_robust(
     bad = outlier_views(first.per_view_rms)
     if bad.size == 0 or len(image_points) - bad.size < MIN_VIEWS:
         return first
-    keep = [i for i in range(len(image_points)) if i not in set(bad.tolist())]
+    keep = np.setdiff1d(np.arange(len(image_points)), bad).tolist()
     second = calibrate(
         [object_points[i] for i in keep], [image_points[i] for i in keep], image_size, model
     )

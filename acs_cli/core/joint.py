@@ -502,11 +502,8 @@ def rotation_variance_std(theta: FloatArray, L: FloatArray) -> float:
     float
         ``inf`` when the information about ``theta_r`` vanishes.
     """
-    Si = estimation.batched_inv3(estimation.covariances(np.asarray(theta, dtype=float), L))
-    SiL = np.matmul(Si, L)
-    i_tt = 0.5 * float(np.sum(Si * Si))
-    i_tr = 0.5 * float(np.sum(Si * np.swapaxes(SiL, 1, 2)))
-    i_rr = 0.5 * float(np.sum(SiL * np.swapaxes(SiL, 1, 2)))
+    F, _ = estimation.variance_component_information(theta, L)
+    (i_tt, i_tr), (_, i_rr) = 0.5 * F
     schur = i_rr - i_tr**2 / i_tt if i_tt > 0.0 else 0.0
     return float(1.0 / np.sqrt(schur)) if schur > 1e-12 * max(i_rr, 1e-300) else float("inf")
 

@@ -42,7 +42,7 @@ from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.validate import MAX_MAGNITUDE
-from acs_cli.io.verdict import weak_marks
+from acs_cli.io.verdict import VerdictSection, weak_marks
 
 __all__ = [
     "EXPORT_FORMATS",
@@ -291,11 +291,16 @@ def _known(cams: Mapping[str, IntrinsicsArtifact | None]) -> dict[str, Intrinsic
     return {c: v for c, v in cams.items() if v is not None}
 
 
-def _weak_intrinsics(
-    cams: Mapping[str, IntrinsicsArtifact | None], sources: Mapping[str, str]
+def _export_notes(
+    artifact: str,
+    verdict: VerdictSection | None,
+    warnings: Sequence[str],
+    cams: Mapping[str, IntrinsicsArtifact | None],
+    sources: Mapping[str, str],
 ) -> list[str]:
-    """Marks for the cameras whose intrinsics file is a weak result."""
-    out: list[str] = []
+    """The comment lines of an export: the artifact's weak mark and warnings, and a mark for
+    each camera whose intrinsics file is a weak result."""
+    out = weak_marks(artifact, verdict) + _warning_notes(artifact, warnings)
     for c, intr in cams.items():
         if intr is not None:
             out += weak_marks(f"the intrinsics of {c} ({sources.get(c, '')})", intr.verdict)
@@ -412,8 +417,7 @@ def run_rig_export(
                 rig.bundle_adjustment.get(cam),
                 rig_file,
             )
-    notes = weak_marks(rig_file.name, rig.verdict) + _warning_notes(rig_file.name, rig.warnings)
-    notes += _weak_intrinsics(cams, sources)
+    notes = _export_notes(rig_file.name, rig.verdict, rig.warnings, cams, sources)
     info: dict[str, Any] = {
         "format": fmt,
         "output": str(output),
@@ -536,8 +540,7 @@ def run_export(
             art.quality.bundle_adjustment.get(x),
             relpose,
         )
-    notes = weak_marks(relpose.name, art.verdict) + _warning_notes(relpose.name, art.warnings)
-    notes += _weak_intrinsics(cams, sources)
+    notes = _export_notes(relpose.name, art.verdict, art.warnings, cams, sources)
     info: dict[str, Any] = {
         "format": fmt,
         "output": str(output),

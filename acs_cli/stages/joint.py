@@ -26,6 +26,7 @@ from acs_cli.core.joint import (
     fixed_joint_warnings,
 )
 from acs_cli.core.quality import Measure, joint_measures, judge, length_scale
+from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
@@ -237,7 +238,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
                 f"(timestamps {fr.rejected[:10]})"
             )
     if config.scenario == "overlap":
-        findings = overlap_findings(est, pair, config.length_unit)
+        findings = overlap_findings(est, pair, poses_by_key["ab"], config.length_unit)
     else:
         findings = fixed_joint_findings(est, {"a": ta, "b": tb}, config.length_unit)
     verdict = judge(joint_verdict_measures(est, poses_by_key), config.accept_weak, findings)
@@ -347,11 +348,13 @@ def paper_misfit(
     return paper_method_misfit(rms, rms_refined, key, unit)
 
 
-def overlap_findings(est: JointEstimate, pair: PairedTrajectories, unit: str) -> list[str]:
+def overlap_findings(
+    est: JointEstimate, pair: PairedTrajectories, T_a_b: FloatArray, unit: str
+) -> list[str]:
     """What a usual cause explains (:func:`acs_cli.core.diagnose.diagnose_overlap`) when the
-    overlap fit's residual is suspicious against the rig's length scale."""
+    overlap fit's residual is suspicious against the rig's length scale (``T_a_b`` ``(n, 4,
+    4)``: B's poses in A's frame, whose travel sets it)."""
     rms = est.residual_rms.get("ab")
-    T_a_b = np.linalg.solve(pair.a.T_world_cam, pair.b.T_world_cam)
     if rms is None or not fit_is_suspicious(rms, length_scale(est.position_in_a, T_a_b)):
         return []
     found = paper_misfit(
