@@ -447,6 +447,13 @@ def bundle_adjust_rig(
     return RigBundle(est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success))
 
 
+def _relative(T_q_ref: FloatArray | None, T_p_ref: FloatArray | None) -> FloatArray:
+    """``T_q_p`` from two ``T_cam_ref`` (every camera of a bundle has one)."""
+    if T_q_ref is None or T_p_ref is None:
+        raise ValueError("a camera of the bundle has no pose at the reference instant")
+    return T_q_ref @ se3.invert_transforms(T_p_ref)
+
+
 def _inverse_columns(J: object, cols: list[int]) -> FloatArray:
     """``(J^T J)^-1`` restricted to ``cols`` (rows and columns), by a Cholesky solve of the
     column-scaled information for those columns only; ``DegenerateMotionError`` when the
@@ -521,7 +528,7 @@ def _assemble(
         p, q = j.between
         e0 = initial.edges[j.name]
         cols = list(range(L.n_shared))[L.geom[j.name]]
-        T_q_p = cams[q].T_cam_ref @ se3.invert_transforms(cams[p].T_cam_ref)
+        T_q_p = _relative(cams[q].T_cam_ref, cams[p].T_cam_ref)
         if j.type == "rigid":
             edges[j.name] = dataclasses.replace(e0, T_q_p=T_q_p)
             continue

@@ -14,7 +14,17 @@ frame where both cameras have a pose (the paper's eq. (24) generalised from a pa
   (``o_p . u_p = 0`` fixes which point: the one nearest ``p``'s centre).
 - ``rigid``: ``G_p = G_q T_q_p``: the hand-eye constraint.
 
-A camera shared by two edges ties them together: its ``X_c`` appears in both. Scales are
+A rig may be seen in several **recordings** (:class:`Recordings`: each frame of the
+timeline belongs to one). The similarity belongs to a *world*, not to a camera: each camera
+has its own world in each recording, unless the recording's bodies share one world (one
+board seen by every camera, one motion-capture lab: ``world: shared``), where one world
+serves them all and the paper's Algorithm I holds inside the rig. A world's similarity is
+estimated only where some edge ties it to another world at one instant; a group of worlds
+tied to each other but not to the reference's (a second recording of other bodies) keeps
+its first world as its own frame (no unknowns: nothing could tell them). The rig's geometry
+(joints, rigid transforms) is shared by every recording.
+
+A camera shared by two edges ties them together: its world's ``X`` appears in both. Scales are
 free for every camera whose units differ from the reference's (unknown scale on either
 side). Joint priors (e.g. from fixed-joint sessions) add rows. The reference instant's poses
 are unknowns too, tied to their measurements by the pose noise, so that ``T_cam_ref`` is
@@ -31,6 +41,7 @@ chi-square bound. Covariances come from the final whitened Jacobian.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +65,8 @@ from acs_cli.errors import DegenerateMotionError, InputError
 
 #: Fewest frames an edge needs in common (as for a self-calibrated pair).
 MIN_EDGE_FRAMES = 14
+#: ... or, where both its cameras are in one world (Algorithm I; stereo for a rigid edge).
+MIN_SHARED_WORLD_FRAMES = 3
 #: Tail probability per residual block for outlier rejection (as ``estimation.OUTLIER_ALPHA``).
 OUTLIER_ALPHA = 0.01
 #: Largest share of an edge's frames rejected as outliers.
@@ -92,6 +105,66 @@ class CameraTrack:
 
 
 @dataclass(frozen=True)
+class Recordings:
+    """Which recording each instant of the rig's timeline belongs to.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The recordings' names (config keys).
+    of_frame : ndarray of int, shape (n,)
+        The recording (index into ``names``) of each instant.
+    shared_world : tuple of bool
+        Per recording: every body's poses are in one world (no world-to-world transform
+        between them is estimated).
+    """
+
+    names: tuple[str, ...]
+    of_frame: np.ndarray
+    shared_world: tuple[bool, ...]
+    #: per recording: the joints held still in it (fixed-joint motion: they enter the solve
+    #: as priors from Algorithm II, and the recording adds no rows to them)
+    held: tuple[tuple[str, ...], ...] = ()
+
+    @staticmethod
+    def single(n: int, shared_world: bool = False, name: str = "default") -> Recordings:
+        """One recording of ``n`` instants."""
+        return Recordings((name,), np.zeros(n, int), (shared_world,))
+
+    def holds(self, joint: str, frames: np.ndarray) -> np.ndarray:
+        """``(m,)`` bool: which of ``frames`` belong to a recording that holds ``joint``."""
+        if not self.held:
+            return np.zeros(frames.size, bool)
+        by_rec = np.array([joint in h for h in self.held], bool)
+        return by_rec[self.of_frame[frames]]
+
+
+@dataclass(frozen=True)
+class WorldEstimate:
+    """One world of one recording (a camera's own, or the recording's shared one).
+
+    ``T_ref_world`` ``(4, 4)`` maps the world (its translations multiplied by ``scale``) into
+    the reference world, with the covariance ``(6, 6)`` of (right rotation perturbation
+    (rad), translation (reference units)); ``tied`` is False for a world that no edge ties to
+    the reference's (its transform is then the identity by choice, not estimated).
+    """
+
+    recording: str
+    cameras: tuple[str, ...]
+    shared: bool
+    T_ref_world: FloatArray
+    covariance: FloatArray
+    scale: float = 1.0
+    scale_std: float | None = None
+    tied: bool = True
+
+    @property
+    def label(self) -> str:
+        """``recording`` for a shared world, ``recording/camera`` for a camera's own."""
+        return self.recording if self.shared else f"{self.recording}/{self.cameras[0]}"
+
+
+@dataclass(frozen=True)
 class EdgePrior:
     """A joint known beforehand (a fixed-joint session's result, or a measurement), in
     reference units and each camera's frame.
@@ -116,17 +189,21 @@ class EdgePrior:
 @dataclass(frozen=True)
 class CameraEstimate:
     """``T_cam_ref`` ``(4, 4)`` with the covariance ``(6, 6)`` of (right rotation
-    perturbation (rad), translation (ref units)); scale (ref units per own unit)."""
+    perturbation (rad), translation (ref units)); scale (ref units per own unit).
 
-    T_cam_ref: FloatArray
+    ``T_cam_ref`` is None for a camera with no pose at the reference instant (a body seen
+    only in another recording): its joints are calibrated, its pose then is not defined."""
+
+    T_cam_ref: FloatArray | None
     covariance: FloatArray
     scale: float = 1.0
     scale_std: float | None = None
     #: the camera's trajectory in the reference world and units: ``(n, 4, 4)`` ``G_c[i]``
     #: (identity rows where the camera has no pose), with the reference instant corrected
     poses_in_reference_world: FloatArray = field(default_factory=lambda: np.zeros((0, 4, 4)))
-    #: ``X_c``'s rotation and translation ``(4, 4)``: the camera's trajectory world (scaled
-    #: by ``scale``) into the reference world: ``G_c = [R_X R_c, scale R_X t_c + t_X]``
+    #: ``X``'s rotation and translation ``(4, 4)`` of the camera's world at the reference
+    #: instant (scaled by ``scale``) into the reference world:
+    #: ``G_c = [R_X R_c, scale R_X t_c + t_X]``
     world_to_reference_world: FloatArray = field(default_factory=lambda: np.eye(4))
 
     @property
@@ -169,35 +246,52 @@ class RigEstimate:
     cost: float
     iterations: int
     warnings: list[str] = field(default_factory=list)
+    recordings: Recordings | None = None
+    #: every world of every recording (see :class:`WorldEstimate`)
+    worlds: list[WorldEstimate] = field(default_factory=list)
 
 
 # --------------------------------------------------------------------------- layout
 
 
 class _Layout:
-    """Where each unknown lives in the parameter vector."""
+    """Where each unknown lives in the parameter vector.
 
-    def __init__(self, topo: RigTopology, tracks: dict[str, CameraTrack]):
-        ref = topo.reference
-        ref_unknown = tracks[ref].unknown_scale
+    Worlds (see :class:`Recordings`) are numbered ``0 .. W-1``; a world tied to the
+    reference world's group has a rotation and translation unless it is that group's first
+    world; a world of unknown scale has its own log-scale, and when the reference world's
+    scale is unknown, every metric world shares one log-scale.
+    """
+
+    def __init__(
+        self,
+        topo: RigTopology,
+        n_worlds: int,
+        root: np.ndarray,
+        unknown_scale: np.ndarray,
+        ref_world: int,
+        with_delta: list[str],
+    ):
+        ref_unknown = bool(unknown_scale[ref_world])
         k = 0
-        self.rot: dict[str, slice] = {}
-        self.trans: dict[str, slice] = {}
-        self.logs: dict[str, int] = {}
-        shared: int | None = None  # metric cameras share one scale to an unknown reference
-        for c in topo.cameras:
-            if c == ref:
+        self.rot: dict[int, slice] = {}
+        self.trans: dict[int, slice] = {}
+        self.logs: dict[int, int] = {}
+        shared: int | None = None  # metric worlds share one scale to an unknown reference
+        for w in range(n_worlds):
+            if root[w] != w:
+                self.rot[w], self.trans[w] = slice(k, k + 3), slice(k + 3, k + 6)
+                k += 6
+            if w == ref_world:
                 continue
-            self.rot[c], self.trans[c] = slice(k, k + 3), slice(k + 3, k + 6)
-            k += 6
-            if tracks[c].unknown_scale:
-                self.logs[c] = k
+            if unknown_scale[w]:
+                self.logs[w] = k
                 k += 1
             elif ref_unknown:
                 if shared is None:
                     shared = k
                     k += 1
-                self.logs[c] = shared
+                self.logs[w] = shared
         # ball: o_p, o_q (3 + 3). hinge: o_p in the plane across its axis (2), o_q (3), and
         # each axis as a 2-dof step from its starting direction (2 + 2). rigid: T_q_p (3 + 3).
         self.edge: dict[str, slice] = {}
@@ -205,19 +299,28 @@ class _Layout:
             size = {"ball": 6, "hinge": 9, "rigid": 6}[j.type]
             self.edge[j.name] = slice(k, k + size)
             k += size
+        # the reference instant's poses, of the cameras that have one there
         self.delta: dict[str, slice] = {}
-        for c in topo.cameras:
+        for c in with_delta:
             self.delta[c] = slice(k, k + 6)
             k += 6
         self.size = k
 
-    def camera_columns(self, c: str) -> list[int]:
-        cols = list(range(self.size))[self.delta[c]]
-        if c in self.rot:
-            cols += list(range(self.size))[self.rot[c]] + list(range(self.size))[self.trans[c]]
-        if c in self.logs:
-            cols.append(self.logs[c])
+    def world_columns(self, w: int) -> list[int]:
+        cols: list[int] = []
+        if w in self.rot:
+            cols += list(range(self.rot[w].start, self.rot[w].stop))
+            cols += list(range(self.trans[w].start, self.trans[w].stop))
+        if w in self.logs:
+            cols.append(self.logs[w])
         return cols
+
+    def camera_columns(self, c: str, worlds: Iterable[int]) -> list[int]:
+        """The columns of camera ``c``'s reference-instant pose and of ``worlds``."""
+        cols = list(range(self.delta[c].start, self.delta[c].stop)) if c in self.delta else []
+        for w in worlds:
+            cols += self.world_columns(int(w))
+        return sorted(set(cols))
 
     def edge_columns(self, name: str) -> list[int]:
         return list(range(self.size))[self.edge[name]]
@@ -231,7 +334,8 @@ class _State:
     L: _Layout
     R: dict[str, FloatArray]
     t: dict[str, FloatArray]
-    R0X: dict[str, FloatArray]
+    widx: dict[str, np.ndarray]  # per camera: (n,) its world at each instant
+    R0X: FloatArray  # (W, 3, 3) starting rotation of each world's similarity
     R0rig: dict[str, FloatArray]
     u0: dict[str, tuple[FloatArray, FloatArray]]  # per hinge: starting axes in p and q
     ref_frame: int
@@ -247,23 +351,73 @@ class _State:
     length: float = 1.0  # the rig's length scale (reference units), for noise floors
     frames_cur: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
+    def frames_of(self, c: str) -> np.ndarray:
+        """``(n,)`` bool: the instants where camera ``c`` is on an edge."""
+        out = np.zeros(self.widx[c].size, bool)
+        for j in self.topo.edges_of(c):
+            out[self.frames[j.name]] = True
+        return out
 
-def _poses(st: _State, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
-    """``G_c`` for every frame: rotations ``(n, 3, 3)`` and translations ``(n, 3)``."""
+
+@dataclass(frozen=True)
+class _Worlds:
+    """Every world's similarity at one ``x``: rotations ``(W, 3, 3)``, translations
+    ``(W, 3)``, scales ``(W,)`` and the right Jacobians ``(W, 3, 3)`` of the rotations'
+    increments (zero for a world without rotation unknowns)."""
+
+    R: FloatArray
+    t: FloatArray
+    s: FloatArray
+    Jw: FloatArray
+
+
+def _worlds(st: _State, x: FloatArray) -> _Worlds:
     L = st.L
+    W = st.R0X.shape[0]
+    R = st.R0X.copy()
+    t = np.zeros((W, 3))
+    s = np.ones(W)
+    Jw = np.zeros((W, 3, 3))
+    if L.rot:
+        ws = np.fromiter(L.rot, int)
+        w = np.stack([x[L.rot[i]] for i in ws])
+        R[ws] = np.matmul(st.R0X[ws], se3.matrix_from_rotvec(w))
+        t[ws] = np.stack([x[L.trans[i]] for i in ws])
+        Jw[ws] = right_jacobians(w)
+    for i, col in L.logs.items():
+        s[i] = np.exp(x[col])
+    return _Worlds(R, t, s, Jw)
+
+
+def _measured(st: _State, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
+    """Camera ``c``'s measured rotations and translations, the reference instant's
+    corrected by its unknown."""
     R, t = st.R[c], st.t[c]
-    d = x[L.delta[c]]
+    if c not in st.L.delta:
+        return R, t
+    d = x[st.L.delta[c]]
     k = st.ref_frame
-    # the reference instant's pose is an unknown near its measurement
     R = R.copy()
     t = t.copy()
     R[k] = R[k] @ se3.matrix_from_rotvec(d[:3])
     t[k] = t[k] + d[3:]
-    if c not in L.rot:
-        return R, t
-    RX = st.R0X[c] @ se3.matrix_from_rotvec(x[L.rot[c]])
-    s = float(np.exp(x[L.logs[c]])) if c in L.logs else 1.0
-    return np.matmul(RX, R), s * t @ RX.T + x[L.trans[c]]
+    return R, t
+
+
+def _poses(
+    st: _State, x: FloatArray, c: str, W: _Worlds | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """``G_c`` for every frame: rotations ``(n, 3, 3)`` and translations ``(n, 3)``."""
+    W = W if W is not None else _worlds(st, x)
+    R, t = _measured(st, x, c)
+    wi = st.widx[c]
+    RX = W.R[wi]
+    return np.matmul(RX, R), W.s[wi, None] * np.einsum("nij,nj->ni", RX, t) + W.t[wi]
+
+
+def _all_poses(st: _State, x: FloatArray) -> dict[str, tuple[FloatArray, FloatArray]]:
+    W = _worlds(st, x)
+    return {c: _poses(st, x, c, W) for c in st.topo.cameras}
 
 
 def _unit(v: FloatArray) -> FloatArray:
@@ -329,7 +483,7 @@ def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, F
 
 
 def _residuals(st: _State, x: FloatArray) -> FloatArray:
-    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    G = _all_poses(st, x)
     parts: list[FloatArray] = []
     for j in st.topo.joints:
         m = (st.mask[j.name] * st.gain[j.name])[:, None]
@@ -341,7 +495,7 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
             parts.append((b["rot"] * st.w_rot[j.name] * m).ravel())
         if "trans" in b:
             parts.append((b["trans"] * st.w_trans[j.name] * m).ravel())
-    for c in st.topo.cameras:
+    for c in st.L.delta:
         parts.append(x[st.L.delta[c]] * st.w_delta[c])
     for name, at, value, W in st.priors:
         g = joint_geometry(st, x, st.topo.joint(name))[at // 3]
@@ -370,69 +524,60 @@ def _geometry_jacobian(st: _State, x: FloatArray, j: RigJoint) -> FloatArray:
     return np.stack([(g(E[i]) - g(-E[i])) / (2 * h) for i in range(size)], axis=1)
 
 
-def _camera_parts(st: _State, x: FloatArray, c: str) -> dict[str, FloatArray]:
-    """What a camera's Jacobian blocks need: ``R_X``, ``s``, ``Jr`` of its rotation and of its
-    reference-instant correction, its (corrected) measured rotations."""
-    L = st.L
-    d = x[L.delta[c]]
-    R = st.R[c].copy()
-    R[st.ref_frame] = R[st.ref_frame] @ se3.matrix_from_rotvec(d[:3])
-    t = st.t[c].copy()
-    t[st.ref_frame] = t[st.ref_frame] + d[3:]
-    if c in L.rot:
-        w = x[L.rot[c]]
-        RX = st.R0X[c] @ se3.matrix_from_rotvec(w)
-        Jw = right_jacobians(w[None])[0]
-    else:
-        RX, Jw = np.eye(3), np.zeros((3, 3))
-    s = float(np.exp(x[L.logs[c]])) if c in L.logs else 1.0
-    return {
-        "RX": RX,
-        "Jw": Jw,
-        "s": np.array(s),
-        "R": R,
-        "t": t,
-        "Jd": right_jacobians(d[None, :3])[0],
-    }
-
-
 def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
     """The Jacobian of :func:`_residuals` (analytic; rotations perturbed on the right)."""
     L, k = st.L, st.ref_frame
-    P = {c: _camera_parts(st, x, c) for c in st.topo.cameras}
+    W = _worlds(st, x)
+    meas = {c: _measured(st, x, c) for c in st.topo.cameras}
+    Jd = {c: right_jacobians(x[L.delta[c]][None, :3])[0] for c in L.delta}
     rows_i: list[np.ndarray] = []
     cols_i: list[np.ndarray] = []
     vals: list[np.ndarray] = []
     row0 = 0
 
-    def put(block: FloatArray, cols: list[int], first_row: int) -> None:
-        # block (m, 3, len(cols)) for rows first_row + 3 i + a
+    def put(
+        block: FloatArray, cols: list[int], first_row: int, at: np.ndarray | None = None
+    ) -> None:
+        # block (m, 3, len(cols)) for rows first_row + 3 at[i] + a (at: 0..m-1 by default)
         m = block.shape[0]
-        r = first_row + np.arange(3 * m)
+        at = np.arange(m) if at is None else at
+        r = (first_row + 3 * at[:, None] + np.arange(3)).reshape(-1)
         rows_i.append(np.repeat(r, len(cols)))
         cols_i.append(np.tile(np.asarray(cols), 3 * m))
         vals.append(block.reshape(-1))
 
-    def cam_block(c: str, y: FloatArray, sign: float, with_t: bool) -> tuple[FloatArray, list[int]]:
-        """Derivatives of ``sign * (R_X y + [s R_X t + t_X])`` by the camera's similarity."""
-        pc = P[c]
-        m = y.shape[0]
-        blocks, cols = [], []
-        if c in L.rot:
-            RX = pc["RX"]
-            # d(R_X Exp(dw) y) = -R_X [y]x Jr(w) dw
-            blocks.append(-sign * np.matmul(se3.left_multiply(RX, se3.skew(y)), pc["Jw"]))
-            cols += list(range(L.rot[c].start, L.rot[c].stop))
-            if with_t:
-                blocks.append(sign * np.broadcast_to(np.eye(3), (m, 3, 3)))
-                cols += list(range(L.trans[c].start, L.trans[c].stop))
-        if c in L.logs and with_t:
-            blocks.append(sign * (pc["s"] * pc["t"][st.frames_cur] @ pc["RX"].T)[:, :, None])
-            cols.append(L.logs[c])
-        if not blocks:
-            return np.zeros((m, 3, 0)), []
-        return np.concatenate(blocks, axis=2), cols
+    def by_world(c: str) -> list[tuple[np.ndarray, int]]:
+        """The current edge's frames of camera ``c`` grouped by world: (positions, world)."""
+        wi = st.widx[c][st.frames_cur]
+        return [(np.flatnonzero(wi == w), int(w)) for w in np.unique(wi)]
 
+    def cam_block(c: str, y: FloatArray, sign: float, with_t: bool, weight: FloatArray) -> None:
+        """Put the derivatives of ``sign * (R_X y + [s R_X t + t_X])`` by the similarity of
+        ``c``'s world at each frame, whitened by ``weight`` ``(m, 3, 3)`` or ``(m, 1, 1)``."""
+        for at, w in by_world(c):
+            RX = W.R[w]
+            blocks, cols = [], []
+            if w in L.rot:
+                # d(R_X Exp(dw) y) = -R_X [y]x Jr(w) dw
+                blocks.append(-sign * np.matmul(se3.left_multiply(RX, se3.skew(y[at])), W.Jw[w]))
+                cols += list(range(L.rot[w].start, L.rot[w].stop))
+                if with_t:
+                    blocks.append(sign * np.broadcast_to(np.eye(3), (at.size, 3, 3)))
+                    cols += list(range(L.trans[w].start, L.trans[w].stop))
+            if w in L.logs and with_t:
+                tf = meas[c][1][st.frames_cur[at]]
+                blocks.append(sign * (W.s[w] * tf @ RX.T)[:, :, None])
+                cols.append(L.logs[w])
+            if blocks:
+                put(np.matmul(weight[at], np.concatenate(blocks, axis=2)), cols, row0, at)
+
+    def delta_block(c: str, i: int, D: FloatArray, first: int, last: int) -> None:
+        """Put ``D`` ``(3, last - first)`` for the reference instant's row ``i`` of ``c``."""
+        if c in L.delta:
+            cols = list(range(L.delta[c].start + first, L.delta[c].start + last))
+            put(D[None], cols, row0, np.array([i]))
+
+    wk = {c: int(st.widx[c][k]) for c in st.topo.cameras}
     for j in st.topo.joints:
         p, q = j.between
         f = st.frames[j.name]
@@ -441,51 +586,43 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
         mask = (st.mask[j.name] * st.gain[j.name])[:, None, None]
         kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any
         ecols = L.edge_columns(j.name)
-        Pp, Pq = P[p], P[q]
-        RGp = se3.left_multiply(Pp["RX"], Pp["R"][f])
-        RGq = se3.left_multiply(Pq["RX"], Pq["R"][f])
+        Rp, Rq = meas[p][0][f], meas[q][0][f]
+        RGp = np.matmul(W.R[st.widx[p][f]], Rp)
+        RGq = np.matmul(W.R[st.widx[q][f]], Rq)
         if j.type in ("ball", "hinge"):
             o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
             Dg = _geometry_jacobian(st, x, j)
             Wp = st.whiten_pos[j.name] * mask
-            yp = se3.rotate(Pp["R"][f], o_p) + Pp["s"] * Pp["t"][f]
-            yq = se3.rotate(Pq["R"][f], o_q) + Pq["s"] * Pq["t"][f]
-            for c, y, sign in ((p, yp, 1.0), (q, yq, -1.0)):
-                B, cols = cam_block(c, y, sign, True)
-                if cols:
-                    put(np.matmul(Wp, B), cols, row0)
+            yp = se3.rotate(Rp, o_p) + W.s[st.widx[p][f], None] * meas[p][1][f]
+            yq = se3.rotate(Rq, o_q) + W.s[st.widx[q][f], None] * meas[q][1][f]
+            cam_block(p, yp, 1.0, True, Wp)
+            cam_block(q, yq, -1.0, True, Wp)
             # joint unknowns: R_Gp do_p - R_Gq do_q
             Be = np.matmul(RGp, Dg[0:3]) - np.matmul(RGq, Dg[3:6])
             put(np.matmul(Wp, Be), ecols, row0)
             if kk.size:
                 i = int(kk[0])
                 for c, o, sign in ((p, o_p, 1.0), (q, o_q, -1.0)):
-                    pc = P[c]
-                    Dr = -sign * pc["RX"] @ pc["R"][k] @ se3.skew(o) @ pc["Jd"]
-                    Dt = sign * pc["s"] * pc["RX"]
-                    blk = Wp[i] @ np.concatenate([Dr, Dt], axis=1)
-                    put(blk[None], list(range(L.delta[c].start, L.delta[c].stop)), row0 + 3 * i)
+                    RX, sc = W.R[wk[c]], W.s[wk[c]]
+                    Dr = -sign * RX @ meas[c][0][k] @ se3.skew(o) @ Jd[c] if c in Jd else None
+                    if Dr is not None:
+                        delta_block(c, i, Wp[i] @ np.concatenate([Dr, sign * sc * RX], 1), 0, 6)
             row0 += 3 * m
             if j.type == "hinge":
                 if u_p is None or u_q is None:
                     raise ValueError(f"hinge {j.name} without axes")
                 w = st.w_rot[j.name] * mask
-                for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
-                    B, cols = cam_block(c, se3.rotate(P[c]["R"][f], u), sign, False)
-                    if cols:
-                        put(w * B, cols, row0)
+                wb = np.broadcast_to(w, (m, 3, 3)) * np.eye(3)
+                cam_block(p, se3.rotate(Rp, u_p), 1.0, False, wb)
+                cam_block(q, se3.rotate(Rq, u_q), -1.0, False, wb)
                 Be = np.matmul(RGp, Dg[6:9]) - np.matmul(RGq, Dg[9:12])
                 put(w * Be, ecols, row0)
                 if kk.size:
                     i = int(kk[0])
                     for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
-                        pc = P[c]
-                        Dr = -sign * pc["RX"] @ pc["R"][k] @ se3.skew(u) @ pc["Jd"]
-                        put(
-                            (w[i] * Dr)[None],
-                            list(range(L.delta[c].start, L.delta[c].start + 3)),
-                            row0 + 3 * i,
-                        )
+                        if c in Jd:
+                            Dr = -sign * W.R[wk[c]] @ meas[c][0][k] @ se3.skew(u) @ Jd[c]
+                            delta_block(c, i, w[i] * Dr, 0, 3)
                 row0 += 3 * m
         else:
             e = x[L.edge[j.name]]
@@ -495,61 +632,53 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
             Ji = se3.right_jacobians_inv(rho) * st.w_rot[j.name] * mask
             Et = np.swapaxes(E, 1, 2)
             # q's similarity: E Exp((R_q R_qp)^T dw); p's: E Exp(-E^T R_p^T dw)
-            if q in L.rot:
-                A = np.swapaxes(np.matmul(Pq["R"][f], Rqp), 1, 2)
-                put(np.matmul(Ji, A @ Pq["Jw"]), list(range(L.rot[q].start, L.rot[q].stop)), row0)
-            if p in L.rot:
-                A = -np.matmul(Et, np.swapaxes(Pp["R"][f], 1, 2))
-                put(np.matmul(Ji, A @ Pp["Jw"]), list(range(L.rot[p].start, L.rot[p].stop)), row0)
+            for at, w_ in by_world(q):
+                if w_ in L.rot:
+                    A = np.swapaxes(np.matmul(Rq[at], Rqp), 1, 2)
+                    cols = list(range(L.rot[w_].start, L.rot[w_].stop))
+                    put(np.matmul(Ji[at], A @ W.Jw[w_]), cols, row0, at)
+            for at, w_ in by_world(p):
+                if w_ in L.rot:
+                    A = -np.matmul(Et[at], np.swapaxes(Rp[at], 1, 2))
+                    cols = list(range(L.rot[w_].start, L.rot[w_].stop))
+                    put(np.matmul(Ji[at], A @ W.Jw[w_]), cols, row0, at)
             Jre = right_jacobians(e[None, :3])[0]
             blk = np.concatenate([np.matmul(Ji, Jre), np.zeros((m, 3, 3))], axis=2)
             put(blk, ecols, row0)
             if kk.size:
                 i = int(kk[0])
-                put(
-                    (Ji[i] @ Rqp.T @ Pq["Jd"])[None],
-                    list(range(L.delta[q].start, L.delta[q].start + 3)),
-                    row0 + 3 * i,
-                )
-                put(
-                    (-Ji[i] @ Et[i] @ Pp["Jd"])[None],
-                    list(range(L.delta[p].start, L.delta[p].start + 3)),
-                    row0 + 3 * i,
-                )
+                if q in Jd:
+                    delta_block(q, i, Ji[i] @ Rqp.T @ Jd[q], 0, 3)
+                if p in Jd:
+                    delta_block(p, i, -Ji[i] @ Et[i] @ Jd[p], 0, 3)
             row0 += 3 * m
             # translation: R_Gq t_qp + t_Gq - t_Gp
             wt = st.w_trans[j.name] * mask
-            yq = se3.rotate(Pq["R"][f], e[3:6]) + Pq["s"] * Pq["t"][f]
-            B, cols = cam_block(q, yq, 1.0, True)
-            if cols:
-                put(wt * B, cols, row0)
-            B, cols = cam_block(p, Pp["s"] * Pp["t"][f], -1.0, True)
-            if cols:
-                put(wt * B, cols, row0)
+            wtb = np.broadcast_to(wt, (m, 3, 3)) * np.eye(3)
+            yq = se3.rotate(Rq, e[3:6]) + W.s[st.widx[q][f], None] * meas[q][1][f]
+            cam_block(q, yq, 1.0, True, wtb)
+            cam_block(p, W.s[st.widx[p][f], None] * meas[p][1][f], -1.0, True, wtb)
             blk = np.concatenate([np.zeros((m, 3, 3)), RGq], axis=2)
             put(wt * blk, ecols, row0)
             if kk.size:
                 i = int(kk[0])
-                Dr = -Pq["RX"] @ Pq["R"][k] @ se3.skew(e[3:6]) @ Pq["Jd"]
-                put(
-                    (wt[i] * np.concatenate([Dr, Pq["s"] * Pq["RX"]], axis=1))[None],
-                    list(range(L.delta[q].start, L.delta[q].stop)),
-                    row0 + 3 * i,
-                )
-                put(
-                    (wt[i] * np.concatenate([np.zeros((3, 3)), -Pp["s"] * Pp["RX"]], axis=1))[None],
-                    list(range(L.delta[p].start, L.delta[p].stop)),
-                    row0 + 3 * i,
-                )
+                if q in Jd:
+                    RX, sc = W.R[wk[q]], W.s[wk[q]]
+                    Dr = -RX @ meas[q][0][k] @ se3.skew(e[3:6]) @ Jd[q]
+                    delta_block(q, i, wt[i] * np.concatenate([Dr, sc * RX], axis=1), 0, 6)
+                if p in Jd:
+                    RX, sc = W.R[wk[p]], W.s[wk[p]]
+                    D = np.concatenate([np.zeros((3, 3)), -sc * RX], axis=1)
+                    delta_block(p, i, wt[i] * D, 0, 6)
             row0 += 3 * m
-    for c in st.topo.cameras:
+    for c in L.delta:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown
         put(D.reshape(2, 3, 6), list(range(L.delta[c].start, L.delta[c].stop)), row0)
         row0 += 6
-    for name, at, _value, W in st.priors:
+    for name, g_at, _value, Wp in st.priors:
         j = st.topo.joint(name)
         Dg = _geometry_jacobian(st, x, j)
-        block = W @ Dg[at : at + 3]
+        block = Wp @ Dg[g_at : g_at + 3]
         rows = block.shape[0]
         r = row0 + np.arange(rows)
         cols = L.edge_columns(name)
@@ -571,67 +700,103 @@ def _initial(
     tracks: dict[str, CameraTrack],
     frames: dict[str, np.ndarray],
     L: _Layout,
+    widx: dict[str, np.ndarray],
+    root: np.ndarray,
 ) -> tuple[
     FloatArray,
-    dict[str, FloatArray],
+    FloatArray,
     dict[str, FloatArray],
     dict[str, tuple[FloatArray, FloatArray]],
 ]:
-    """Starting point: each edge from the reference outward by the linear self-calibration
-    (:func:`acs_cli.core.relpose._initial_lifted`), in the reference world and units."""
+    """Starting point, in the reference world and units.
+
+    First every world's similarity, outward from the worlds that are their group's frame:
+    a world is reached through an edge whose other camera's world is known at the same
+    instants, by the pairwise self-calibration (:func:`_edge_start`). Then each edge's
+    geometry from every frame: a joint's point by the paper's Algorithm I (eq. (13): the
+    worlds now agree), a hinge's axis, a rigid edge's transform."""
     x = np.zeros(L.size)
-    R0X: dict[str, FloatArray] = {}
+    n_worlds = root.size
+    X: dict[int, tuple[FloatArray, FloatArray, float]] = {
+        int(w): (np.eye(3), np.zeros(3), 1.0) for w in range(n_worlds) if root[w] == w
+    }
+    R0X = np.broadcast_to(np.eye(3), (n_worlds, 3, 3)).copy()
     R0rig: dict[str, FloatArray] = {}
     u0: dict[str, tuple[FloatArray, FloatArray]] = {}
-    X: dict[str, tuple[FloatArray, FloatArray, float]] = {
-        topo.reference: (np.eye(3), np.zeros(3), 1.0)
-    }
-    for step in topo.tree_order():
-        j = step.joint
-        s_name, t_name = step.source, step.target
-        f = frames[j.name]
-        RXs, tXs, ss = X[s_name]
-        Ts = tracks[s_name].T_w_c[f]
-        Gs = se3.transforms_from_rt(np.matmul(RXs, Ts[:, :3, :3]), ss * Ts[:, :3, 3] @ RXs.T + tXs)
-        Tt = tracks[t_name].T_w_c[f]
-        # j_t = phi R j_s + t  (target units, target world)
-        R, tt, phi, o_s, o_t = _edge_start(Gs, Tt, j.type)
-        phi = max(phi, 1e-9)
-        RXt = R.T
-        st_ = 1.0 / phi
-        tXt = -R.T @ tt / phi
-        free = t_name in L.logs
-        if not free:
-            st_ = 1.0
-        X[t_name] = (RXt, tXt, st_)
-        R0X[t_name] = RXt
-        x[L.trans[t_name]] = tXt
-        if free:
-            x[L.logs[t_name]] = np.log(st_)
-        o_t = o_t * st_
-        o = {s_name: o_s, t_name: o_t}
-        Gt_R = np.matmul(RXt, Tt[:, :3, :3])
-        Gt_t = st_ * Tt[:, :3, 3] @ RXt.T + tXt
+    o_start: dict[str, dict[str, FloatArray]] = {}
+
+    def in_reference(c: str, f: np.ndarray) -> FloatArray:
+        T = tracks[c].T_w_c[f]
+        wi = widx[c][f]
+        RX = np.stack([X[int(w)][0] for w in wi])
+        tX = np.stack([X[int(w)][1] for w in wi])
+        sX = np.array([X[int(w)][2] for w in wi])
+        return se3.transforms_from_rt(
+            np.matmul(RX, T[:, :3, :3]), sX[:, None] * np.einsum("nij,nj->ni", RX, T[:, :3, 3]) + tX
+        )
+
+    for min_frames in (6, 1):  # the better-supported ties first
+        progress = True
+        while progress and len(X) < n_worlds:
+            progress = False
+            for j in topo.joints:
+                p, q = j.between
+                f = frames[j.name]
+                pairs = np.stack([widx[p][f], widx[q][f]], axis=1)
+                for wp, wq in np.unique(pairs, axis=0):
+                    wp, wq = int(wp), int(wq)
+                    if (wp in X) == (wq in X):
+                        continue
+                    sel = f[(pairs[:, 0] == wp) & (pairs[:, 1] == wq)]
+                    if sel.size < min_frames:
+                        continue
+                    s_cam, t_cam, wt = (p, q, wq) if wp in X else (q, p, wp)
+                    Gs = in_reference(s_cam, sel)
+                    Tt = tracks[t_cam].T_w_c[sel]
+                    # j_t = phi R j_s + t  (target units, target world)
+                    R, tt, phi, o_s, o_t = _edge_start(Gs, Tt, j.type)
+                    phi = max(phi, 1e-9)
+                    sc = 1.0 / phi if wt in L.logs else 1.0
+                    X[wt] = (R.T, -R.T @ tt / phi, sc)
+                    if j.type == "ball" and j.name not in o_start:
+                        o_start[j.name] = {s_cam: o_s, t_cam: o_t * sc}
+                    progress = True
+    for w in range(n_worlds):
+        RXw, tXw, sw = X.setdefault(w, (np.eye(3), np.zeros(3), 1.0))
+        R0X[w] = RXw
+        if w in L.trans:
+            x[L.trans[w]] = tXw
+        if w in L.logs:
+            x[L.logs[w]] = np.log(sw)
+    for j in topo.joints:
         p, q = j.between
+        f = frames[j.name]
+        Gp, Gq = in_reference(p, f), in_reference(q, f)
+        Rp, tp, Rq, tq = Gp[:, :3, :3], Gp[:, :3, 3], Gq[:, :3, :3], Gq[:, :3, 3]
         e = L.edge[j.name]
-        if j.type == "ball":
-            x[e] = np.concatenate([o[p], o[q]])
-        elif j.type == "hinge":
-            # relative rotations R_s_t[i] = Rot(u_s, theta_i) R0: u_t with R_s_t u_t constant
-            Rst = np.einsum("nji,njk->nik", Gs[:, :3, :3], Gt_R)
-            _, _, Vt = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), full_matrices=False)
-            u = {t_name: Vt[2], s_name: _unit(Rst.mean(axis=0) @ Vt[2])}
+        if j.type in ("ball", "hinge"):
+            o = o_start.get(j.name)
+            if o is None:
+                # eq. (13): R_p o_p - R_q o_q = t_q - t_p, linear in (o_p, o_q)
+                A = np.concatenate([Rp, -Rq], axis=2).reshape(-1, 6)
+                sol = np.linalg.lstsq(A, (tq - tp).reshape(-1), rcond=None)[0]
+                o = {p: sol[:3], q: sol[3:]}
+            if j.type == "ball":
+                x[e] = np.concatenate([o[p], o[q]])
+                continue
+            # relative rotations R_p_q[i] = Rot(u_p, theta_i) R0: u_q with R_p_q u_q constant
+            Rpq = np.einsum("nji,njk->nik", Rp, Rq)
+            _, _, Vt = np.linalg.svd((Rpq - Rpq.mean(axis=0)).reshape(-1, 3), full_matrices=False)
+            u = {q: Vt[2], p: _unit(Rpq.mean(axis=0) @ Vt[2])}
             # slide the point along the axis to the one nearest p's centre
             lam = -float(o[p] @ u[p])
-            o = {c: o[c] + lam * u[c] for c in o}
+            o = {c: o[c] + lam * u[c] for c in (p, q)}
             u0[j.name] = (u[p], u[q])
             x[e] = np.concatenate([tangent_basis(u[p]).T @ o[p], o[q], np.zeros(4)])
         else:
             # G_p = G_q T_q_p: T_q_p from the frames' average
-            Rg = {s_name: Gs[:, :3, :3], t_name: Gt_R}
-            tg = {s_name: Gs[:, :3, 3], t_name: Gt_t}
-            Rqp, _ = se3.project_to_rotation(np.einsum("nji,njk->ik", Rg[q], Rg[p]))
-            tqp = np.mean(np.einsum("nji,nj->ni", Rg[q], tg[p] - tg[q]), axis=0)
+            Rqp, _ = se3.project_to_rotation(np.einsum("nji,njk->ik", Rq, Rp))
+            tqp = np.mean(np.einsum("nji,nj->ni", Rq, tp - tq), axis=0)
             R0rig[j.name] = Rqp
             x[e] = np.concatenate([np.zeros(3), tqp])
     return x, R0X, R0rig, u0
@@ -666,7 +831,7 @@ def _chol_whiteners(S: FloatArray) -> FloatArray:
 
 def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[str, float]]:
     """Per-edge noise levels from the current residuals; updates the weights in ``st``."""
-    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    G = _all_poses(st, x)
     noise: dict[str, dict[str, float]] = {}
     cam_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
     cam_trans: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
@@ -710,11 +875,12 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
             for c in (p, q):
                 cam_trans[c].append(v / 2.0)
         noise[j.name] = d
-    for c in st.topo.cameras:
+    scales = _worlds(st, x).s
+    for c in st.L.delta:
         vr = float(np.mean(cam_rot[c])) if cam_rot[c] else 1e-6
         vt = float(np.mean(cam_trans[c])) if cam_trans[c] else 1e-6
         # translation noise of the measured pose is in the camera's own units
-        s = float(np.exp(x[st.L.logs[c]])) if c in st.L.logs else 1.0
+        s = float(scales[st.widx[c][st.ref_frame]])
         st.w_delta[c] = np.array([1 / np.sqrt(vr)] * 3 + [s / np.sqrt(vt)] * 3)
     return noise
 
@@ -723,7 +889,7 @@ def _reject(st: _State, x: FloatArray) -> int:
     """Drop residual blocks beyond the chi-square bound; returns how many were dropped."""
     from scipy.stats import chi2  # lazily: importing scipy.stats costs ~0.6 s a command
 
-    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    G = _all_poses(st, x)
     dropped = 0
     for j in st.topo.joints:
         b = _edge_blocks(st, x, j, G)
@@ -755,7 +921,9 @@ def _reject(st: _State, x: FloatArray) -> int:
 # --------------------------------------------------------------------------- solve
 
 
-def _check_tracks(topo: RigTopology, tracks: dict[str, CameraTrack], ref_frame: int) -> int:
+def _check_tracks(
+    topo: RigTopology, tracks: dict[str, CameraTrack], ref_frame: int, recs: Recordings
+) -> int:
     for c in topo.cameras:
         if c not in tracks:
             raise InputError(f"cameras.{c}: no poses given")
@@ -765,16 +933,102 @@ def _check_tracks(topo: RigTopology, tracks: dict[str, CameraTrack], ref_frame: 
         tr = tracks[c]
         if tr.T_w_c.shape[0] != n or tr.valid.shape != (n,):
             raise InputError(f"cameras.{c}: poses are not on the rig's common timeline")
+    if recs.of_frame.shape != (n,):
+        raise InputError("the recordings do not cover the rig's common timeline")
     if not -n <= ref_frame < n:
         raise InputError(f"reference.frame: {ref_frame} is outside the {n} frames")
     k = ref_frame % n
-    missing = [c for c in topo.cameras if not tracks[c].valid[k]]
+    # every camera of the reference recording has a pose at the reference instant
+    in_ref = recs.of_frame == recs.of_frame[k]
+    missing = [c for c in topo.cameras if tracks[c].valid[in_ref].any() and not tracks[c].valid[k]]
+    if topo.reference not in missing and not tracks[topo.reference].valid[k]:
+        missing.insert(0, topo.reference)
     if missing:
         raise InputError(
             f"reference.frame: camera {missing[0]} has no pose at frame {k}; choose a frame "
             "where every camera has one"
         )
     return k
+
+
+@dataclass(frozen=True)
+class _WorldGraph:
+    """The worlds of a rig's recordings (see :class:`Recordings`)."""
+
+    widx: dict[str, np.ndarray]  # per camera: (n,) its world at each instant
+    recording: list[int]  # per world
+    cameras: list[tuple[str, ...]]  # per world
+    shared: list[bool]  # per world
+    root: np.ndarray  # per world: the first world of its group (itself for a group's frame)
+    unknown_scale: np.ndarray  # per world
+    ref_world: int
+
+
+def _world_graph(
+    topo: RigTopology,
+    tracks: dict[str, CameraTrack],
+    recs: Recordings,
+    frames: dict[str, np.ndarray],
+    k: int,
+) -> _WorldGraph:
+    """Number the worlds, and group those that edges tie together at some instant.
+
+    Raises
+    ------
+    InputError
+        The bodies of a shared world disagree on whether its scale is known.
+    """
+    n = recs.of_frame.size
+    keys: dict[tuple[int, str], int] = {}
+    recording: list[int] = []
+    cams: list[list[str]] = []
+    shared: list[bool] = []
+    widx: dict[str, np.ndarray] = {}
+    for c in topo.cameras:
+        w = np.zeros(n, int)
+        on_edges = np.zeros(n, bool)  # a world only where the camera is on some edge
+        for j in topo.edges_of(c):
+            on_edges[frames[j.name]] = True
+        for rr in np.unique(recs.of_frame[on_edges]):
+            r = int(rr)
+            key = (r, "" if recs.shared_world[r] else c)
+            if key not in keys:
+                keys[key] = len(recording)
+                recording.append(r)
+                cams.append([])
+                shared.append(recs.shared_world[r])
+            cams[keys[key]].append(c)
+            w[recs.of_frame == r] = keys[key]
+        widx[c] = w
+    unknown = np.zeros(len(recording), bool)
+    for wn, members in enumerate(cams):
+        flags = {tracks[c].unknown_scale for c in members}
+        if len(flags) > 1:
+            raise InputError(
+                f"recordings.{recs.names[recording[wn]]}: its bodies share one world, but "
+                "some have scale: unknown and others not; a shared world has one scale"
+            )
+        unknown[wn] = flags.pop()
+    parent = list(range(len(recording)))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for j in topo.joints:
+        p, q = j.between
+        f = frames[j.name]
+        for a, b in np.unique(np.stack([widx[p][f], widx[q][f]], axis=1), axis=0):
+            ra, rb = find(int(a)), find(int(b))
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    ref_world = int(widx[topo.reference][k])
+    groups = {find(w) for w in range(len(recording))}
+    first = {g: (ref_world if find(ref_world) == g else g) for g in groups}
+    root = np.array([first[find(w)] for w in range(len(recording))], int)
+    return _WorldGraph(widx, recording, [tuple(m) for m in cams], shared, root, unknown, ref_world)
 
 
 def estimate_rig(
@@ -785,6 +1039,7 @@ def estimate_rig(
     priors: dict[str, EdgePrior] | None = None,
     reject_outliers: bool = True,
     accept_weak: bool = False,
+    recordings: Recordings | None = None,
 ) -> RigEstimate:
     """Calibrate a rig from every camera's general motion: one maximum-likelihood solve.
 
@@ -802,6 +1057,9 @@ def estimate_rig(
     accept_weak : bool
         Return joints whose std alone is past the refusal level instead of refusing them
         (``--accept-weak``); exact degeneracies are refused whatever it says.
+    recordings : Recordings, optional
+        Which recording each instant belongs to and which recordings' bodies share one
+        world (default: one recording, a world per camera).
 
     Returns
     -------
@@ -815,28 +1073,43 @@ def estimate_rig(
         An edge with too few frames in common, or a motion that leaves part of the rig
         undetermined; the message names the edge and what to record (or configure) instead.
     """
-    k = _check_tracks(topology, tracks, reference_frame)
+    n = tracks[topology.cameras[0]].T_w_c.shape[0] if topology.cameras[0] in tracks else 0
+    recs = recordings if recordings is not None else Recordings.single(n)
+    k = _check_tracks(topology, tracks, reference_frame, recs)
     priors = priors or {}
     frames: dict[str, np.ndarray] = {}
     for j in topology.joints:
         p, q = j.between
         f = np.flatnonzero(tracks[p].valid & tracks[q].valid)
-        if f.size < MIN_EDGE_FRAMES:
+        f = f[~recs.holds(j.name, f)]
+        # in a shared world the joint is Algorithm I's (eq. (13)): a few frames determine it
+        one_world = int(np.sum(np.asarray(recs.shared_world)[recs.of_frame[f]]))
+        if f.size < MIN_EDGE_FRAMES and one_world < MIN_SHARED_WORLD_FRAMES:
             raise DegenerateMotionError(
                 f"joint {j.name} ({p}-{q}): the two cameras have poses at {f.size} common "
-                f"instants; the rig needs at least {MIN_EDGE_FRAMES} of general motion. Record "
-                "more frames where both cameras track.",
+                f"instants; the rig needs at least {MIN_EDGE_FRAMES} of general motion (or "
+                f"{MIN_SHARED_WORLD_FRAMES} in a shared world). Record more frames where both "
+                "cameras track.",
                 details={"joint": j.name, "frames": int(f.size)},
             )
         frames[j.name] = f
-    L = _Layout(topology, tracks)
-    x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L)
+    wg = _world_graph(topology, tracks, recs, frames, k)
+    # the cameras on some edge at the reference instant: their poses there are unknowns
+    with_delta = [
+        c for c in topology.cameras if any(k in frames[j.name] for j in topology.edges_of(c))
+    ]
+    if topology.reference not in with_delta:
+        raise InputError(
+            f"reference.frame: camera {topology.reference} is on no joint at frame {k} (a "
+            "joint held still there): choose a frame of a recording that moves it"
+        )
+    L = _Layout(topology, wg.root.size, wg.root, wg.unknown_scale, wg.ref_world, with_delta)
+    x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L, wg.widx, wg.root)
     Rm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, :3]) for c in topology.cameras}
     tm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, 3]) for c in topology.cameras}
     # the rig's length scale: for noise floors and for judging what is determined
-    travel = float(
-        np.sqrt(np.mean(np.sum((tm[topology.reference] - tm[topology.reference].mean(0)) ** 2, 1)))
-    )
+    t_ref = tm[topology.reference][tracks[topology.reference].valid]
+    travel = float(np.sqrt(np.mean(np.sum((t_ref - t_ref.mean(0)) ** 2, 1))))
     prior_rows: list[tuple[str, int, FloatArray, FloatArray]] = []
     for name, pr in priors.items():
         j = topology.joint(name)
@@ -876,6 +1149,7 @@ def estimate_rig(
         L=L,
         R=Rm,
         t=tm,
+        widx=wg.widx,
         R0X=R0X,
         R0rig=R0rig,
         u0=u0,
@@ -889,7 +1163,7 @@ def estimate_rig(
         },
         w_rot={j.name: 1.0 for j in topology.joints},
         w_trans={j.name: 1.0 for j in topology.joints},
-        w_delta={c: np.full(6, 1e3) for c in topology.cameras},
+        w_delta={c: np.full(6, 1e3) for c in with_delta},
         priors=prior_rows,
         length=max(travel, 1e-9),
     )
@@ -934,7 +1208,7 @@ def estimate_rig(
     J = sol.jac
     H = np.asarray((J.T @ J).toarray() if hasattr(J, "toarray") else J.T @ J)
     cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
-    est = _assemble(st, x, cov, noise, float(sol.cost), nfev)
+    est = _assemble(st, x, cov, noise, float(sol.cost), nfev, wg, recs)
     est.warnings.extend(check_joint_types(st, x))
     _check_determined(st, x, H, cov, est, travel, accept_weak)
     return est
@@ -957,44 +1231,76 @@ def _assemble(
     noise: dict[str, dict[str, float]],
     cost: float,
     nfev: int,
+    wg: _WorldGraph,
+    recs: Recordings,
 ) -> RigEstimate:
     topo, L, k = st.topo, st.L, st.ref_frame
     ref = topo.reference
+    W = _worlds(st, x)
 
     def pose_at_ref(xx: FloatArray, c: str) -> FloatArray:
         R, t = _poses(st, xx, c)
         return se3.transforms_from_rt(R[k], t[k])
 
+    def scale_of(w: int) -> tuple[float, float | None]:
+        if w not in L.logs:
+            return 1.0, None
+        s = float(W.s[w])
+        return s, float(s * np.sqrt(max(cov[L.logs[w], L.logs[w]], 0.0)))
+
     cams: dict[str, CameraEstimate] = {}
     for c in topo.cameras:
-        T0 = se3.invert_transforms(pose_at_ref(x, c)) @ pose_at_ref(x, ref)
+        R, t = _poses(st, x, c, W)
+        wc = int(st.widx[c][k]) if c in L.delta else int(st.widx[c][np.argmax(st.frames_of(c))])
+        T0: FloatArray | None = None
+        C6: FloatArray = np.zeros((6, 6))
+        if c in L.delta and c != ref:
+            T0 = se3.invert_transforms(pose_at_ref(x, c)) @ pose_at_ref(x, ref)
 
-        def vec(xx: FloatArray, c: str = c, T0: FloatArray = T0) -> FloatArray:
-            T = se3.invert_transforms(pose_at_ref(xx, c)) @ pose_at_ref(xx, ref)
-            return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
+            def vec(xx: FloatArray, c: str = c, T0: FloatArray = T0) -> FloatArray:
+                T = se3.invert_transforms(pose_at_ref(xx, c)) @ pose_at_ref(xx, ref)
+                return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
 
-        cols = sorted(set(L.camera_columns(c) + L.camera_columns(ref)))
-        _, C6 = lsq.propagate(vec, x, cols, cov[np.ix_(cols, cols)])
-        scale, scale_std = 1.0, None
-        if c in L.logs:
-            scale = float(np.exp(x[L.logs[c]]))
-            scale_std = float(scale * np.sqrt(max(cov[L.logs[c], L.logs[c]], 0.0)))
-        R, t = _poses(st, x, c)
-        X: FloatArray = np.eye(4)
-        if c in L.rot:
-            X = se3.transforms_from_rt(
-                st.R0X[c] @ se3.matrix_from_rotvec(x[L.rot[c]]), x[L.trans[c]]
-            )
+            cols = sorted(set(L.camera_columns(c, [wc]) + L.camera_columns(ref, [wg.ref_world])))
+            _, C6 = lsq.propagate(vec, x, cols, cov[np.ix_(cols, cols)])
+        elif c == ref:
+            T0 = np.eye(4)
+        scale, scale_std = scale_of(wc)
         cams[c] = CameraEstimate(
-            T0 if c != ref else np.eye(4),
-            C6 if c != ref else np.zeros((6, 6)),
+            T0,
+            C6,
             scale,
             scale_std,
             se3.transforms_from_rt(R, t),
-            X,
+            se3.transforms_from_rt(W.R[wc], W.t[wc]),
+        )
+    worlds: list[WorldEstimate] = []
+    for w in range(wg.root.size):
+        Cw: FloatArray = np.zeros((6, 6))
+        if w in L.rot:
+            R_w = W.R[w]
+
+            def wvec(xx: FloatArray, w: int = w, R_w: FloatArray = R_w) -> FloatArray:
+                Wx = _worlds(st, xx)
+                return np.concatenate([se3.rotvec_from_matrix(R_w.T @ Wx.R[w]), Wx.t[w]])
+
+            cols = L.world_columns(w)
+            _, Cw = lsq.propagate(wvec, x, cols, cov[np.ix_(cols, cols)])
+        scale, scale_std = scale_of(w)
+        worlds.append(
+            WorldEstimate(
+                recording=recs.names[wg.recording[w]],
+                cameras=wg.cameras[w],
+                shared=wg.shared[w],
+                T_ref_world=se3.transforms_from_rt(W.R[w], W.t[w]),
+                covariance=Cw,
+                scale=scale,
+                scale_std=scale_std,
+                tied=bool(wg.root[w] == wg.ref_world),
+            )
         )
     edges: dict[str, EdgeEstimate] = {}
-    G = {c: _poses(st, x, c) for c in topo.cameras}
+    G = _all_poses(st, x)
     for j in topo.joints:
         p, q = j.between
         pos: dict[str, FloatArray] = {}
@@ -1018,7 +1324,14 @@ def _assemble(
         if axis and axis[p][int(np.argmax(np.abs(axis[p])))] < 0:
             # one convention for the axis's sign: its largest component (in p) is positive
             axis = {c: -u for c, u in axis.items()}
-        T_q_p = cams[q].T_cam_ref @ se3.invert_transforms(cams[p].T_cam_ref)
+        Tq, Tp = cams[q].T_cam_ref, cams[p].T_cam_ref
+        if j.type == "rigid":  # constant: the edge's own unknowns
+            e = x[L.edge[j.name]]
+            T_q_p = se3.transforms_from_rt(st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3]), e[3:6])
+        elif Tq is not None and Tp is not None:
+            T_q_p = Tq @ se3.invert_transforms(Tp)
+        else:  # no instant where both are posed: the articulation is not defined
+            T_q_p = np.full((4, 4), np.nan)
         b = _edge_blocks(st, x, j, G)
         m = st.mask[j.name]
         r = b.get("pos", b.get("trans"))
@@ -1037,7 +1350,7 @@ def _assemble(
             noise=noise.get(j.name, {}),
             residual_blocks={kind: v[m] for kind, v in b.items()},
         )
-    return RigEstimate(topo, k, cams, edges, cost, nfev)
+    return RigEstimate(topo, k, cams, edges, cost, nfev, recordings=recs, worlds=worlds)
 
 
 # --------------------------------------------------------------------------- degeneracy
@@ -1062,7 +1375,7 @@ def check_joint_types(st: _State, x: FloatArray) -> list[str]:
     DegenerateMotionError
         Naming each misfit joint and the type that fits its motion.
     """
-    G = {c: _poses(st, x, c) for c in st.topo.cameras}
+    G = _all_poses(st, x)
     warnings: list[str] = []
     refused: list[str] = []
     for j in st.topo.joints:
@@ -1180,7 +1493,7 @@ def _check_determined(
     w, V = np.linalg.eigh(Hn)
     null = V[:, w < NULL_EIGENVALUE * max(float(w[-1]), 1e-300)]
     parents = topo.parents()
-    G = {c: _poses(st, x, c) for c in topo.cameras}
+    G = _all_poses(st, x)
     problems: list[str] = []
     details: dict[str, object] = {}
     flagged: set[str] = set()
@@ -1194,7 +1507,7 @@ def _check_determined(
         cols = L.edge_columns(j.name)
         # the child camera of this edge in the tree carries the edge's world transform
         child = q if parents.get(q) is not None and parents[q].joint.name == j.name else p
-        cols_all = cols + L.camera_columns(child)
+        cols_all = cols + L.camera_columns(child, np.unique(st.widx[child][st.frames[j.name]]))
         in_null = float(np.sum(null[cols_all, :] ** 2)) if null.size else 0.0
         scale_len = max(travel, 1e-12)
         worst = 0.0

@@ -6,7 +6,9 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
     length_unit: m                      # the reference camera's trajectory unit
     cameras:
       <name>:
-        T_cam_ref: 4x4                  # reference camera's frame (reference instant) -> this one's
+        T_cam_ref: 4x4 | null           # reference camera's frame (reference instant) -> this one's
+                                        # (null: no pose at the reference instant, a body seen
+                                        # only in another recording)
         T_cam_ref_std: {rotation_deg: [3], translation: [3]}   # right perturbation of R, then t
         unknown_scale: bool
         scale: float                    # reference units per trajectory unit of this camera
@@ -28,6 +30,19 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
     bundle_adjustment:                  # when every camera's poses carried board corners
       <name>: {intrinsics_file, rms_px, sigma_px, frames, camera_matrix, distortion,
                intrinsics_std}          # as joint.yaml's quality.bundle_adjustment.<cam>
+    recordings:                         # each recording of the rig and its worlds
+      <name>:
+        world: shared | separate        # one world for every body, or one per body
+        frames: int                     # instants of the rig's timeline in this recording
+        worlds:
+          <label>:                      # the recording's name (shared) or recording/body
+            bodies: [str]
+            T_ref_world: 4x4            # the world (x scale) -> the reference camera's frame
+            T_ref_world_std: {rotation_deg: [3], translation: [3]}
+            scale: float
+            scale_std: float | fixed
+            tied: bool                  # false: no edge ties it to the reference's world
+                                        # (its T_ref_world is then a choice, not an estimate)
     warnings: [str]
 
 Every length (``T_cam_ref`` translations, joint positions) is in the reference camera's
@@ -54,7 +69,7 @@ from acs_cli.io.verdict import VerdictSection
 
 KIND = "rig"
 
-__all__ = ["KIND", "RigArtifact", "RigCameraResult", "RigJointResult"]
+__all__ = ["KIND", "RigArtifact", "RigCameraResult", "RigJointResult", "RigRecordingResult"]
 
 
 @dataclass(frozen=True)
@@ -62,7 +77,7 @@ class RigCameraResult:
     """One camera of a calibrated rig (see the module doc for units and frames)."""
 
     name: str
-    T_cam_ref: FloatArray
+    T_cam_ref: FloatArray | None  # None: no pose at the reference instant
     rotation_std_deg: FloatArray
     translation_std: FloatArray
     unknown_scale: bool = False
@@ -76,6 +91,30 @@ class RigCameraResult:
     #: estimated (``estimate_time_offset``)
     time_offset_s: float | None = None
     time_offset_s_std: float | None = None
+
+
+@dataclass(frozen=True)
+class RigWorldResult:
+    """One world of a recording (see the module doc)."""
+
+    label: str
+    bodies: tuple[str, ...]
+    T_ref_world: FloatArray
+    rotation_std_deg: FloatArray
+    translation_std: FloatArray
+    scale: float = 1.0
+    scale_std: float | None = None
+    tied: bool = True
+
+
+@dataclass(frozen=True)
+class RigRecordingResult:
+    """One recording of a rig: whether its bodies share a world, its instants, its worlds."""
+
+    name: str
+    shared_world: bool
+    frames: int
+    worlds: dict[str, RigWorldResult] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -125,6 +164,7 @@ class RigArtifact(YamlArtifact):
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     verdict: VerdictSection | None = None
+    recordings: dict[str, RigRecordingResult] = field(default_factory=dict)
 
     KIND: ClassVar[str] = KIND
     REQUIRED: ClassVar[tuple[str, ...]] = ("reference.camera", "cameras", "joints")
@@ -132,10 +172,33 @@ class RigArtifact(YamlArtifact):
     # ------------------------------------------------------------------ queries
 
     def T_a_b(self, a: str, b: str) -> FloatArray:
-        """``T_a_b`` at the reference instant: ``T_a_ref @ inv(T_b_ref)``."""
-        return np.asarray(
-            self.cameras[a].T_cam_ref @ se3.invert_transforms(self.cameras[b].T_cam_ref)
-        )
+        """``T_a_b`` at the reference instant: ``T_a_ref @ inv(T_b_ref)``.
+
+        Raises
+        ------
+        InputError
+            ``a`` or ``b`` has no pose at the reference instant.
+        """
+        Ta, Tb = self.posed(a), self.posed(b)
+        return np.asarray(Ta @ se3.invert_transforms(Tb))
+
+    def posed(self, camera: str) -> FloatArray:
+        """``T_cam_ref`` of ``camera``, which must have a pose at the reference instant.
+
+        Raises
+        ------
+        InputError
+            The camera was seen only in another recording than the reference's.
+        """
+        T = self.cameras[camera].T_cam_ref
+        if T is None:
+            raise InputError(
+                f"cameras.{camera}: no pose at the reference instant (it is seen only in "
+                "another recording than the reference's), so its pose relative to the other "
+                "cameras is not defined",
+                path=self.source,
+            )
+        return T
 
     def summary(self) -> str:
         """A few lines for a person: each camera's position, each joint."""
@@ -143,6 +206,9 @@ class RigArtifact(YamlArtifact):
         lines = [f"rig: {len(self.cameras)} cameras, {len(self.joints)} joints, "
                  f"reference {self.reference_camera} at frame {self.reference_frame}"]  # fmt: skip
         for c in self.cameras.values():
+            if c.T_cam_ref is None:
+                lines.append(f"  {c.name}: no pose at the reference instant")
+                continue
             centre = -c.T_cam_ref[:3, :3].T @ c.T_cam_ref[:3, 3]
             s = (
                 f"  {c.name}: centre in {self.reference_camera} ["
@@ -218,12 +284,41 @@ class RigArtifact(YamlArtifact):
             out["bundle_adjustment"] = {c: b.to_plain() for c, b in self.bundle_adjustment.items()}
         if self.verdict is not None:
             out["verdict"] = self.verdict.to_plain()
+        if self.recordings:
+            out["recordings"] = {
+                r.name: {
+                    "world": "shared" if r.shared_world else "separate",
+                    "frames": r.frames,
+                    "worlds": {
+                        w.label: {
+                            "bodies": list(w.bodies),
+                            "T_ref_world": w.T_ref_world,
+                            "T_ref_world_std": {
+                                "rotation_deg": w.rotation_std_deg,
+                                "translation": w.translation_std,
+                            },
+                            "scale": w.scale,
+                            "scale_std": "fixed" if w.scale_std is None else w.scale_std,
+                            "tied": w.tied,
+                        }
+                        for w in r.worlds.values()
+                    },
+                }
+                for r in self.recordings.values()
+            }
         out["warnings"] = list(self.warnings)
         return out
 
     def validate(self) -> None:
         """Every camera a rigid ``T_cam_ref``; joints between known cameras."""
+        if self.cameras[self.reference_camera].T_cam_ref is None:
+            raise InputError(
+                f"'cameras.{self.reference_camera}.T_cam_ref': the reference camera needs a pose",
+                path=self.source,
+            )
         for c in self.cameras.values():
+            if c.T_cam_ref is None:
+                continue
             try:
                 se3.check_transforms(c.T_cam_ref, name=f"cameras.{c.name}.T_cam_ref")
             except InputError as exc:
@@ -247,7 +342,11 @@ class RigArtifact(YamlArtifact):
         for name, c in cams_doc.items():
             k = f"cameras.{name}"
             c = as_mapping(c, k, p)
-            T = as_matrix(c.get("T_cam_ref"), (4, 4), f"{k}.T_cam_ref", p)
+            T = (
+                None
+                if "T_cam_ref" in c and c["T_cam_ref"] is None
+                else as_matrix(c.get("T_cam_ref"), (4, 4), f"{k}.T_cam_ref", p)
+            )
             std = as_mapping(c.get("T_cam_ref_std", {}), f"{k}.T_cam_ref_std", p)
             scale_std = c.get("scale_std", "fixed")
             cameras[str(name)] = RigCameraResult(
@@ -325,7 +424,9 @@ class RigArtifact(YamlArtifact):
             if str(c) not in cameras:
                 raise InputError(f"'bundle_adjustment.{c}' is not one of the cameras", path=p)
             bundle[str(c)] = BundleSection.parse(b, f"bundle_adjustment.{c}", p)
+        recordings = _parse_recordings(doc.get("recordings"), p)
         return cls(
+            recordings=recordings,
             reference_camera=reference,
             reference_frame=frame,
             length_unit=str(doc.get("length_unit", "m")),
@@ -337,3 +438,44 @@ class RigArtifact(YamlArtifact):
             header=header_of(doc),
             source=str(p),
         )
+
+
+def _parse_recordings(doc: Any, p: Path) -> dict[str, RigRecordingResult]:
+    """The ``recordings`` section of a ``rig.yaml`` (absent in files of one recording)."""
+    out: dict[str, RigRecordingResult] = {}
+    for name, r in as_mapping(doc or {}, "recordings", p).items():
+        k = f"recordings.{name}"
+        r = as_mapping(r, k, p)
+        world = r.get("world", "separate")
+        if world not in ("shared", "separate"):
+            raise InputError(f"'{k}.world' must be shared or separate", path=p)
+        worlds: dict[str, RigWorldResult] = {}
+        for label, w in as_mapping(r.get("worlds") or {}, f"{k}.worlds", p).items():
+            kw = f"{k}.worlds.{label}"
+            w = as_mapping(w, kw, p)
+            std = as_mapping(w.get("T_ref_world_std", {}), f"{kw}.T_ref_world_std", p)
+            bodies = w.get("bodies") or []
+            if not isinstance(bodies, list):
+                raise InputError(f"'{kw}.bodies' must be a list", path=p)
+            scale_std = w.get("scale_std", "fixed")
+            worlds[str(label)] = RigWorldResult(
+                label=str(label),
+                bodies=tuple(str(b) for b in bodies),
+                T_ref_world=as_matrix(w.get("T_ref_world"), (4, 4), f"{kw}.T_ref_world", p),
+                rotation_std_deg=as_vector(
+                    std.get("rotation_deg", [0, 0, 0]), f"{kw}.T_ref_world_std.rotation_deg", p
+                ),
+                translation_std=as_vector(
+                    std.get("translation", [0, 0, 0]), f"{kw}.T_ref_world_std.translation", p
+                ),
+                scale=as_number(w.get("scale", 1.0), f"{kw}.scale", p, positive=True),
+                scale_std=None
+                if scale_std == "fixed"
+                else as_number(scale_std, f"{kw}.scale_std", p, non_negative=True),
+                tied=bool(w.get("tied", True)),
+            )
+        frames = r.get("frames", 0)
+        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 0:
+            raise InputError(f"'{k}.frames' must be a non-negative integer", path=p)
+        out[str(name)] = RigRecordingResult(str(name), world == "shared", frames, worlds)
+    return out

@@ -196,7 +196,7 @@ class _Body:
 
 def _T_ref_cam(rig: RigArtifact, cam: str) -> FloatArray:
     """``T_ref_cam`` (4, 4): the camera's pose in the reference camera's frame."""
-    return se3.invert_transforms(rig.cameras[cam].T_cam_ref)
+    return se3.invert_transforms(rig.posed(cam))
 
 
 def _bodies(
@@ -798,7 +798,7 @@ def rig_in_metres(rig: RigArtifact, metres_per_unit: float) -> RigArtifact:
     cameras = {
         name: replace(
             c,
-            T_cam_ref=scaled(c.T_cam_ref),
+            T_cam_ref=None if c.T_cam_ref is None else scaled(c.T_cam_ref),
             translation_std=np.asarray(c.translation_std, dtype=float) * s,
             T_ref_world=None if c.T_ref_world is None else scaled(c.T_ref_world),
         )

@@ -227,11 +227,19 @@ def _gather(run_dir: Path) -> _Found:
 
 def _rig_view(found: _Found, rig: RigArtifact) -> RigOfManyView:
     """The rig of many cameras: its cameras and joints, and their paths when written."""
-    T_ref_cam = {c: se3.invert_transforms(r.T_cam_ref) for c, r in rig.cameras.items()}
+    T_ref_cam = {
+        c: se3.invert_transforms(r.T_cam_ref)
+        for c, r in rig.cameras.items()
+        if r.T_cam_ref is not None
+    }
     joints = []
     for name, j in rig.joints.items():
         p = j.between[0]
-        point = None if j.type == "rigid" else se3.transform_points(T_ref_cam[p], j.position_in[p])
+        point = (
+            None
+            if j.type == "rigid" or p not in T_ref_cam
+            else se3.transform_points(T_ref_cam[p], j.position_in[p])
+        )
         joints.append((name, j.type, j.between[0], j.between[1], point))
     paths: dict[str, np.ndarray] = {}
     folder = found.run_dir / "trajectories"
@@ -251,7 +259,7 @@ def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
     u = rig.length_unit
     rows: list[Estimate] = []
     for c, r in rig.cameras.items():
-        if c == rig.reference_camera:
+        if c == rig.reference_camera or r.T_cam_ref is None:
             continue
         for i, ax in enumerate("xyz"):
             rows.append(

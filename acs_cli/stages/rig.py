@@ -43,7 +43,7 @@ from acs_cli.core.quality import (
 )
 from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
-from acs_cli.core.rig_solve import CameraTrack, EdgePrior, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import CameraTrack, EdgePrior, Recordings, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.targets import MarkerTarget
 from acs_cli.core.time_offset import (
@@ -55,7 +55,13 @@ from acs_cli.core.time_offset import (
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
+from acs_cli.io.rig import (
+    RigArtifact,
+    RigCameraResult,
+    RigJointResult,
+    RigRecordingResult,
+    RigWorldResult,
+)
 from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
@@ -109,6 +115,27 @@ class RigJointSpec:
 
 
 @dataclass(frozen=True)
+class RigRecordingSpec:
+    """One recording of a rig config: the bodies it saw, and whether they share a world.
+
+    ``fixed_joints``: joints held still in the recording's world (the paper's fixed-joint
+    motion, a pivot): each camera of such a joint gives the joint's position in its frame
+    by Algorithm II, a prior of the rig solve; the recording adds no rows to those joints.
+    """
+
+    name: str
+    cameras: dict[str, RigCameraSpec]
+    shared_world: bool = False
+    fixed_joints: tuple[str, ...] = ()
+
+
+#: The recording of a config written without ``recordings`` (one recording).
+DEFAULT_RECORDING = "default"
+#: ``world``: every body's poses in one world, or each in its own.
+WORLDS = ("separate", "shared")
+
+
+@dataclass(frozen=True)
 class RigRunConfig:
     """A checked rig run configuration (``schema_version: 2``); paths are resolved."""
 
@@ -132,6 +159,25 @@ class RigRunConfig:
     sfm: dict[str, Any] = field(default_factory=dict)
     #: write joints past a refusal level, marked weak (``acscal run --accept-weak``)
     accept_weak: bool = False
+    #: every recording of the rig (one, named ``default``, for a config without
+    #: ``recordings``); ``cameras`` holds each body's settings, common to its recordings
+    recordings: dict[str, RigRecordingSpec] = field(default_factory=dict)
+    reference_recording: str = DEFAULT_RECORDING
+
+    def __post_init__(self) -> None:
+        if not self.recordings:  # built by hand with cameras only: their one recording
+            rec = RigRecordingSpec(DEFAULT_RECORDING, dict(self.cameras))
+            object.__setattr__(self, "recordings", {DEFAULT_RECORDING: rec})
+            object.__setattr__(self, "reference_recording", DEFAULT_RECORDING)
+
+    @property
+    def single(self) -> bool:
+        """Whether the config has one recording."""
+        return len(self.recordings) <= 1
+
+    def recording_of_reference(self) -> RigRecordingSpec:
+        """The reference recording's spec."""
+        return self.recordings[self.reference_recording]
 
 
 def is_rig_config(doc: Any) -> bool:
@@ -151,16 +197,17 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         cycle, an unknown camera in a joint, two joints between one pair, a camera in no
         joint.
     """
-    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker, camera_times
+    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker
 
     c = _Checker(path)
     top = c.mapping(
         doc,
         "",
-        required=("output", "cameras", "joints"),
+        required=("output", "joints"),
         optional=(
             "schema", "schema_version", "reference", "board", "target", "pair_by", "max_dt",
-            "workers", "bundle", "estimate_time_offset", "max_offset", "sfm",
+            "workers", "bundle", "estimate_time_offset", "max_offset", "sfm", "cameras",
+            "recordings", "world",
         ),
     )  # fmt: skip
     if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
@@ -172,59 +219,46 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
             f"a config with joints is version {RIG_CONFIG_VERSION}, got {version}",
         )
     output = c.path(top["output"], "output")
-    cams_doc = c.mapping(top["cameras"], "cameras", optional=tuple(map(str, top["cameras"])))
-    if not cams_doc:
-        raise c.fail("cameras", "names no camera")
-    cameras: dict[str, RigCameraSpec] = {}
-    for name, cam in cams_doc.items():
-        key = f"cameras.{name}"
-        cam = c.mapping(
-            cam if cam is not None else {},
-            key,
-            optional=(
-                "poses",
-                "format",
-                "images",
-                "model",
-                "scale",
-                "front_end",
-                "intrinsics",
-                "timestamps",
-                "fps",
-            ),
+    if ("cameras" in top) == ("recordings" in top):
+        raise c.fail("cameras", "give either 'cameras' (one recording) or 'recordings' (several)")
+    recordings: dict[str, RigRecordingSpec] = {}
+    if "cameras" in top:
+        shared = c.choice(top.get("world", "separate"), "world", WORLDS) == "shared"
+        cams = _camera_specs(c, top["cameras"], "cameras")
+        recordings[DEFAULT_RECORDING] = RigRecordingSpec(DEFAULT_RECORDING, cams, shared)
+    else:
+        if "world" in top:
+            raise c.fail("world", "goes in each recording (recordings.<name>.world)")
+        recs_doc = c.mapping(
+            top["recordings"], "recordings", optional=tuple(map(str, top["recordings"] or {}))
         )
-        if ("poses" in cam) == ("images" in cam):
-            raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
-        front_end = c.choice(cam.get("front_end", "board"), f"{key}.front_end", FRONT_ENDS)
-        if "images" not in cam and any(k in cam for k in _IMAGE_KEYS):
-            raise c.fail(key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
-        stamps, fps = camera_times(c, cam, key)
-        if front_end == "board" and "intrinsics" in cam:
-            raise c.fail(f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)")
-        default_scale = "unknown" if front_end == "sfm" else "known"
-        scale = c.choice(cam.get("scale", default_scale), f"{key}.scale", SCALES)
-        if front_end == "sfm" and scale == "known":
-            raise c.fail(
-                f"{key}.scale", "structure from motion gives trajectories up to scale: unknown"
-            )
-        cameras[name] = RigCameraSpec(
-            name=name,
-            poses=c.path(cam["poses"], f"{key}.poses") if "poses" in cam else None,
-            format=c.choice(cam.get("format", "auto"), f"{key}.format", TRAJECTORY_FORMATS),
-            images=c.path(cam["images"], f"{key}.images") if "images" in cam else None,
-            model=c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS),
-            unknown_scale=scale == "unknown",
-            front_end=front_end,
-            intrinsics=c.path(cam["intrinsics"], f"{key}.intrinsics")
-            if "intrinsics" in cam
-            else None,
-            timestamps=stamps,
-            fps=fps,
+        if not recs_doc:
+            raise c.fail("recordings", "names no recording")
+        for rname, rec in recs_doc.items():
+            key = f"recordings.{rname}"
+            rec = c.mapping(rec, key, required=("cameras",), optional=("world", "fixed_joints"))
+            shared = c.choice(rec.get("world", "separate"), f"{key}.world", WORLDS) == "shared"
+            held = rec.get("fixed_joints") or []
+            if not isinstance(held, list) or not all(isinstance(h, str) for h in held):
+                raise c.fail(f"{key}.fixed_joints", "must be a list of joint names")
+            recordings[str(rname)] = RigRecordingSpec(
+                str(rname), _camera_specs(c, rec["cameras"], f"{key}.cameras"), shared,
+                tuple(held),
+            )  # fmt: skip
+    cameras = _body_settings(c, recordings)
+    ref = c.mapping(
+        top.get("reference", {}), "reference", optional=("camera", "frame", "recording")
+    )
+    ref_rec = ref.get("recording", next(iter(recordings)))
+    if not isinstance(ref_rec, str) or ref_rec not in recordings:
+        raise c.fail(
+            "reference.recording", f"must name one of the recordings ({', '.join(recordings)})"
         )
-    ref = c.mapping(top.get("reference", {}), "reference", optional=("camera", "frame"))
-    ref_cam = ref.get("camera", next(iter(cameras)))
+    ref_cam = ref.get("camera", next(iter(recordings[ref_rec].cameras)))
     if not isinstance(ref_cam, str) or ref_cam not in cameras:
         raise c.fail("reference.camera", f"must name one of the cameras ({', '.join(cameras)})")
+    if ref_cam not in recordings[ref_rec].cameras:
+        raise c.fail("reference.camera", f"{ref_cam} is not in the reference recording {ref_rec}")
     ref_frame = c.integer(ref.get("frame", 0), "reference.frame", 0)
     joints_doc = c.mapping(top["joints"], "joints", optional=tuple(map(str, top["joints"])))
     joints: dict[str, RigJointSpec] = {}
@@ -270,6 +304,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         topo = rig_topology(list(cameras), raw, ref_cam)
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
+    _check_recordings(c, recordings, joints)
     board, target = c.board_or_target(top)
     image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
     if image_cams and board is None and target is None:
@@ -299,7 +334,121 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         ),
         max_offset=c.positive(top.get("max_offset", 0.5), "max_offset"),
         sfm=_sfm_options(c, top.get("sfm")),
+        recordings=recordings,
+        reference_recording=ref_rec,
     )
+
+
+def _camera_specs(c: Any, doc: Any, where: str) -> dict[str, RigCameraSpec]:
+    """The camera entries of one recording (``cameras`` or ``recordings.<r>.cameras``)."""
+    from acs_cli.stages.run import camera_times
+
+    cams_doc = c.mapping(doc, where, optional=tuple(map(str, doc or {})))
+    if not cams_doc:
+        raise c.fail(where, "names no camera")
+    cameras: dict[str, RigCameraSpec] = {}
+    for name, cam in cams_doc.items():
+        key = f"{where}.{name}"
+        cam = c.mapping(
+            cam if cam is not None else {},
+            key,
+            optional=(
+                "poses",
+                "format",
+                "images",
+                "model",
+                "scale",
+                "front_end",
+                "intrinsics",
+                "timestamps",
+                "fps",
+            ),
+        )
+        if ("poses" in cam) == ("images" in cam):
+            raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
+        front_end = c.choice(cam.get("front_end", "board"), f"{key}.front_end", FRONT_ENDS)
+        if "images" not in cam and any(k in cam for k in _IMAGE_KEYS):
+            raise c.fail(key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
+        stamps, fps = camera_times(c, cam, key)
+        if front_end == "board" and "intrinsics" in cam:
+            raise c.fail(f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)")
+        default_scale = "unknown" if front_end == "sfm" else "known"
+        scale = c.choice(cam.get("scale", default_scale), f"{key}.scale", SCALES)
+        if front_end == "sfm" and scale == "known":
+            raise c.fail(
+                f"{key}.scale", "structure from motion gives trajectories up to scale: unknown"
+            )
+        cameras[name] = RigCameraSpec(
+            name=name,
+            poses=c.path(cam["poses"], f"{key}.poses") if "poses" in cam else None,
+            format=c.choice(cam.get("format", "auto"), f"{key}.format", TRAJECTORY_FORMATS),
+            images=c.path(cam["images"], f"{key}.images") if "images" in cam else None,
+            model=c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS),
+            unknown_scale=scale == "unknown",
+            front_end=front_end,
+            intrinsics=c.path(cam["intrinsics"], f"{key}.intrinsics")
+            if "intrinsics" in cam
+            else None,
+            timestamps=stamps,
+            fps=fps,
+        )
+    return cameras
+
+
+#: Settings of a body that every recording of it must give alike.
+_BODY_KEYS = ("unknown_scale", "model", "front_end", "intrinsics")
+
+
+def _body_settings(c: Any, recordings: dict[str, RigRecordingSpec]) -> dict[str, RigCameraSpec]:
+    """Each body's settings (its first recording's entry); a body whose recordings disagree
+    on its scale, camera model, front end or intrinsics is refused naming the key."""
+    out: dict[str, RigCameraSpec] = {}
+    first: dict[str, str] = {}
+    for rname, rec in recordings.items():
+        for name, spec in rec.cameras.items():
+            if name not in out:
+                out[name], first[name] = spec, rname
+                continue
+            for k in _BODY_KEYS:
+                if getattr(spec, k) != getattr(out[name], k):
+                    what = "scale" if k == "unknown_scale" else k
+                    raise c.fail(
+                        f"recordings.{rname}.cameras.{name}.{what}",
+                        f"differs from recordings.{first[name]}.cameras.{name}: a body's "
+                        f"{what} is the same in every recording",
+                    )
+    return out
+
+
+def _check_recordings(
+    c: Any, recordings: dict[str, RigRecordingSpec], joints: dict[str, RigJointSpec]
+) -> None:
+    """Every joint is seen by some recording with both its bodies (or held still in one);
+    every held joint exists, is not rigid and is seen by its recording."""
+    determined = set()
+    for rname, rec in recordings.items():
+        for h in rec.fixed_joints:
+            if h not in joints:
+                raise c.fail(f"recordings.{rname}.fixed_joints", f"{h!r} is not a joint")
+            if joints[h].type == "rigid":
+                raise c.fail(
+                    f"recordings.{rname}.fixed_joints", f"{h} is rigid: it cannot be held still"
+                )
+            if not any(b in rec.cameras for b in joints[h].between):
+                raise c.fail(
+                    f"recordings.{rname}.fixed_joints", f"the recording sees neither body of {h}"
+                )
+        for jn, j in joints.items():
+            if all(b in rec.cameras for b in j.between) and jn not in rec.fixed_joints:
+                determined.add(jn)
+            if jn in rec.fixed_joints:
+                determined.add(jn)
+    for jn in joints:
+        if jn not in determined:
+            raise c.fail(
+                f"joints.{jn}",
+                "no recording sees both of its bodies (or holds it still): nothing determines it",
+            )
 
 
 def _sfm_options(c: Any, doc: Any) -> dict[str, Any]:
@@ -338,9 +487,14 @@ class RigRun:
 
 
 def tracks_on_timeline(
-    config: RigRunConfig, trajectories: dict[str, Trajectory]
+    config: RigRunConfig,
+    trajectories: dict[str, Trajectory],
+    recording: RigRecordingSpec | None = None,
 ) -> tuple[dict[str, CameraTrack], np.ndarray, dict[str, np.ndarray], list[str]]:
     """Every camera's poses on one timeline; checks that neighbours share instants.
+
+    With ``recording``, the cameras and joints of that recording (those with both bodies in
+    it and not held still there).
 
     Returns the tracks, the timeline (seconds or frame numbers), each camera's row of its
     trajectory at every instant (-1 where it has none) and warnings.
@@ -390,6 +544,10 @@ def tracks_on_timeline(
             )
     for j in config.topology.joints:
         p, q = j.between
+        if p not in index or q not in index:
+            continue
+        if recording is not None and j.name in recording.fixed_joints:
+            continue
         common = int(np.sum((index[p] >= 0) & (index[q] >= 0)))
         if common == 0:
             tp, tq = trajectories[p].timestamps, trajectories[q].timestamps
@@ -412,11 +570,22 @@ def tracks_on_timeline(
     return tracks, slots, index, warnings
 
 
-def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
+def _priors(
+    config: RigRunConfig, by_rec: dict[str, dict[str, Trajectory]] | None = None
+) -> dict[str, EdgePrior]:
     """Joint priors: positions given in the config, and fixed-joint sessions (a ball's
     centre by :func:`~acs_cli.core.joint.estimate_pivot`, a hinge's axis and line by
-    :func:`~acs_cli.core.joint.estimate_hinge_fixed`)."""
+    :func:`~acs_cli.core.joint.estimate_hinge_fixed`): files (``joints.<j>.fixed_joint``)
+    and recordings that hold the joint still (``recordings.<r>.fixed_joints``)."""
     from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
+
+    held: dict[str, list[tuple[str, str, FloatArray]]] = {}
+    for rname, rec in config.recordings.items():
+        for jn in rec.fixed_joints:
+            for cam in config.joints[jn].between:
+                if cam in rec.cameras and by_rec is not None:
+                    key = f"recordings.{rname}.fixed_joints ({jn}, camera {cam})"
+                    held.setdefault(jn, []).append((key, cam, by_rec[rname][cam].T_world_cam))
 
     out = {}
     metric = not config.cameras[config.reference_camera].unknown_scale
@@ -435,8 +604,11 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
         )
         line: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
         axis: dict[str, tuple[np.ndarray, float]] = {}
-        for cam, path in j.fixed_joint.items():
-            key = f"joints.{name}.fixed_joint.{cam}"
+        sessions: list[tuple[str, str, Path | FloatArray]] = [
+            (f"joints.{name}.fixed_joint.{cam}", cam, path) for cam, path in j.fixed_joint.items()
+        ]
+        sessions += held.get(name, [])
+        for key, cam, src in sessions:
             if (
                 config.cameras[cam].unknown_scale
                 or config.cameras[config.reference_camera].unknown_scale
@@ -446,10 +618,15 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
                     "reference camera to be metric (scale: known)",
                     path=config.path,
                 )
-            try:
-                T = read_trajectory(path).T_world_cam
-            except InputError as exc:
-                raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
+            if isinstance(src, Path):
+                try:
+                    T = read_trajectory(src).T_world_cam
+                except InputError as exc:
+                    raise InputError(
+                        f"{key}: {exc.message}", path=exc.path, line=exc.line
+                    ) from None
+            else:
+                T = src
             if j.type == "ball":
                 pv = estimate_pivot(T, "refined", f"{key} (camera {cam})")
                 position.setdefault(cam, pv.position_in_cam)
@@ -470,8 +647,12 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
     return out
 
 
-def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> RigArtifact:
-    """The ``rig.yaml`` content of an estimate."""
+def rig_artifact(
+    est: RigEstimate, length_unit: str, warnings: list[str], recordings: str | None = None
+) -> RigArtifact:
+    """The ``rig.yaml`` content of an estimate (with a ``recordings`` section when
+    ``recordings`` names the reference recording of a rig of several, or of one with a
+    shared world)."""
     ref = est.topology.reference
     T_ref_refworld = se3.invert_transforms(
         est.cameras[ref].poses_in_reference_world[est.reference_frame]
@@ -485,10 +666,36 @@ def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> Rig
             unknown_scale=e.scale_std is not None,
             scale=e.scale,
             scale_std=e.scale_std,
-            T_ref_world=T_ref_refworld @ e.world_to_reference_world,
+            T_ref_world=None
+            if e.T_cam_ref is None
+            else T_ref_refworld @ e.world_to_reference_world,
         )
         for c, e in est.cameras.items()
     }
+    recs: dict[str, RigRecordingResult] = {}
+    if est.recordings is not None and (recordings is not None or any(est.recordings.shared_world)):
+        for i, rname in enumerate(est.recordings.names):
+            worlds = {}
+            for w in est.worlds:
+                if w.recording != rname:
+                    continue
+                sd = np.sqrt(np.maximum(np.diag(w.covariance), 0.0))
+                worlds[w.label] = RigWorldResult(
+                    label=w.label,
+                    bodies=w.cameras,
+                    T_ref_world=T_ref_refworld @ w.T_ref_world if w.tied else w.T_ref_world,
+                    rotation_std_deg=np.degrees(sd[:3]),
+                    translation_std=sd[3:],
+                    scale=w.scale,
+                    scale_std=w.scale_std,
+                    tied=w.tied,
+                )
+            recs[rname] = RigRecordingResult(
+                rname,
+                est.recordings.shared_world[i],
+                int(np.sum(est.recordings.of_frame == i)),
+                worlds,
+            )
     joints = {}
     for name, e in est.edges.items():
         joints[name] = RigJointResult(
@@ -512,6 +719,7 @@ def rig_artifact(est: RigEstimate, length_unit: str, warnings: list[str]) -> Rig
         cameras=cams,
         joints=joints,
         warnings=list(warnings),
+        recordings=recs,
     )
 
 
@@ -553,35 +761,38 @@ def run_rig(
         Where to write (default ``config.output / "rig.yaml"``).
     """
     poses = dict(poses or {})
-    files: dict[str, tuple[Path, str]] = {}
-    for name, spec in config.cameras.items():
-        if spec.poses is not None:
-            files[name] = (spec.poses, spec.format)
-        elif name in poses:
-            files[name] = (poses[name], "npz")
-        else:
-            raise InputError(f"cameras.{name}: no poses (run its poses stage first)")
-    priors = _priors(config)
-    trajectories = {}
-    for n, (p, fmt) in files.items():
-        try:
-            trajectories[n] = read_trajectory(p, fmt)
-        except InputError as exc:  # name the config key with the file
-            key = f"cameras.{n}.poses" if config.cameras[n].poses is not None else f"poses of {n}"
-            raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
+    files, by_rec = read_recordings(config, poses)
+    priors = _priors(config, by_rec)
     offsets: dict[str, tuple[float, float]] = {}
-    if config.estimate_time_offset:
-        offsets, warnings = rig_time_offsets(config, trajectories, priors)
-        tracks, slots, index = tracks_with_offsets(config, trajectories, offsets)
+    single = config.single
+    if single:
+        trajectories = by_rec[config.reference_recording]
+        if config.estimate_time_offset:
+            offsets, warnings = rig_time_offsets(config, trajectories, priors)
+            tracks, slots, index = tracks_with_offsets(config, trajectories, offsets)
+        else:
+            tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
+            warnings += rig_synchronisation(config, trajectories, priors)
+        recordings = Recordings.single(
+            slots.size, config.recording_of_reference().shared_world, config.reference_recording
+        )
     else:
-        tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
-        warnings += rig_synchronisation(config, trajectories, priors)
+        if config.estimate_time_offset:
+            raise InputError(
+                "estimate_time_offset: takes a config of one recording (give each recording's "
+                "cameras on one clock, or calibrate the offsets recording by recording)",
+                path=config.path,
+            )
+        tracks, slots, recordings, warnings = tracks_of_recordings(config, by_rec, priors)
+        index = {}
+    k = recording_frame(config, recordings)
     est = estimate_rig(
         config.topology,
         tracks,
-        reference_frame=config.reference_frame,
+        reference_frame=k,
         priors=priors,
         accept_weak=config.accept_weak,
+        recordings=recordings,
     )
     for name, e in est.edges.items():
         if e.frames_rejected:
@@ -590,15 +801,21 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    if config.bundle and not offsets:
+    if config.bundle and not offsets and single:
+        trajectories = by_rec[config.reference_recording]
         est, sections, notes = rig_bundle(config, files, trajectories, index, est)
         warnings += notes
+    elif config.bundle and not single:
+        warnings.append(
+            "no bundle adjustment of the rig: it takes a config of one recording yet, so the "
+            "rig of several recordings is solved from poses"
+        )
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
     warnings += verdict.warnings()
     art = dataclasses.replace(
-        rig_artifact(est, unit, warnings),
+        rig_artifact(est, unit, warnings, None if single else config.reference_recording),
         bundle_adjustment=sections,
         verdict=VerdictSection.from_verdict(verdict),
     )
@@ -616,7 +833,9 @@ def run_rig(
     }
     header = make_header(
         "rig",
-        {f"poses_{n}": p for n, (p, _) in files.items()} | fixed | {"config": config.path},
+        {f"poses_{n.replace('/', '_')}": p for n, (p, _) in files.items()}
+        | fixed
+        | {"config": config.path},
         "one maximum-likelihood solve over every joint (acs_cli.core.rig_solve.estimate_rig): "
         "ball, hinge and rigid constraints on each camera's trajectory, per-camera "
         "world-to-reference similarities, noise levels per joint, outliers rejected"
@@ -634,7 +853,8 @@ def run_rig(
         },
         {
             "T_cam_ref": f"maps {config.reference_camera}'s frame at reference frame "
-            f"{est.reference_frame} (t = {slots[est.reference_frame]:.9f}) into the camera's",
+            f"{config.reference_frame} of recording {config.reference_recording} "
+            f"(t = {slots[est.reference_frame]:.9f}) into the camera's",
             "position_in": "the joint in each camera's frame",
             "axis_in": "hinge axis (unit) in each camera's frame",
         },
@@ -645,8 +865,112 @@ def run_rig(
     return RigRun(est, art, out, warnings)
 
 
-def _edge_fit(config: RigRunConfig, j: RigJoint, priors: dict[str, EdgePrior]) -> Fit:
-    """One joint's calibration on its two cameras' paired poses: its raw residuals."""
+def label(config: RigRunConfig, recording: str, camera: str) -> str:
+    """A camera of a recording, in messages and stage names: ``cam`` in a config of one
+    recording, ``recording/cam`` in one of several."""
+    return camera if config.single else f"{recording}/{camera}"
+
+
+def camera_key(config: RigRunConfig, recording: str, camera: str) -> str:
+    """The config key of a camera entry."""
+    return f"cameras.{camera}" if config.single else f"recordings.{recording}.cameras.{camera}"
+
+
+def read_recordings(
+    config: RigRunConfig, poses: dict[str, Path]
+) -> tuple[dict[str, tuple[Path, str]], dict[str, dict[str, Trajectory]]]:
+    """Every camera's trajectory in every recording, each read once.
+
+    ``poses`` holds the poses stage's files of cameras given as ``images`` (by
+    :func:`label`). Returns the files by label and the trajectories by recording and camera.
+    """
+    files: dict[str, tuple[Path, str]] = {}
+    by_rec: dict[str, dict[str, Trajectory]] = {}
+    for rname, rec in config.recordings.items():
+        by_rec[rname] = {}
+        for name, spec in rec.cameras.items():
+            lab = label(config, rname, name)
+            key = camera_key(config, rname, name)
+            if spec.poses is not None:
+                files[lab] = (spec.poses, spec.format)
+            elif lab in poses:
+                files[lab] = (poses[lab], "npz")
+            else:
+                raise InputError(f"{key}: no poses (run its poses stage first)")
+            path, fmt = files[lab]
+            try:
+                by_rec[rname][name] = read_trajectory(path, fmt)
+            except InputError as exc:  # name the config key with the file
+                where = f"{key}.poses" if spec.poses is not None else f"poses of {lab}"
+                raise InputError(f"{where}: {exc.message}", path=exc.path, line=exc.line) from None
+    return files, by_rec
+
+
+def recording_frame(config: RigRunConfig, recordings: Recordings) -> int:
+    """The reference instant on the rig's timeline: ``reference.frame`` of the reference
+    recording.
+
+    Raises
+    ------
+    InputError
+        The frame is outside the recording.
+    """
+    r = recordings.names.index(config.reference_recording)
+    at = np.flatnonzero(recordings.of_frame == r)
+    if config.reference_frame >= at.size:
+        raise InputError(
+            f"reference.frame: {config.reference_frame} is outside the {at.size} instants of "
+            f"recording {config.reference_recording}",
+            path=config.path,
+        )
+    return int(at[config.reference_frame])
+
+
+def tracks_of_recordings(
+    config: RigRunConfig,
+    by_rec: dict[str, dict[str, Trajectory]],
+    priors: dict[str, EdgePrior],
+) -> tuple[dict[str, CameraTrack], np.ndarray, Recordings, list[str]]:
+    """Every recording's cameras on its own timeline (as :func:`tracks_on_timeline`), the
+    timelines one after the other: the rig's tracks, times, recordings and warnings."""
+    names = tuple(config.recordings)
+    parts: list[tuple[dict[str, CameraTrack], np.ndarray]] = []
+    warnings: list[str] = []
+    for rname, rec in config.recordings.items():
+        trajs = by_rec[rname]
+        tr, slots, _, notes = tracks_on_timeline(config, trajs, rec)
+        warnings += [f"recording {rname}: {w}" for w in notes]
+        warnings += [
+            f"recording {rname}: {w}" for w in rig_synchronisation(config, trajs, priors, rec)
+        ]
+        parts.append((tr, slots))
+    n = sum(slots.size for _, slots in parts)
+    tracks: dict[str, CameraTrack] = {}
+    for c, spec in config.cameras.items():
+        T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        valid = np.zeros(n, bool)
+        at = 0
+        for tr, slots in parts:
+            if c in tr:
+                T[at : at + slots.size] = tr[c].T_w_c
+                valid[at : at + slots.size] = tr[c].valid
+            at += slots.size
+        tracks[c] = CameraTrack(T, valid, spec.unknown_scale)
+    of_frame = np.concatenate([np.full(slots.size, i) for i, (_, slots) in enumerate(parts)])
+    recordings = Recordings(
+        names,
+        of_frame,
+        tuple(r.shared_world for r in config.recordings.values()),
+        tuple(r.fixed_joints for r in config.recordings.values()),
+    )
+    return tracks, np.concatenate([slots for _, slots in parts]), recordings, warnings
+
+
+def _edge_fit(
+    config: RigRunConfig, j: RigJoint, priors: dict[str, EdgePrior], shared: bool = False
+) -> Fit:
+    """One joint's calibration on its two cameras' paired poses: its raw residuals
+    (``shared``: both cameras' poses in one world)."""
     p, q = j.between
     topo = rig_topology([p, q], [(j.name, [p, q], j.type)], p)
     prior = {j.name: priors[j.name]} if j.name in priors else {}
@@ -657,7 +981,8 @@ def _edge_fit(config: RigRunConfig, j: RigJoint, priors: dict[str, EdgePrior]) -
             p: CameraTrack(Tp, ok, config.cameras[p].unknown_scale),
             q: CameraTrack(Tq, ok, config.cameras[q].unknown_scale),
         }
-        est = estimate_rig(topo, tracks, priors=prior, reject_outliers=False)
+        recs = Recordings.single(Tp.shape[0], shared)
+        est = estimate_rig(topo, tracks, priors=prior, reject_outliers=False, recordings=recs)
         return est.edges[j.name].residual_blocks
 
     return fit
@@ -689,6 +1014,7 @@ def rig_time_offsets(
     ref = config.reference_camera
     offsets = {ref: (0.0, 0.0)}
     notes = []
+    shared = config.recordings[config.reference_recording].shared_world
     for step in config.topology.tree_order():
         j = step.joint
         p, q = j.between
@@ -696,7 +1022,7 @@ def rig_time_offsets(
         try:
             off = estimate_time_offset(
                 tp.timestamps, tp.T_world_cam, tq.timestamps, tq.T_world_cam,
-                _edge_fit(config, j, priors), config.max_offset,
+                _edge_fit(config, j, priors, shared), config.max_offset,
             )  # fmt: skip
         except DegenerateMotionError as exc:
             raise DegenerateMotionError(f"joint {j.name}: {exc.message}") from None
@@ -757,7 +1083,10 @@ def tracks_with_offsets(
 
 
 def rig_synchronisation(
-    config: RigRunConfig, trajectories: dict[str, Trajectory], priors: dict[str, EdgePrior]
+    config: RigRunConfig,
+    trajectories: dict[str, Trajectory],
+    priors: dict[str, EdgePrior],
+    recording: RigRecordingSpec | None = None,
 ) -> list[str]:
     """Warnings for joints whose cameras fit clearly better with one clock shifted by a
     frame (:func:`acs_cli.core.time_offset.synchronisation_check`; whole frames only, three
@@ -767,12 +1096,15 @@ def rig_synchronisation(
     ):
         return []
     out = []
+    rec = recording if recording is not None else config.recordings[config.reference_recording]
     for j in config.topology.joints:
         p, q = j.between
+        if p not in trajectories or q not in trajectories or j.name in rec.fixed_joints:
+            continue
         tp, tq = trajectories[p], trajectories[q]
         found = synchronisation_check(
             tp.timestamps, tp.T_world_cam, tq.timestamps, tq.T_world_cam,
-            _edge_fit(config, j, priors), steps=(-1.0, 1.0),
+            _edge_fit(config, j, priors, rec.shared_world), steps=(-1.0, 1.0),
         )  # fmt: skip
         if found is not None:
             out.append(
@@ -933,8 +1265,17 @@ def write_rig_trajectories(
     G_ref_k = est.cameras[ref].poses_in_reference_world[est.reference_frame]
     T_ref_w = se3.invert_transforms(G_ref_k)
     written: list[Path] = []
+    # the reference recording's instants: the only ones in the reference camera's frame
+    recs = est.recordings
+    here = (
+        np.ones(times.size, bool)
+        if recs is None
+        else recs.of_frame == recs.of_frame[est.reference_frame]
+    )
     for c, e in est.cameras.items():
-        ok = tracks[c].valid
+        ok = tracks[c].valid & here
+        if not ok.any():
+            continue
         path = folder / f"{c}.tum"
         write_tum(path, times[ok], T_ref_w @ e.poses_in_reference_world[ok])
         written.append(path)
@@ -942,7 +1283,9 @@ def write_rig_trajectories(
         if not edge.position_in:
             continue
         p, q = edge.joint.between
-        ok = tracks[p].valid & tracks[q].valid
+        ok = tracks[p].valid & tracks[q].valid & here
+        if not ok.any():
+            continue
         G = est.cameras[p].poses_in_reference_world[ok]
         T = G.copy()
         T[:, :3, 3] = se3.transform_points(G, edge.position_in[p])

@@ -38,7 +38,7 @@ from acs_cli.io.validate import short_repr
 
 if TYPE_CHECKING:
     from acs_cli.core.targets import MarkerTarget, Target
-    from acs_cli.stages.rig import RigRunConfig
+    from acs_cli.stages.rig import RigCameraSpec, RigRunConfig
 
 __all__ = [
     "CONFIG_SCHEMA",
@@ -794,13 +794,20 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
 
 
 def _sfm_stage(
-    name: str, images: Path, intrinsics: Path | None, out: Path, config: RigRunConfig
+    name: str,
+    images: Path,
+    intrinsics: Path | None,
+    out: Path,
+    config: RigRunConfig,
+    cam_name: str | None = None,
 ) -> tuple[_Stage, Path]:
-    """A camera's markerless poses stage (``front_end: sfm``) and the NPZ it writes."""
+    """A camera's markerless poses stage (``front_end: sfm``) and the NPZ it writes
+    (``name`` labels the stage; ``cam_name``, the camera, names its folder)."""
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
 
-    npz = out / f"cam_{name}" / "poses.npz"
-    cam = config.cameras[name]
+    cam_name = cam_name or name
+    npz = out / f"cam_{cam_name}" / "poses.npz"
+    cam = config.cameras[cam_name]
     cfg = SfmPosesConfig(
         workers=config.workers,
         tum=npz.with_suffix(".tum"),
@@ -823,70 +830,26 @@ def _sfm_stage(
 
 def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
-    from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
-    from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, run_rig
+    from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, label, run_rig
 
-    out = config.output
     stages: list[_Stage] = []
     intrinsics: dict[str, Path] = {}
     poses: dict[str, Path] = {}
-    for name, cam in config.cameras.items():
-        if cam.images is not None and cam.front_end == "sfm":
-            stage, poses[name] = _sfm_stage(name, cam.images, cam.intrinsics, out, config)
-            stages.append(stage)
-            continue
-        if cam.images is None or (config.board is None and config.target is None):
-            continue
-        defaults = IntrinsicsConfig()  # the board's fields, unused with a target
-        the_board = config.board or (defaults.cols, defaults.rows, defaults.square)
-        cols, rows, square = the_board
-        board = _target_options(the_board, config.target)
-        cam_dir = out / f"cam_{name}"
-        intr_out = cam_dir / "intrinsics.yaml"
-        intrinsics[name] = intr_out
-        icfg = IntrinsicsConfig(
-            cols=cols,
-            rows=rows,
-            square=square,
-            model=cam.model,
-            workers=config.workers,
-            target=config.target,
-            accept_weak=config.accept_weak,
-        )
-        images = cam.images
-
-        def do_intrinsics(
-            images: Path = images, intr_out: Path = intr_out, icfg: IntrinsicsConfig = icfg
-        ) -> list[str]:
-            return run_intrinsics(images, intr_out, icfg).warnings
-
-        stages.append(
-            _Stage(
-                f"intrinsics {name}",
-                "intrinsics",
-                {"images": images},
-                {**board, "model": cam.model, "accept_weak": config.accept_weak},
-                [intr_out],
-                do_intrinsics,
-            )
-        )
-        npz = cam_dir / "poses.npz"
-        stages.append(
-            _poses_stage(
-                f"poses {name}",
-                images,
-                intr_out,
-                npz,
-                the_board,
-                config.workers,
-                (cam.timestamps, cam.fps),
-                config.target,
-            )
-        )
-        poses[name] = npz
+    for rname, rec in config.recordings.items():
+        # a config of one recording keeps its cameras' folders at the top of the output
+        out = config.output if config.single else config.output / rname
+        for cam_name, cam in rec.cameras.items():
+            name = label(config, rname, cam_name)
+            _plan_rig_camera(config, name, cam_name, cam, out, stages, intrinsics, poses)
+    out = config.output
     rig_out = out / RIG_FILE
-    inputs = {f"poses_{n}": c.poses for n, c in config.cameras.items() if c.poses is not None}
-    inputs |= {f"poses_{n}": p for n, p in poses.items()}
+    inputs = {
+        f"poses_{label(config, r, n).replace('/', '_')}": c.poses
+        for r, rec in config.recordings.items()
+        for n, c in rec.cameras.items()
+        if c.poses is not None
+    }
+    inputs |= {f"poses_{n.replace('/', '_')}": p for n, p in poses.items()}
     for jname, js in config.joints.items():
         inputs |= {f"fixed_joint_{jname}_{c}": p for c, p in js.fixed_joint.items()}
 
@@ -894,8 +857,13 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         return run_rig(config, poses, rig_out).warnings
 
     traj = out / TRAJECTORY_DIR
-    traj_files = [traj / f"{c}.tum" for c in config.cameras]
-    traj_files += [traj / f"{n}.tum" for n, j in config.joints.items() if j.type != "rigid"]
+    seen = config.recordings[config.reference_recording].cameras
+    traj_files = [traj / f"{c}.tum" for c in seen]
+    traj_files += [
+        traj / f"{n}.tum"
+        for n, j in config.joints.items()
+        if j.type != "rigid" and all(b in seen for b in j.between)
+    ]
 
     stages.append(
         _Stage(
@@ -903,7 +871,11 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             "rig",
             inputs | {"config": config.path},
             {
-                "reference": [config.reference_camera, config.reference_frame],
+                "reference": [
+                    config.reference_camera,
+                    config.reference_frame,
+                    config.reference_recording,
+                ],
                 "accept_weak": config.accept_weak,
             },
             [rig_out, *traj_files],
@@ -911,6 +883,75 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         )
     )
     return stages, intrinsics
+
+
+def _plan_rig_camera(
+    config: RigRunConfig,
+    name: str,
+    cam_name: str,
+    cam: RigCameraSpec,
+    out: Path,
+    stages: list[_Stage],
+    intrinsics: dict[str, Path],
+    poses: dict[str, Path],
+) -> None:
+    """The intrinsics and poses stages (or the sfm stage) of one camera of one recording,
+    labelled ``name``, its files in ``out/cam_<camera>``."""
+    from acs_cli.stages.intrinsics import IntrinsicsConfig, run_intrinsics
+
+    if cam.images is not None and cam.front_end == "sfm":
+        stage, poses[name] = _sfm_stage(name, cam.images, cam.intrinsics, out, config, cam_name)
+        stages.append(stage)
+        return
+    if cam.images is None or (config.board is None and config.target is None):
+        return
+    defaults = IntrinsicsConfig()  # the board's fields, unused with a target
+    the_board = config.board or (defaults.cols, defaults.rows, defaults.square)
+    cols, rows, square = the_board
+    board = _target_options(the_board, config.target)
+    cam_dir = out / f"cam_{cam_name}"
+    intr_out = cam_dir / "intrinsics.yaml"
+    intrinsics[name] = intr_out
+    icfg = IntrinsicsConfig(
+        cols=cols,
+        rows=rows,
+        square=square,
+        model=cam.model,
+        workers=config.workers,
+        target=config.target,
+        accept_weak=config.accept_weak,
+    )
+    images = cam.images
+
+    def do_intrinsics(
+        images: Path = images, intr_out: Path = intr_out, icfg: IntrinsicsConfig = icfg
+    ) -> list[str]:
+        return run_intrinsics(images, intr_out, icfg).warnings
+
+    stages.append(
+        _Stage(
+            f"intrinsics {name}",
+            "intrinsics",
+            {"images": images},
+            {**board, "model": cam.model, "accept_weak": config.accept_weak},
+            [intr_out],
+            do_intrinsics,
+        )
+    )
+    npz = cam_dir / "poses.npz"
+    stages.append(
+        _poses_stage(
+            f"poses {name}",
+            images,
+            intr_out,
+            npz,
+            the_board,
+            config.workers,
+            (cam.timestamps, cam.fps),
+            config.target,
+        )
+    )
+    poses[name] = npz
 
 
 def run_pipeline(
