@@ -570,6 +570,41 @@ def tracks_on_timeline(
     return tracks, slots, index, warnings
 
 
+def check_prior_units(config: RigRunConfig) -> None:
+    """Priors in metres (``position_in``, fixed-joint sessions) need a metric reference
+    camera, and a fixed-joint session a metric camera.
+
+    Raises
+    ------
+    InputError
+        Naming the key of the first prior that cannot be used.
+    """
+    ref_unknown = config.cameras[config.reference_camera].unknown_scale
+    for name, j in config.joints.items():
+        if j.position_in and ref_unknown:
+            raise InputError(
+                f"joints.{name}.position_in is in metres, but the reference camera "
+                f"{config.reference_camera} has an unknown scale: choose a metric camera as "
+                "reference.camera",
+                path=config.path,
+            )
+        keys = [(f"joints.{name}.fixed_joint.{cam}", cam) for cam in j.fixed_joint]
+        keys += [
+            (f"recordings.{r}.fixed_joints ({name}, camera {cam})", cam)
+            for r, rec in config.recordings.items()
+            if name in rec.fixed_joints
+            for cam in j.between
+            if cam in rec.cameras
+        ]
+        for key, cam in keys:
+            if config.cameras[cam].unknown_scale or ref_unknown:
+                raise InputError(
+                    f"{key}: a fixed-joint session gives metres; it needs {cam} and the "
+                    "reference camera to be metric (scale: known)",
+                    path=config.path,
+                )
+
+
 def _priors(
     config: RigRunConfig, by_rec: dict[str, dict[str, Trajectory]] | None = None
 ) -> dict[str, EdgePrior]:
@@ -587,16 +622,9 @@ def _priors(
                     key = f"recordings.{rname}.fixed_joints ({jn}, camera {cam})"
                     held.setdefault(jn, []).append((key, cam, by_rec[rname][cam].T_world_cam))
 
+    check_prior_units(config)
     out = {}
-    metric = not config.cameras[config.reference_camera].unknown_scale
     for name, j in config.joints.items():
-        if j.position_in and not metric:
-            raise InputError(
-                f"joints.{name}.position_in is in metres, but the reference camera "
-                f"{config.reference_camera} has an unknown scale: choose a metric camera as "
-                "reference.camera",
-                path=config.path,
-            )
         cov = None if j.position_std is None else np.eye(3) * j.position_std**2
         position = dict(j.position_in)
         covariance: dict[str, FloatArray] = (
@@ -609,15 +637,6 @@ def _priors(
         ]
         sessions += held.get(name, [])
         for key, cam, src in sessions:
-            if (
-                config.cameras[cam].unknown_scale
-                or config.cameras[config.reference_camera].unknown_scale
-            ):
-                raise InputError(
-                    f"{key}: a fixed-joint session gives metres; it needs {cam} and the "
-                    "reference camera to be metric (scale: known)",
-                    path=config.path,
-                )
             if isinstance(src, Path):
                 try:
                     T = read_trajectory(src).T_world_cam
@@ -761,6 +780,7 @@ def run_rig(
         Where to write (default ``config.output / "rig.yaml"``).
     """
     poses = dict(poses or {})
+    check_prior_units(config)
     files, by_rec = read_recordings(config, poses)
     priors = _priors(config, by_rec)
     offsets: dict[str, tuple[float, float]] = {}

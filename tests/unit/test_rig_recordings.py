@@ -1,0 +1,183 @@
+"""Recordings and shared worlds in the one rig engine (issue 19, items 1 and 2).
+
+A shared world is the paper's Algorithm I inside the rig; several recordings share the rig's
+geometry; a recording that holds a joint still gives it by Algorithm II."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from acs_cli.core import se3
+from acs_cli.core.joint import estimate_joint_overlap
+from acs_cli.core.rig import rig_topology
+from acs_cli.core.rig_solve import CameraTrack, Recordings, estimate_rig
+from acs_cli.errors import InputError
+from sample_data_gen import acs_sim
+from sample_data_gen import mocap_sim as M
+
+HIP = rig_topology(["pelvis", "femur"], [("hip", ["pelvis", "femur"], "ball")], "pelvis")
+LEG = rig_topology(
+    ["pelvis", "femur", "tibia"],
+    [("hip", ["pelvis", "femur"], "ball"), ("knee", ["femur", "tibia"], "hinge")],
+    "pelvis",
+)
+
+
+def _tracks(*trials: dict[str, np.ndarray], unknown: tuple[str, ...] = ()) -> dict:
+    """Trials one after the other on one timeline: each body's track (identity, invalid,
+    where a trial does not see it)."""
+    sizes = [next(iter(t.values())).shape[0] for t in trials]
+    n = sum(sizes)
+    bodies = sorted({b for t in trials for b in t})
+    out = {}
+    for b in bodies:
+        T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        v = np.zeros(n, bool)
+        at = 0
+        for t, m in zip(trials, sizes, strict=True):
+            if b in t:
+                T[at : at + m] = t[b]
+                v[at : at + m] = True
+            at += m
+        out[b] = CameraTrack(T, v, b in unknown)
+    return out
+
+
+def _recordings(sizes: list[int], shared: list[bool], held: tuple = ()) -> Recordings:
+    names = tuple(f"r{i}" for i in range(len(sizes)))
+    of = np.concatenate([np.full(m, i) for i, m in enumerate(sizes)])
+    return Recordings(names, of, tuple(shared), held)
+
+
+def test_shared_world_is_algorithm_1_inside_the_rig(rng: np.random.Generator) -> None:
+    # a hip trial: the pelvis hardly turns; one lab world for both segments
+    trial = M.hip_trial(rng)
+    n = trial.times.size
+    est = estimate_rig(HIP, _tracks(trial.measured), recordings=Recordings.single(n, True))
+    e = est.edges["hip"]
+    pair = estimate_joint_overlap(trial.measured["pelvis"], trial.measured["femur"])
+    std = float(np.sqrt(np.linalg.eigvalsh(e.position_cov_in["pelvis"])[-1]))
+    # as good as the two-camera overlap (here: the same answer) and within its std
+    assert np.linalg.norm(e.position_in["pelvis"] - pair.position_in_a) < 0.2 * std
+    assert np.linalg.norm(e.position_in["pelvis"] - M.HIP_IN_PELVIS) < 4 * std
+    assert np.linalg.norm(e.position_in["femur"] - M.HIP_IN_FEMUR) < 0.005
+    # one world: no world-to-world transform estimated
+    assert [w.label for w in est.worlds] == ["default"]
+    assert np.allclose(est.worlds[0].T_ref_world, np.eye(4))
+
+
+def test_a_chain_from_two_recordings(rng: np.random.Generator) -> None:
+    hip, knee = M.hip_trial(rng), M.knee_trial(rng)
+    n, m = hip.times.size, knee.times.size
+    est = estimate_rig(
+        LEG,
+        _tracks(hip.measured, knee.measured),
+        recordings=_recordings([n, m], [True, True]),
+    )
+    assert np.linalg.norm(est.edges["hip"].position_in["pelvis"] - M.HIP_IN_PELVIS) < 0.003
+    k = est.edges["knee"]
+    u = M.KNEE_AXIS_IN_FEMUR
+    assert np.degrees(np.arccos(min(1.0, abs(float(k.axis_in["femur"] @ u))))) < 0.5
+    # the hinge point reported is the axis point nearest the femur's origin
+    nearest = M.KNEE_IN_FEMUR - (M.KNEE_IN_FEMUR @ u) * u
+    assert np.linalg.norm(k.position_in["femur"] - nearest) < 0.003
+    # the tibia has no pose at the reference instant (the hip trial's)
+    assert est.cameras["tibia"].T_cam_ref is None
+    assert est.cameras["femur"].T_cam_ref is not None
+    # the knee trial's world is tied to nothing: a choice, not an estimate
+    assert [(w.label, w.tied) for w in est.worlds] == [("r0", True), ("r1", False)]
+
+
+def test_recordings_as_one_timeline_match_each_joint_alone(rng: np.random.Generator) -> None:
+    hip, knee = M.hip_trial(rng), M.knee_trial(rng)
+    n, m = hip.times.size, knee.times.size
+    both = estimate_rig(
+        LEG, _tracks(hip.measured, knee.measured), recordings=_recordings([n, m], [True, True])
+    )
+    alone = estimate_rig(HIP, _tracks(hip.measured), recordings=Recordings.single(n, True))
+    a, b = both.edges["hip"].position_in["pelvis"], alone.edges["hip"].position_in["pelvis"]
+    # the knee's recording shares only the femur's reference-pose noise level with the hip
+    assert np.linalg.norm(a - b) < 2e-5
+
+
+def test_fixed_joint_recording_then_general_motion(rng: np.random.Generator) -> None:
+    # the paper's scenario 2 in one solve: a recording holds the joint still (each camera on
+    # its own board), another moves the rig freely; the fixed one enters as priors
+    rig = acs_sim.make_rig(rng)
+    fixed = acs_sim.fixed_joint_sequence(rng, rig, 30)
+    general = acs_sim.general_sequence(rng, rig, 40)
+    noisy = {
+        s: {
+            "a": acs_sim.add_pose_noise(rng, seq.T_wa_a, 0.3, 0.01),
+            "b": acs_sim.add_pose_noise(rng, seq.T_wb_b, 0.3, 0.01),
+        }
+        for s, seq in (("fixed", fixed), ("general", general))
+    }
+    topo = rig_topology(["a", "b"], [("j", ["a", "b"], "ball")], "a")
+    # without the fixed recording as priors, its frames would try to tie two worlds that a
+    # pivot cannot tell apart: held, the recording adds no rows to the joint
+    from acs_cli.core.joint import estimate_pivot
+    from acs_cli.core.rig_solve import EdgePrior
+
+    pa = estimate_pivot(noisy["fixed"]["a"], "refined", "a")
+    pb = estimate_pivot(noisy["fixed"]["b"], "refined", "b")
+    prior = EdgePrior(
+        position_in={"a": pa.position_in_cam, "b": pb.position_in_cam},
+        covariance_in={"a": pa.covariance, "b": pb.covariance},
+    )
+    est = estimate_rig(
+        topo,
+        _tracks(noisy["general"], noisy["fixed"]),
+        priors={"j": prior},
+        recordings=_recordings([40, 30], [False, False], ((), ("j",))),
+    )
+    e = est.edges["j"]
+    assert e.frames_used + e.frames_rejected == 40  # the held recording adds no rows
+    assert np.linalg.norm(e.position_in["a"] - rig.o_a) < 0.05
+    T_b_a = general.T_b_a(0)
+    T = est.cameras["b"].T_cam_ref
+    assert T is not None
+    assert np.linalg.norm(T[:3, 3] - T_b_a[:3, 3]) < 0.1
+
+
+def test_stereo_pair_from_a_few_views_of_one_board(rng: np.random.Generator) -> None:
+    # a rigid edge between two cameras in one world: stereo calibration, from 5 views
+    T_b_a = se3.transforms_from_rt(se3.matrix_from_rotvec(np.array([0.02, -0.3, 0.01])),
+                                   np.array([-0.12, 0.004, 0.01]))  # fmt: skip
+    T_w_a = se3.transforms_from_rt(
+        acs_sim.random_rotations(rng, 5, 40.0), rng.uniform(-0.5, 0.5, (5, 3))
+    )
+    T_w_b = T_w_a @ se3.invert_transforms(T_b_a)
+    tracks = {
+        "a": CameraTrack(acs_sim.add_pose_noise(rng, T_w_a, 0.05, 0.0005), np.ones(5, bool)),
+        "b": CameraTrack(acs_sim.add_pose_noise(rng, T_w_b, 0.05, 0.0005), np.ones(5, bool)),
+    }
+    topo = rig_topology(["a", "b"], [("s", ["a", "b"], "rigid")], "a")
+    est = estimate_rig(topo, tracks, recordings=Recordings.single(5, True))
+    T = est.edges["s"].T_q_p
+    assert np.linalg.norm(T[:3, 3] - T_b_a[:3, 3]) < 0.003
+    assert se3.rotation_angle_deg((T[:3, :3].T @ T_b_a[:3, :3])[None])[0] < 0.2
+    # separate worlds need general motion: refused at 5 frames
+    with pytest.raises(Exception, match="at least 14"):
+        estimate_rig(topo, tracks)
+
+
+def test_a_shared_world_has_one_scale(rng: np.random.Generator) -> None:
+    trial = M.hip_trial(rng, n=60)
+    tracks = _tracks(trial.measured, unknown=("femur",))
+    with pytest.raises(InputError, match=r"share one world.*one scale"):
+        estimate_rig(HIP, tracks, recordings=Recordings.single(60, True))
+
+
+def test_shared_world_of_unknown_scale(rng: np.random.Generator) -> None:
+    # one SfM reconstruction seeing both bodies: one world, one unknown scale; the joint is
+    # then in the reconstruction's units
+    trial = M.hip_trial(rng)
+    n = trial.times.size
+    mu = 3.7
+    measured = {c: acs_sim.scale_translations(T, mu) for c, T in trial.measured.items()}
+    tracks = _tracks(measured, unknown=("pelvis", "femur"))
+    est = estimate_rig(HIP, tracks, recordings=Recordings.single(n, True))
+    assert np.linalg.norm(est.edges["hip"].position_in["pelvis"] - mu * M.HIP_IN_PELVIS) < 0.01
+    assert est.cameras["femur"].scale == 1.0  # one world: one scale, the reference's
