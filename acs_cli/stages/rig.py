@@ -821,14 +821,16 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    if config.bundle and not offsets and single:
+    shared = config.recording_of_reference().shared_world
+    has_corners = any(p.suffix == ".npz" for p, _ in files.values())
+    if config.bundle and not offsets and single and not shared:
         trajectories = by_rec[config.reference_recording]
         est, sections, notes = rig_bundle(config, files, trajectories, index, est)
         warnings += notes
-    elif config.bundle and not single:
+    elif config.bundle and has_corners and (shared or not single):
         warnings.append(
-            "no bundle adjustment of the rig: it takes a config of one recording yet, so the "
-            "rig of several recordings is solved from poses"
+            "no bundle adjustment of the rig: it takes one recording with a world per camera "
+            "yet, so a rig of several recordings or a shared world is solved from poses"
         )
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"

@@ -1,0 +1,116 @@
+"""``acscal run`` over a rig config of several recordings and shared worlds (issue 19):
+motion capture of a leg (a hip trial and a knee trial, one lab world each)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from cli_runner import acscal
+
+from acs_cli.io.rig import RigArtifact
+from acs_cli.io.trajectory import write_tum
+from sample_data_gen import mocap_sim as M
+
+CONFIG = """\
+schema: acscal/run-config
+schema_version: 2
+output: out/
+reference: {camera: pelvis, recording: hip, frame: 0}
+recordings:
+  hip:
+    world: shared
+    cameras:
+      pelvis: {poses: hip_pelvis.tum}
+      femur: {poses: hip_femur.tum}
+  knee:
+    world: shared
+    cameras:
+      femur: {poses: knee_femur.tum}
+      tibia: {poses: knee_tibia.tum}
+joints:
+  hip: {between: [pelvis, femur], type: ball}
+  knee: {between: [femur, tibia], type: hinge}
+"""
+
+
+@pytest.fixture(scope="module")
+def leg(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("leg")
+    rng = np.random.default_rng(7)
+    for name, trial in (("hip", M.hip_trial(rng)), ("knee", M.knee_trial(rng))):
+        for body, T in trial.measured.items():
+            write_tum(root / f"{name}_{body}.tum", trial.times, T)
+    (root / "config.yaml").write_text(CONFIG)
+    return root
+
+
+def test_a_leg_from_two_trials(leg: Path) -> None:
+    res = acscal("run", leg / "config.yaml")
+    assert res.returncode == 0, res.stderr
+    rig = RigArtifact.load(leg / "out" / "rig.yaml")
+    hip = rig.joints["hip"]
+    assert np.linalg.norm(hip.position_in["pelvis"] - M.HIP_IN_PELVIS) < 0.003
+    u = M.KNEE_AXIS_IN_FEMUR
+    assert abs(float(rig.joints["knee"].axis_in["femur"] @ u)) > np.cos(np.radians(0.5))
+    # the tibia is not in the reference recording: no pose there, said so in the file
+    assert rig.cameras["tibia"].T_cam_ref is None
+    doc = yaml.safe_load((leg / "out" / "rig.yaml").read_text())
+    assert doc["cameras"]["tibia"]["T_cam_ref"] is None
+    assert doc["recordings"]["hip"]["world"] == "shared"
+    assert doc["recordings"]["knee"]["worlds"]["knee"]["tied"] is False
+    assert doc["recordings"]["hip"]["frames"] == 300
+    # trajectories of the reference recording only
+    traj = sorted(f.name for f in (leg / "out" / "trajectories").iterdir())
+    assert traj == ["femur.tum", "hip.tum", "pelvis.tum"]
+    assert "no bundle adjustment" not in res.stderr  # poses only: nothing to say
+    again = acscal("run", leg / "config.yaml")
+    assert again.returncode == 0 and "rig: skipped" in again.stdout, again.stdout
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (("recording: hip", "recording: run"), "reference.recording"),
+        (("camera: pelvis, recording", "camera: tibia, recording"), "reference.camera"),
+        (
+            ("tibia: {poses: knee_tibia.tum}", "tibia: {poses: knee_tibia.tum, scale: unknown}"),
+            None,
+        ),
+        (
+            ("femur: {poses: knee_femur.tum}", "femur: {poses: knee_femur.tum, model: fisheye}"),
+            "recordings.knee.cameras.femur.model",
+        ),
+        (
+            (
+                "  knee:\n    world: shared\n    cameras:\n      femur: {poses: knee_femur.tum}\n",
+                "  knee:\n    world: shared\n    cameras:\n",
+            ),
+            "joints.knee",
+        ),
+        (
+            (
+                "    world: shared\n    cameras:\n      pelvis",
+                "    world: one\n    cameras:\n      pelvis",
+            ),
+            "recordings.hip.world",
+        ),
+    ],
+)
+def test_bad_recordings_exit_2_naming_the_key(
+    leg: Path, tmp_path: Path, edit: tuple[str, str], key: str | None
+) -> None:
+    text = CONFIG.replace(*edit)
+    assert text != CONFIG
+    for f in leg.glob("*.tum"):
+        (tmp_path / f.name).symlink_to(f)
+    (tmp_path / "config.yaml").write_text(text)
+    res = acscal("run", tmp_path / "config.yaml")
+    assert res.returncode == 2, res.stdout + res.stderr
+    lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, res.stderr
+    if key is not None:
+        assert key in res.stderr
+    assert not (tmp_path / "out" / "rig.yaml").exists()
