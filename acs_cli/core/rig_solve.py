@@ -478,7 +478,10 @@ def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, F
         Rqp = st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3])
         # G_p = G_q T_q_p
         out["rot"] = se3.rotvec_from_matrix(np.einsum("nji,njk,kl->nil", Rp, Rq, Rqp))
-        out["trans"] = se3.rotate(Rq, e[3:6]) + tq - tp
+        # G_p = G_q T_q_p, at the midpoint between the two cameras (symmetric in p and q:
+        # swapping the edge's ends changes only the residual's sign)
+        v = Rqp.T @ e[3:6]  # = -t_p_q
+        out["trans"] = 0.5 * (se3.rotate(Rq, e[3:6]) + se3.rotate(Rp, v)) + tq - tp
     return out
 
 
@@ -652,24 +655,29 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
                 if p in Jd:
                     delta_block(p, i, -Ji[i] @ Et[i] @ Jd[p], 0, 3)
             row0 += 3 * m
-            # translation: R_Gq t_qp + t_Gq - t_Gp
+            # translation at the midpoint: (R_Gq t_qp + R_Gp v) / 2 + t_Gq - t_Gp, v = R_qp^T t_qp
+            tqp = e[3:6]
+            v = Rqp.T @ tqp
             wt = st.w_trans[j.name] * mask
             wtb = np.broadcast_to(wt, (m, 3, 3)) * np.eye(3)
-            yq = se3.rotate(Rq, e[3:6]) + W.s[st.widx[q][f], None] * meas[q][1][f]
+            yq = 0.5 * se3.rotate(Rq, tqp) + W.s[st.widx[q][f], None] * meas[q][1][f]
             cam_block(q, yq, 1.0, True, wtb)
-            cam_block(p, W.s[st.widx[p][f], None] * meas[p][1][f], -1.0, True, wtb)
-            blk = np.concatenate([np.zeros((m, 3, 3)), RGq], axis=2)
-            put(wt * blk, ecols, row0)
+            yp = W.s[st.widx[p][f], None] * meas[p][1][f] - 0.5 * se3.rotate(Rp, v)
+            cam_block(p, yp, -1.0, True, wtb)
+            # d(R_qp^T t) = [R_qp^T t]x Jr dw; d/dt_qp = (R_Gq + R_Gp R_qp^T) / 2
+            d_rot = 0.5 * np.matmul(RGp, se3.skew(v) @ Jre)
+            d_t = 0.5 * (RGq + np.matmul(RGp, Rqp.T))
+            put(wt * np.concatenate([d_rot, d_t], axis=2), ecols, row0)
             if kk.size:
                 i = int(kk[0])
                 if q in Jd:
                     RX, sc = W.R[wk[q]], W.s[wk[q]]
-                    Dr = -RX @ meas[q][0][k] @ se3.skew(e[3:6]) @ Jd[q]
+                    Dr = -0.5 * RX @ meas[q][0][k] @ se3.skew(tqp) @ Jd[q]
                     delta_block(q, i, wt[i] * np.concatenate([Dr, sc * RX], axis=1), 0, 6)
                 if p in Jd:
                     RX, sc = W.R[wk[p]], W.s[wk[p]]
-                    D = np.concatenate([np.zeros((3, 3)), -sc * RX], axis=1)
-                    delta_block(p, i, wt[i] * D, 0, 6)
+                    Dr = -0.5 * RX @ meas[p][0][k] @ se3.skew(v) @ Jd[p]
+                    delta_block(p, i, wt[i] * np.concatenate([Dr, -sc * RX], axis=1), 0, 6)
             row0 += 3 * m
     for c in L.delta:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown

@@ -5,6 +5,8 @@ geometry; a recording that holds a joint still gives it by Algorithm II."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -12,7 +14,7 @@ from acs_cli.core import se3
 from acs_cli.core.joint import estimate_joint_overlap
 from acs_cli.core.rig import rig_topology
 from acs_cli.core.rig_solve import CameraTrack, Recordings, estimate_rig
-from acs_cli.errors import InputError
+from acs_cli.errors import DegenerateMotionError, InputError
 from sample_data_gen import acs_sim
 from sample_data_gen import mocap_sim as M
 
@@ -181,3 +183,71 @@ def test_shared_world_of_unknown_scale(rng: np.random.Generator) -> None:
     est = estimate_rig(HIP, tracks, recordings=Recordings.single(n, True))
     assert np.linalg.norm(est.edges["hip"].position_in["pelvis"] - mu * M.HIP_IN_PELVIS) < 0.01
     assert est.cameras["femur"].scale == 1.0  # one world: one scale, the reference's
+
+
+@pytest.mark.parametrize("shared", [False, True])
+def test_the_analytic_jacobian_matches_differences(
+    rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch, shared: bool
+) -> None:
+    # every joint type, two recordings (the second's worlds shared or not), unknown scale
+    from acs_cli.core import rig_solve
+    from sample_data_gen.rig_sim import rig_recording
+
+    rec = rig_recording(rng, 40, sigma_rot_deg=0.3, sigma_trans=0.01,
+                        unknown_scale=() if shared else ("cam4",))  # fmt: skip
+    n = rec.timestamps.size
+    tracks = {
+        c: CameraTrack(T, np.ones(n, bool), rec.unknown_scale[c]) for c, T in rec.T_wc_c.items()
+    }
+    recs = _recordings([25, 15], [False, shared])
+    seen: list = []
+    real = rig_solve.lsq.solve
+
+    def spy(fun, x0, jac=None, **kw):  # type: ignore[no-untyped-def]
+        seen.append((fun, jac, x0.copy()))
+        return real(fun, x0, jac=jac, **kw)
+
+    monkeypatch.setattr(rig_solve.lsq, "solve", spy)
+    # the shared variant treats worlds that differ as one: a misfit, refused after the
+    # solves; only the residual function and its Jacobian matter here
+    with contextlib.suppress(DegenerateMotionError):
+        estimate_rig(rec.topology, tracks, reference_frame=3, recordings=recs)
+    fun, jac, x0 = seen[-1]
+    x = x0 + 1e-3 * rng.standard_normal(x0.size)
+    J = jac(x).toarray()
+    h = 1e-6
+    D = np.stack([(fun(x + h * e) - fun(x - h * e)) / (2 * h) for e in np.eye(x.size)], axis=1)
+    scale = np.maximum(np.abs(D).max(axis=0), 1.0)
+    np.testing.assert_allclose(J / scale, D / scale, atol=2e-5)
+
+
+def test_swapping_a_rigid_edge_or_the_reference_changes_nothing(
+    rng: np.random.Generator,
+) -> None:
+    # a hand-eye pair (separate worlds): T_b_a the same whichever way it is written down
+    n = 30
+    T_b_a = se3.transforms_from_rt(se3.matrix_from_rotvec(np.array([0.3, -0.5, 0.2])),
+                                   np.array([0.05, 0.1, 0.12]))  # fmt: skip
+    T_w_a = se3.transforms_from_rt(
+        acs_sim.random_rotations(rng, n, 60.0), rng.uniform(-0.5, 0.5, (n, 3))
+    )
+    T_w_b = acs_sim.random_transform(rng) @ T_w_a @ se3.invert_transforms(T_b_a)
+    tracks = {
+        "a": CameraTrack(acs_sim.add_pose_noise(rng, T_w_a, 0.2, 0.002), np.ones(n, bool)),
+        "b": CameraTrack(acs_sim.add_pose_noise(rng, T_w_b, 0.2, 0.002), np.ones(n, bool)),
+    }
+    got = []
+    for between, ref in (
+        (["a", "b"], "a"),
+        (["b", "a"], "a"),
+        (["a", "b"], "b"),
+        (["b", "a"], "b"),
+    ):
+        est = estimate_rig(rig_topology(["a", "b"], [("r", between, "rigid")], ref), tracks)
+        T = est.edges["r"].T_q_p
+        got.append(T if between[0] == "a" else se3.invert_transforms(T))
+    for T in got[1:]:
+        assert np.linalg.norm(T[:3, 3] - got[0][:3, 3]) < 1e-6
+        assert (
+            se3.rotation_angle_deg((T[:3, :3].T @ got[0][:3, :3])[None])[0] < 1e-4
+        )  # solver tolerance
