@@ -1510,7 +1510,10 @@ def _check_determined(
         j = step.joint
         p, q = j.between
         upstream = {s.joint.name for s in topo.path(topo.reference, step.source)}
-        if upstream & flagged:
+        # a problem upstream spreads its null directions downstream: there only the planar
+        # rule, which looks at this edge's own motion, names a problem of this edge's
+        downstream = bool(upstream & flagged)
+        if downstream and (j.name in with_prior or not planar_offset(st, x, j)):
             continue
         cols = L.edge_columns(j.name)
         # the child camera of this edge in the tree carries the edge's world transform

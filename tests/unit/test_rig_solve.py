@@ -209,3 +209,28 @@ def test_hinge_rotation_std_is_honest_on_a_two_camera_rig() -> None:
         z.extend(dR / np.sqrt(np.diag(e.covariance)[:3]))
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.6 < rms < 1.5, rms
+
+
+def test_every_planar_edge_is_named_downstream_too(rng: np.random.Generator) -> None:
+    # issue 19: a truck, a trailer and a second trailer on flat ground (two hinges about the
+    # vertical), and a rigid pair on the truck: each edge's offset along the vertical is
+    # undetermined, the second hinge's too, though its problem is downstream of the first's
+    joints = (
+        ("h01", ("cam0", "cam1"), "hinge"),
+        ("h12", ("cam1", "cam2"), "hinge"),
+        ("r03", ("cam0", "cam3"), "rigid"),
+    )
+    edges = make_edges(rng, joints)
+    z = np.array([0.0, 0.0, 1.0])
+    R0 = se3.matrix_from_rotvec(np.array([0.0, 0.0, 0.4]))
+    for name in ("h01", "h12"):
+        e = edges[name]
+        edges[name] = EdgeTruth(name, e.between, "hinge", R0, e.o_p - (e.o_p @ z) * z, e.o_q, z)
+    rec = rig_recording(
+        rng, 100, joints=joints, edges=edges, planar=True, sigma_rot_deg=0.3, sigma_trans=0.01
+    )
+    with pytest.raises(DegenerateMotionError) as err:
+        estimate_rig(rec.topology, _tracks(rec))
+    text = err.value.message
+    for name in ("h01 (cam0-cam1)", "h12 (cam1-cam2)", "r03 (cam0-cam3)"):
+        assert f"joint {name}" in text, text
