@@ -782,6 +782,7 @@ def run_rig(
     poses = dict(poses or {})
     check_prior_units(config)
     files, by_rec = read_recordings(config, poses)
+    turned = shared_board_orders(config, files, by_rec)
     priors = _priors(config, by_rec)
     offsets: dict[str, tuple[float, float]] = {}
     single = config.single
@@ -805,6 +806,7 @@ def run_rig(
             )
         tracks, slots, recordings, warnings = tracks_of_recordings(config, by_rec, priors)
         index = {}
+    warnings += turned
     k = recording_frame(config, recordings)
     est = estimate_rig(
         config.topology,
@@ -926,6 +928,68 @@ def read_recordings(
                 where = f"{key}.poses" if spec.poses is not None else f"poses of {lab}"
                 raise InputError(f"{where}: {exc.message}", path=exc.path, line=exc.line) from None
     return files, by_rec
+
+
+def shared_board_orders(
+    config: RigRunConfig,
+    files: dict[str, tuple[Path, str]],
+    by_rec: dict[str, dict[str, Trajectory]],
+) -> list[str]:
+    """Bring every camera of a shared world to one labelling of a symmetric checkerboard.
+
+    Two cameras that see one checkerboard can label it in its two orders (see
+    :func:`acs_cli.stages.bundle.shared_board_flip`); their worlds then differ by a half
+    turn. For each joint between two cameras of a shared recording whose poses carry that
+    board, the second camera's trajectory is turned to the first's order when its joint
+    then fits with less than half the residual (as ``acscal joint --overlap`` does); the
+    trajectories in ``by_rec`` are replaced. Returns what was turned, as warnings.
+    """
+    from acs_cli.stages.bundle import shared_board_flip
+
+    notes: list[str] = []
+    for rname, rec in config.recordings.items():
+        if not rec.shared_world:
+            continue
+        trajs = by_rec[rname]
+        settled: set[str] = set()
+        for step in config.topology.tree_order():
+            j = step.joint
+            a, b = step.source, step.target
+            if a not in trajs or b not in trajs or b in settled or j.name in rec.fixed_joints:
+                continue
+            pa, pb = files[label(config, rname, a)][0], files[label(config, rname, b)][0]
+            F = shared_board_flip((pa, pb)) if pa.suffix == pb.suffix == ".npz" else None
+            settled.add(b)
+            if F is None:
+                continue
+            tracks, _, _, _ = tracks_on_timeline(config, {a: trajs[a], b: trajs[b]}, rec)
+            sub = rig_topology([a, b], [(j.name, [a, b], j.type)], a)
+            n = tracks[a].valid.size
+            flipped = CameraTrack(
+                np.where(tracks[b].valid[:, None, None], F @ tracks[b].T_w_c, tracks[b].T_w_c),
+                tracks[b].valid,
+                tracks[b].unknown_scale,
+            )
+            rms = []
+            for tb in (tracks[b], flipped):
+                try:
+                    est = estimate_rig(
+                        sub, {a: tracks[a], b: tb}, reject_outliers=False,
+                        recordings=Recordings.single(n, True),
+                    )  # fmt: skip
+                    rms.append(est.edges[j.name].residual_rms)
+                except (DegenerateMotionError, InputError):
+                    rms.append(np.inf)
+            if rms[1] < 0.5 * rms[0]:
+                t = trajs[b]
+                trajs[b] = dataclasses.replace(t, T_world_cam=F @ t.T_world_cam)
+                notes.append(
+                    f"recording {rname}: camera {b} labelled the shared board in the other "
+                    f"order than {a}; turned to {a}'s (joint {j.name}'s residual "
+                    + (f"{rms[0]:.3g}" if np.isfinite(rms[0]) else "did not fit")
+                    + f" -> {rms[1]:.3g})"
+                )
+    return notes
 
 
 def recording_frame(config: RigRunConfig, recordings: Recordings) -> int:
