@@ -35,8 +35,9 @@ with ``L_i`` the lever shapes of both cameras (as in :mod:`acs_cli.core.estimati
 noise levels fitted per edge; axis and rigid residuals have one fitted variance each. The
 solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`: scipy's
 ``least_squares``, trust-region steps on the analytic sparse Jacobian) with
-refitting the noise levels, and rejects per edge and frame the residuals beyond a
-chi-square bound. Covariances come from the final whitened Jacobian.
+refitting the noise levels, and rejects per edge the frames whose externally studentised
+residual is beyond the threshold the two-camera estimators use (:func:`_reject`).
+Covariances come from the final whitened Jacobian.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 
-from acs_cli.core import lsq, se3
+from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
@@ -67,8 +68,6 @@ from acs_cli.errors import DegenerateMotionError, InputError
 MIN_EDGE_FRAMES = 14
 #: ... or, where both its cameras are in one world (Algorithm I; stereo for a rigid edge).
 MIN_SHARED_WORLD_FRAMES = 3
-#: Tail probability per residual block for outlier rejection (as ``estimation.OUTLIER_ALPHA``).
-OUTLIER_ALPHA = 0.01
 #: Largest share of an edge's frames rejected as outliers.
 MAX_OUTLIER_FRACTION = 0.3
 #: The reference instant's constraint rows are weighted this much more than the others: the
@@ -893,34 +892,101 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
     return noise
 
 
-def _reject(st: _State, x: FloatArray) -> int:
-    """Drop residual blocks beyond the chi-square bound; returns how many were dropped."""
-    from scipy.stats import chi2  # lazily: importing scipy.stats costs ~0.6 s a command
+def _edge_rows(st: _State) -> dict[str, np.ndarray]:
+    """Per edge, ``(m, d)``: the rows of :func:`_residuals` (and of its Jacobian) of each of
+    its frames: the point's 3 (ball, hinge), then the axis's 3 (hinge), or the rotation's and
+    the translation's 3 each (rigid)."""
+    out: dict[str, np.ndarray] = {}
+    row0 = 0
+    for j in st.topo.joints:
+        m = st.frames[j.name].size
+        kinds = {"ball": 1, "hinge": 2, "rigid": 2}[j.type]
+        blocks = [row0 + 3 * m * b + 3 * np.arange(m)[:, None] + np.arange(3) for b in range(kinds)]
+        out[j.name] = np.concatenate(blocks, axis=1)
+        row0 += 3 * m * kinds
+    return out
 
-    G = _all_poses(st, x)
+
+def _leave_out(
+    T: FloatArray, testable: np.ndarray, kept: np.ndarray, S: float, nu: float, dim: int
+) -> np.ndarray:
+    """Outliers that hide each other: the worst ``LEAVE_OUT_SHARE`` of an edge's kept
+    frames, each tested against the noise level of the others (the leave-out test of
+    :func:`acs_cli.core.estimation.solve`, its noise level taken without refitting: the
+    others' power ``S - sum T``, trimmed as the threshold allows for). Returns the frames
+    beyond it."""
+    k = min(int(np.ceil(estimation.LEAVE_OUT_SHARE * kept.sum())), int(testable.sum()))
+    if k < 2:
+        return np.zeros(0, int)
+    cand = np.flatnonzero(testable)
+    suspects = cand[np.argsort(T[cand])[::-1][:k]]
+    rest_power = S - float(T[suspects].sum())
+    rest_dof = nu - dim * k
+    if rest_dof < estimation.MIN_TEST_DOF or not rest_power > 0:
+        return np.zeros(0, int)
+    stat = T[suspects] / dim / (rest_power / rest_dof)
+    others = kept.copy()
+    others[suspects] = False
+    thr = estimation.outlier_threshold(
+        kept.size,
+        rest_dof,
+        dim,
+        (k - 1) / max(int(kept.sum()), 1),
+        estimation.tail_shape(T[others], dim),
+    )
+    return np.asarray(suspects[stat > thr])
+
+
+def _reject(st: _State, x: FloatArray) -> int:
+    """Drop the frames whose externally studentised residual is beyond the threshold of
+    :func:`acs_cli.core.estimation.outlier_threshold` (the test of the two-camera
+    estimators, :mod:`acs_cli.core.estimation`'s module doc), edge by edge; returns how many
+    were dropped.
+
+    For an edge's frame ``i`` with whitened residual ``e_i`` (dimension ``d``: 3 for a ball,
+    5 for a hinge, 6 for a rigid edge) and hat-matrix block ``H_ii = G_i (G^T G)^-1 G_i^T``
+    (``G`` the whitened Jacobian of the whole solve), ``T_i = e_i^T (I - H_ii)^-1 e_i`` is its
+    leave-one-out prediction error, and ``F_i = (T_i / d) / ((S - T_i) / (nu - d))`` with
+    ``S`` the edge's whitened residual power over its ``k`` kept frames and
+    ``nu = d k - sum tr(H_ii) - (noise levels - 1)``: Fisher's ``F(d, nu - d)`` under
+    Gaussian noise, whatever the number of frames.
+    """
+    r = _residuals(st, x)
+    J = _jacobian(st, x)
+    H = np.asarray((J.T @ J).toarray())
+    Hinv = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
+    rows = _edge_rows(st)
     dropped = 0
     for j in st.topo.joints:
-        b = _edge_blocks(st, x, j, G)
-        d2 = np.zeros(st.frames[j.name].size)
-        dof = 0
-        if "pos" in b:
-            w = np.matmul(st.whiten_pos[j.name], b["pos"][:, :, None])[:, :, 0]
-            d2 += np.sum(w**2, axis=1)
-            dof += 3
-        if "rot" in b:
-            d2 += np.sum((b["rot"] * st.w_rot[j.name]) ** 2, axis=1)
-            dof += 2 if j.type == "hinge" else 3
-        if "trans" in b:
-            d2 += np.sum((b["trans"] * st.w_trans[j.name]) ** 2, axis=1)
-            dof += 3
         m = st.mask[j.name]
         n = m.size
-        thr = float(chi2.isf(OUTLIER_ALPHA / max(n, 1), dof))
         room = int(np.floor(MAX_OUTLIER_FRACTION * n)) - int((~m).sum())
+        if room <= 0:
+            continue
+        idx = rows[j.name]
+        d_rows = idx.shape[1]
+        e = r[idx]  # (n, d_rows); zero where the frame is dropped
+        G = J[idx.ravel()].toarray().reshape(n, d_rows, -1)
+        Hii = np.matmul(G @ Hinv, np.swapaxes(G, 1, 2))
+        M = np.eye(d_rows) - Hii + 1e-9 * np.eye(d_rows)
+        T = np.einsum("ni,ni->n", e, np.linalg.solve(M, e[:, :, None])[:, :, 0])
+        dim = {"ball": 3, "hinge": 5, "rigid": 6}[j.type]
+        n_noise = {"ball": 2, "hinge": 3, "rigid": 2}[j.type]
+        k = int(m.sum())
+        p_eff = float(np.trace(Hii[m], axis1=1, axis2=2).sum())
+        nu = dim * k - p_eff - (n_noise - 1)
+        S = float(np.sum(e[m] ** 2))
+        if nu - dim < estimation.MIN_TEST_DOF or not S > 0:
+            continue
+        stat = T / dim / (np.maximum(S - T, 1e-12 * S) / (nu - dim))
+        thr = estimation.outlier_threshold(n, nu - dim, dim, shape=estimation.tail_shape(T[m], dim))
         # the reference instant is never dropped: its poses are corrected to fit
-        bad = np.flatnonzero(m & (d2 > thr) & (st.frames[j.name] != st.ref_frame))
-        if bad.size and room > 0:
-            bad = bad[np.argsort(d2[bad])[::-1][:room]]
+        testable = m & (st.frames[j.name] != st.ref_frame)
+        bad = np.flatnonzero(testable & (stat > thr))
+        if bad.size == 0:
+            bad = _leave_out(T, testable, m, S, nu, dim)
+        if bad.size:
+            bad = bad[np.argsort(stat[bad])[::-1][:room]]
             m[bad] = False
             dropped += bad.size
     return dropped
