@@ -16,6 +16,19 @@ them. The model is the kinematic tree itself:
 - every camera has its intrinsics in its own model (:mod:`acs_cli.core.camera_models`:
   pinhole with ``k3`` held, rational or fisheye).
 
+A body of the tree need not be a camera: a robot's flange (poses from its controller), a
+motion-capture segment or an INS has poses but no corners. Such a *pose-only* body ``b``
+has its world too, ``W_b`` (for a camera on a robot's flange: the robot's base in the
+board's frame, the ``Z`` of ``AX = ZB``; the rigid joint between them is ``X``), and its
+measured poses ``M_b[i] = T_wb_b[i]`` are measurements of ``W_b^-1 G[i] T_ref_b[i]``: the
+residual is ``log(R_M^T R)`` (radians, in the body's frame) and the difference of the
+translations (in its world), with the body's own noise levels (one rotation and one
+translation sigma) estimated by maximum likelihood: the solve alternates with a variance
+component refit (Förstner's: each group's squared residuals over its redundancy, from the
+final information) until the levels settle. Every residual is a function of the physical
+rig only, so the solution does not depend on how the rig is written down (which body is
+the reference, which way round a joint's ``between`` is).
+
 Camera ``c``'s pose is chained along the tree, ``T_ref_c[i]`` (as
 :func:`acs_cli.core.rig.chain_transforms`), so a corner ``X`` of its board is at
 
@@ -30,26 +43,42 @@ across the axis (the point nearest camera ``p``'s centre is reported, as
 (:func:`acs_cli.core.lsq.solve`, Levenberg-Marquardt on the normal equations) with a
 sparse Jacobian differenced in groups (:func:`acs_cli.core.lsq.block_jacobian`: the
 unknowns of different frames never share a row). Covariances come from the inverse of the
-information, scaled by the fitted corner noise.
+information, scaled by the fitted corner noise (with pose-only bodies: of the whitened
+residuals at the fitted noise levels).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
+import scipy.sparse
 
 from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import check_frame_corners, information, observed
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.rig import RigJoint, RigTopology
-from acs_cli.core.rig_solve import CameraEstimate, RigEstimate, tangent_basis
+from acs_cli.core.rig_solve import (
+    CameraEstimate,
+    CameraTrack,
+    EdgeEstimate,
+    RigEstimate,
+    tangent_basis,
+)
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
-__all__ = ["MIN_RIG_BUNDLE_FRAMES", "CameraViews", "RigBundle", "bundle_adjust_rig"]
+__all__ = [
+    "MIN_RIG_BUNDLE_FRAMES",
+    "CameraViews",
+    "PoseBodyEstimate",
+    "PoseBodyFit",
+    "RigBundle",
+    "RigidEdgeEstimate",
+    "bundle_adjust_rig",
+]
 
 #: Fewest frames (every camera seeing its board) a rig's bundle adjustment takes.
 MIN_RIG_BUNDLE_FRAMES = 6
@@ -57,6 +86,51 @@ MIN_RIG_BUNDLE_FRAMES = 6
 ARTICULATION_DOF = {"ball": 3, "hinge": 1, "rigid": 0}
 #: Unknowns of each joint type's fixed geometry.
 GEOMETRY_DOF = {"ball": 6, "hinge": 9, "rigid": 6}
+#: Noise-level refits (each followed by a solve) with pose-only bodies, at most.
+NOISE_ROUNDS = 30
+#: The refit noise levels are final when none moves by more than this share (in its log).
+NOISE_SETTLED = 1e-5
+#: Pose-only noise levels are kept above these (radians, and a share of the body's travel):
+#: noiseless poses would otherwise weigh their rows beyond what differences resolve.
+NOISE_FLOOR_ROT = 1e-7
+NOISE_FLOOR_LENGTH = 1e-7
+
+
+@dataclass(frozen=True)
+class RigidEdgeEstimate(EdgeEstimate):
+    """A rigid joint refined by the bundle: ``T_q_p`` with its covariance ``(6, 6)`` (right
+    rotation perturbation of ``R_q_p`` (rad), then ``t_q_p``)."""
+
+    T_q_p_covariance: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
+
+
+@dataclass(frozen=True)
+class PoseBodyFit:
+    """A pose-only body of the bundle (one with poses and no corners).
+
+    Attributes
+    ----------
+    frames : int
+        The frames adjusted.
+    sigma_rot_deg, sigma_trans : float
+        The fitted noise of its measured poses: per axis, degrees (rotation about the
+        body's own axes) and metres (translation in its world).
+    rms_rot_deg, rms_trans : float
+        RMS of its pose residuals (angle, degrees; distance, metres) over the frames.
+    T_world_board : dict of camera to ndarray (4, 4)
+        Each corner camera's board frame in this body's world (``T_wb_board``: for a camera
+        on a robot's flange, the board in the robot's base, ``Z``).
+    T_world_board_covariance : dict of camera to ndarray (6, 6)
+        Right rotation perturbation (rad), then translation (m).
+    """
+
+    frames: int
+    sigma_rot_deg: float
+    sigma_trans: float
+    rms_rot_deg: float
+    rms_trans: float
+    T_world_board: dict[str, FloatArray]
+    T_world_board_covariance: dict[str, FloatArray]
 
 
 @dataclass(frozen=True)
@@ -87,6 +161,13 @@ class CameraViews:
 
 
 @dataclass(frozen=True)
+class PoseBodyEstimate(CameraEstimate):
+    """A pose-only body of the bundle's estimate: its pose as any camera's, and its fit."""
+
+    pose_fit: PoseBodyFit | None = None
+
+
+@dataclass(frozen=True)
 class RigBundle:
     """Result of :func:`bundle_adjust_rig`.
 
@@ -110,6 +191,8 @@ class RigBundle:
         The instants adjusted (indices into the timeline).
     success : bool
         The solver converged.
+    pose_bodies : dict of body to PoseBodyFit
+        The bodies that had poses only (empty when every body has corners).
     """
 
     estimate: RigEstimate
@@ -120,6 +203,7 @@ class RigBundle:
     sigma_px: float
     frames: np.ndarray
     success: bool
+    pose_bodies: dict[str, PoseBodyFit] = field(default_factory=dict)
 
 
 class _Layout:
@@ -130,8 +214,9 @@ class _Layout:
         self.free = free  # per camera: indices of its refined intrinsics
         self.intr = {}
         for c in topo.cameras:
-            self.intr[c] = slice(k, k + len(free[c]))
-            k += len(free[c])
+            if c in free:  # a camera with corners (not a pose-only body)
+                self.intr[c] = slice(k, k + len(free[c]))
+                k += len(free[c])
         self.world = {}
         for c in topo.cameras:
             if c != topo.reference:
@@ -188,6 +273,23 @@ class _Model:
     R0: dict[str, FloatArray]  # per ball (n, 3, 3) articulations; per rigid (3, 3)
     geom0: dict[str, dict[str, FloatArray]]  # per joint: starting geometry
     obs: dict[str, tuple[np.ndarray, np.ndarray, FloatArray]]  # frame, corner, pixels
+    # pose-only bodies: their measured poses at every adjusted frame (rotations, translations)
+    meas: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    # weights (1 / sigma) of the pixel rows and of each pose-only body's rotation and
+    # translation rows
+    w_px: float = 1.0
+    w_rot: dict[str, float] = field(default_factory=dict)
+    w_trans: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def cams(self) -> list[str]:
+        """The bodies with corners, in ``topo.cameras`` order."""
+        return [c for c in self.topo.cameras if c in self.views]
+
+    @property
+    def bodies(self) -> list[str]:
+        """The pose-only bodies, in ``topo.cameras`` order."""
+        return [c for c in self.topo.cameras if c in self.meas]
 
     def intrinsics(self, x: FloatArray, c: str) -> FloatArray:
         out = np.asarray(self.views[c].intrinsics, dtype=float).copy()
@@ -244,39 +346,89 @@ class _Model:
         return {c: (np.matmul(RG, R), tG + _apply(RG, t)) for c, (R, t) in self.chain(x).items()}
 
     def board(self, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
-        """``W_c``: camera ``c``'s board frame in the reference board's frame."""
+        """``W_c``: camera ``c``'s board frame (a pose-only body's world) in the reference
+        body's world."""
         if c == self.topo.reference:
             return np.eye(3), np.zeros(3)
         w = x[self.L.world[c]]
         W0 = self.W0[c]
         return W0[:3, :3] @ se3.matrix_from_rotvec(w[:3]), W0[:3, 3] + w[3:]
 
-    def residuals(self, x: FloatArray) -> FloatArray:
-        """Pixel residuals, camera by camera in ``topo.cameras`` order (as
-        :meth:`row_frames`), each in its observations' order."""
-        out = []
+    def raw(self, x: FloatArray) -> tuple[list[FloatArray], dict[str, FloatArray]]:
+        """Unweighted residuals: pixels ``(k, 2)`` per camera with corners (in
+        :attr:`cams` order, each in its observations' order), and per pose-only body
+        ``(n, 6)``: the rotation log ``log(R_M^T R)`` (rad) and the translation difference
+        of its predicted pose minus its measured one, in its own world."""
+        px_out: list[FloatArray] = []
         poses = self.poses(x)
-        for c in self.topo.cameras:
+        for c in self.cams:
             R, t = poses[c]
             fi, ki, px = self.obs[c]
             Rw, tw = self.board(x, c)
             Xw = self.views[c].board_points[ki] @ Rw.T + tw
             x_cam = np.einsum("kji,kj->ki", R[fi], Xw - t[fi])  # R^T (W X - t)
             cam = camera_model(self.views[c].model)
-            out.append((cam.project(x_cam, self.intrinsics(x, c)) - px).ravel())
+            px_out.append(cam.project(x_cam, self.intrinsics(x, c)) - px)
+        pose_out: dict[str, FloatArray] = {}
+        for b in self.bodies:
+            R, t = poses[b]
+            Rw, tw = self.board(x, b)
+            Rp = np.matmul(Rw.T, R)  # W_b^-1 G_b: the body's pose in its own world
+            tp = (t - tw) @ Rw
+            RM, tM = self.meas[b]
+            rot = se3.rotvec_from_matrix(np.matmul(np.swapaxes(RM, 1, 2), Rp))
+            pose_out[b] = np.concatenate([rot, tp - tM], axis=1)
+        return px_out, pose_out
+
+    def residuals(self, x: FloatArray) -> FloatArray:
+        """Whitened residuals (the order of :meth:`row_frames`): pixels, then each pose-only
+        body's rotation and translation rows frame by frame."""
+        px, pose = self.raw(x)
+        out = [self.w_px * r.ravel() for r in px]
+        for b in self.bodies:
+            w = np.array([self.w_rot[b]] * 3 + [self.w_trans[b]] * 3)
+            out.append((pose[b] * w).ravel())
         return np.concatenate(out)
 
     def row_frames(self) -> np.ndarray:
         """The frame of each residual row (the order of :meth:`residuals`)."""
-        return np.concatenate([np.repeat(self.obs[c][0], 2) for c in self.topo.cameras])
+        rows = [np.repeat(self.obs[c][0], 2) for c in self.cams]
+        rows += [np.repeat(np.arange(self.L.n), 6) for _ in self.bodies]
+        return np.concatenate(rows)
+
+    def pose_rows(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Each pose-only body's rotation and translation rows in :meth:`residuals`."""
+        start = sum(2 * self.obs[c][0].size for c in self.cams)
+        out = {}
+        for b in self.bodies:
+            rows = start + np.arange(6 * self.L.n).reshape(self.L.n, 6)
+            out[b] = (rows[:, :3].ravel(), rows[:, 3:].ravel())
+            start += 6 * self.L.n
+        return out
 
 
-def _check(topo: RigTopology, views: dict[str, CameraViews], est: RigEstimate) -> int:
+def _check(
+    topo: RigTopology,
+    views: dict[str, CameraViews],
+    poses: dict[str, CameraTrack],
+    est: RigEstimate,
+) -> int:
     """The timeline's length; ``InputError`` naming what does not fit."""
-    missing = [c for c in topo.cameras if c not in views]
+    missing = [c for c in topo.cameras if c not in views and c not in poses]
     if missing:
-        raise InputError(f"no corners for camera(s) {', '.join(missing)}")
-    n = views[topo.reference].corners.shape[0]
+        raise InputError(
+            f"no corners for camera(s) {', '.join(missing)}, and no poses to fit as bodies "
+            "without corners"
+        )
+    both = [c for c in topo.cameras if c in views and c in poses]
+    if both:
+        raise InputError(
+            f"camera(s) {', '.join(both)} given corners and poses: a body of the bundle has "
+            "one or the other"
+        )
+    if not any(c in views for c in topo.cameras):
+        raise InputError("no camera of the rig has corners: a bundle adjustment needs one")
+    n = est.cameras[topo.reference].poses_in_reference_world.shape[0]
     for c, v in views.items():
         if v.corners.ndim != 3 or v.corners.shape[2] != 2:
             raise InputError(
@@ -290,17 +442,25 @@ def _check(topo: RigTopology, views: dict[str, CameraViews], est: RigEstimate) -
         if np.asarray(v.intrinsics).shape != (size,):
             raise InputError(f"camera {c}: its {v.model} model's intrinsics have shape ({size},)")
         if v.corners.shape[0] != n:
-            raise InputError(f"camera {c}: {v.corners.shape[0]} instants, the reference {n}")
-    if est.cameras[topo.reference].poses_in_reference_world.shape[0] != n:
-        raise InputError("the rig estimate and the corners are on different timelines")
+            raise InputError(f"camera {c}: {v.corners.shape[0]} instants, the rig estimate {n}")
+    for c, tr in poses.items():
+        if c not in topo.cameras:
+            raise InputError(f"poses given for {c}, which is not in the rig")
+        if tr.T_w_c.shape != (n, 4, 4) or tr.valid.shape != (n,):
+            raise InputError(f"body {c}: its poses are not on the rig's timeline of {n} instants")
+        se3.check_transforms(tr.T_w_c[tr.valid], name=f"body {c}'s poses")
     return n
 
 
 def _initial(
-    topo: RigTopology, views: dict[str, CameraViews], est: RigEstimate, frames: np.ndarray
+    topo: RigTopology,
+    views: dict[str, CameraViews],
+    poses: dict[str, CameraTrack],
+    est: RigEstimate,
+    frames: np.ndarray,
 ) -> tuple[_Model, FloatArray]:
     """The model and its starting unknowns, from the pose-based estimate."""
-    L = _Layout(topo, frames.size, {c: camera_model(views[c].model).free() for c in topo.cameras})
+    L = _Layout(topo, frames.size, {c: camera_model(v.model).free() for c, v in views.items()})
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
     x = np.zeros(L.size)
     blocks = np.zeros((frames.size, L.block))
@@ -329,15 +489,18 @@ def _initial(
             ]
             geom0[j.name] = {"A": A, "B": B, "o_p": e.position_in[p], "o_q": e.position_in[q]}
     intr = np.zeros(L.n_shared)
-    for c in topo.cameras:
+    for c in views:
         intr[L.intr[c]] = np.asarray(views[c].intrinsics, float)[L.free[c]]
     x[: L.n_shared] += intr
     x[L.n_shared :] = blocks.ravel()
     obs = {}
-    for c in topo.cameras:
-        v = views[c]
+    for c, v in views.items():
         fi, ki = np.nonzero(observed(v.corners, v.valid, v.board_points)[frames])
         obs[c] = (fi, ki, v.corners[frames][fi, ki])
+    meas = {
+        b: (tr.T_w_c[frames, :3, :3].copy(), tr.T_w_c[frames, :3, 3].copy())
+        for b, tr in poses.items()
+    }
     model = _Model(
         topo=topo,
         L=L,
@@ -348,6 +511,7 @@ def _initial(
         R0=R0,
         geom0=geom0,
         obs=obs,
+        meas=meas,
     )
     return model, x
 
@@ -357,20 +521,26 @@ def bundle_adjust_rig(
     views: dict[str, CameraViews],
     initial: RigEstimate,
     frames: np.ndarray,
+    poses: dict[str, CameraTrack] | None = None,
 ) -> RigBundle:
-    """Maximum-likelihood calibration of a rig from every camera's board corners.
+    """Maximum-likelihood calibration of a rig from its cameras' board corners and the
+    measured poses of its pose-only bodies.
 
     Parameters
     ----------
     topology : RigTopology
     views : dict of CameraViews
-        Every camera's corners on the rig's timeline (metric boards).
+        The corners on the rig's timeline (metric boards) of every body that has them (at
+        least one).
     initial : RigEstimate
         The pose-based estimate (:func:`acs_cli.core.rig_solve.estimate_rig`) on the same
         timeline, metric (every camera of known scale).
     frames : ndarray of int
-        The instants to adjust (every camera sees its board there); they must include the
-        reference instant.
+        The instants to adjust (every camera sees its board there, every pose-only body
+        has a pose); they must include the reference instant.
+    poses : dict of CameraTrack, optional
+        The measured poses (``T_world_body`` in the body's own world, metres) of every
+        body without corners (a robot's flange, a motion-capture segment, an INS).
 
     Returns
     -------
@@ -379,12 +549,13 @@ def bundle_adjust_rig(
     Raises
     ------
     InputError
-        Views that do not fit the topology or the timeline, an unknown scale, too few
-        frames, or frames without the reference instant.
+        Views or poses that do not fit the topology or the timeline, a body with neither,
+        an unknown scale, too few frames, or frames without the reference instant.
     DegenerateMotionError
-        Corners that leave part of the rig undetermined.
+        Corners and poses that leave part of the rig undetermined.
     """
-    n_total = _check(topology, views, initial)
+    poses = dict(poses or {})
+    n_total = _check(topology, views, poses, initial)
     frames = np.unique(np.asarray(frames, dtype=int))
     if frames.size < MIN_RIG_BUNDLE_FRAMES:
         raise InputError(
@@ -396,12 +567,19 @@ def bundle_adjust_rig(
     for c, v in views.items():
         seen = observed(v.corners, v.valid, v.board_points, f"camera {c}'s corners")
         check_frame_corners(seen[frames], f"camera {c}", frames)
+    for b, tr in poses.items():
+        gaps = frames[~tr.valid[frames]]
+        if gaps.size:
+            raise InputError(
+                f"body {b} has no pose at frame(s) {', '.join(map(str, gaps[:5]))}: a bundle "
+                "adjustment takes frames where every body has its measurement"
+            )
     unknown = [c for c, e in initial.cameras.items() if e.scale_std is not None]
     if unknown:
         raise InputError(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
-    model, x0 = _initial(topology, views, initial, frames)
+    model, x0 = _initial(topology, views, poses, initial, frames)
     L = model.L
     row_frame = model.row_frames()
 
@@ -419,32 +597,198 @@ def bundle_adjust_rig(
     def jac(x: FloatArray) -> object:
         return lsq.block_jacobian(model.residuals, x, fun(x), L.n_shared, L.block, row_frame)
 
-    sol = lsq.solve(fun, x0, jac=jac, method="normal")
+    if model.bodies:
+        _start_noise(model, x0)
+        x = x0
+        # the refits are a fixed-point iteration s -> F(s) on the log noise levels, which
+        # converges slowly where a body's pose noise and the corners' depth noise trade
+        # off: Anderson's acceleration over the last few iterates
+        s_in: list[FloatArray] = []
+        s_out: list[FloatArray] = []
+        for _ in range(NOISE_ROUNDS):
+            s_in.append(_noise(model))
+            sol = lsq.solve(fun, x, jac=jac, method="normal", xtol=1e-11)
+            x = sol.x
+            _refit_noise(model, sol.x, sol.jac)
+            last.clear()  # the weights changed
+            s_out.append(_noise(model))
+            if np.max(np.abs(s_out[-1] - s_in[-1])) <= NOISE_SETTLED:
+                break
+            _set_noise(model, _anderson(s_in[-4:], s_out[-4:]))
+        # at the settled weights; a second solve from there takes the Gauss-Newton steps
+        # the first one's relative-cost test stops short of along weakly determined
+        # directions (where the cost is flat), so that the solution is the same whichever
+        # way the rig is written down
+        for _ in range(2):
+            sol = lsq.solve(fun, x, jac=jac, method="normal")
+            x = sol.x
+        sigma2 = 1.0 / model.w_px**2
+        scale = 1.0  # the whitened residuals have unit variance at the fitted levels
+    else:
+        sol = lsq.solve(fun, x0, jac=jac, method="normal")
+        dof = max(sol.fun.size - x0.size, 1)
+        sigma2 = float(sol.fun @ sol.fun / dof)
+        scale = sigma2
     x = sol.x
-    r = sol.fun.reshape(-1, 2)
-    dof = max(sol.fun.size - x.size, 1)
-    sigma2 = float(sol.fun @ sol.fun / dof)
     k_ref = int(np.flatnonzero(frames == initial.reference_frame)[0])
     cols = list(range(L.n_shared)) + L.frame_columns(k_ref, slice(0, L.block))
-    cov = sigma2 * _inverse_columns(sol.jac, cols)
+    cov = scale * _inverse_columns(sol.jac, cols)
     where = {c: i for i, c in enumerate(cols)}
     est = _assemble(model, x, cov, where, k_ref, initial)
-    intr = {c: model.intrinsics(x, c) for c in topology.cameras}
+    intr = {c: model.intrinsics(x, c) for c in model.cams}
     std: dict[str, FloatArray] = {}
     icov: dict[str, FloatArray] = {}
-    for c in topology.cameras:
+    for c in model.cams:
         ci = np.zeros((intr[c].size, intr[c].size))
         idx = [where[i] for i in range(L.intr[c].start, L.intr[c].stop)]
         ci[np.ix_(L.free[c], L.free[c])] = cov[np.ix_(idx, idx)]
         icov[c] = ci
         std[c] = np.sqrt(np.maximum(np.diag(ci), 0.0))
-    rms, start = {}, 0
-    for c in topology.cameras:
-        m = model.obs[c][0].size
-        rc = r[start : start + m]
-        rms[c] = float(np.sqrt(np.mean(np.sum(rc**2, axis=1)))) if m else 0.0
-        start += m
-    return RigBundle(est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success))
+    px, pose = model.raw(x)
+    rms = {
+        c: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if r.size else 0.0
+        for c, r in zip(model.cams, px, strict=True)
+    }
+    bodies = _pose_bodies(model, x, cov, where, pose)
+    cams = dict(est.cameras)
+    for b, fit in bodies.items():
+        e = cams[b]
+        fields = {f.name: getattr(e, f.name) for f in dataclasses.fields(e)}
+        cams[b] = PoseBodyEstimate(**fields, pose_fit=fit)
+    est = dataclasses.replace(est, cameras=cams)
+    return RigBundle(
+        est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success), bodies
+    )
+
+
+def _noise(model: _Model) -> FloatArray:
+    """The current noise levels: logs of the pixel sigma and each pose-only body's."""
+    out = [model.w_px]
+    for b in model.bodies:
+        out += [model.w_rot[b], model.w_trans[b]]
+    return -np.log(np.asarray(out))
+
+
+def _set_noise(model: _Model, s: FloatArray) -> None:
+    """Set the weights from log noise levels ``s`` (the order of :func:`_noise`)."""
+    w = np.exp(-np.asarray(s))
+    model.w_px = float(w[0])
+    for i, b in enumerate(model.bodies):
+        model.w_rot[b], model.w_trans[b] = float(w[1 + 2 * i]), float(w[2 + 2 * i])
+
+
+def _anderson(s_in: list[FloatArray], s_out: list[FloatArray]) -> FloatArray:
+    """The next iterate of a fixed-point iteration ``s_out[k] = F(s_in[k])`` by Anderson's
+    acceleration over the iterates given (the plain ``F`` when it would move more than a
+    factor of 4 past it, or with one iterate)."""
+    last = s_out[-1]
+    if len(s_in) < 2:
+        return last
+    f = [o - i for i, o in zip(s_in, s_out, strict=True)]
+    dF = np.stack([f[k + 1] - f[k] for k in range(len(f) - 1)], axis=1)
+    dG = np.stack([s_out[k + 1] - s_out[k] for k in range(len(f) - 1)], axis=1)
+    gamma = np.linalg.lstsq(dF, f[-1], rcond=1e-10)[0]
+    out = last - dG @ gamma
+    return np.asarray(out if np.max(np.abs(out - last)) < np.log(4.0) else last)
+
+
+def _floors(model: _Model, b: str) -> tuple[float, float]:
+    """The lowest rotation (rad) and translation (m) sigma of body ``b``'s poses."""
+    t = model.meas[b][1]
+    travel = float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
+    return NOISE_FLOOR_ROT, NOISE_FLOOR_LENGTH * max(travel, 1e-3)
+
+
+def _start_noise(model: _Model, x: FloatArray) -> None:
+    """Starting weights: each group's RMS per coordinate at the starting point."""
+    px, pose = model.raw(x)
+    allpx = np.concatenate([r.ravel() for r in px])
+    model.w_px = 1.0 / max(float(np.sqrt(np.mean(allpx**2))), 1e-3)
+    for b in model.bodies:
+        fr, ft = _floors(model, b)
+        model.w_rot[b] = 1.0 / max(float(np.sqrt(np.mean(pose[b][:, :3] ** 2))), fr)
+        model.w_trans[b] = 1.0 / max(float(np.sqrt(np.mean(pose[b][:, 3:] ** 2))), ft)
+
+
+def _refit_noise(model: _Model, x: FloatArray, J: object) -> None:
+    """One variance-component refit (Förstner): each group's squared residuals over its
+    redundancy ``n_k - tr(H^-1 J_k^T J_k)`` (``H`` the whitened information); the pixel
+    rows take what the pose rows leave of the unknowns (the traces add up to their number)."""
+    H = information(J)
+    d = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
+    try:
+        cf = scipy.linalg.cho_factor(H * np.outer(d, d))
+    except np.linalg.LinAlgError:
+        raise DegenerateMotionError(
+            "the corners and poses do not determine the rig (its information matrix is "
+            "singular: a joint, a board or a body's world that the motion cannot see)",
+        ) from None
+    Js = scipy.sparse.csr_array(J) @ scipy.sparse.diags_array(d)
+    px, pose = model.raw(x)
+    taken = 0.0
+    for b, (rot_rows, trans_rows) in model.pose_rows().items():
+        fr, ft = _floors(model, b)
+        for rows, e, floor, key in (
+            (rot_rows, pose[b][:, :3], fr, "rot"),
+            (trans_rows, pose[b][:, 3:], ft, "trans"),
+        ):
+            Jk = np.asarray(Js[rows].toarray())
+            a = float(np.sum(Jk.T * scipy.linalg.cho_solve(cf, Jk.T)))
+            taken += a
+            var = float(np.sum(e**2)) / max(rows.size - a, 1.0)
+            w = 1.0 / max(np.sqrt(var), floor)
+            if key == "rot":
+                model.w_rot[b] = w
+            else:
+                model.w_trans[b] = w
+    allpx = np.concatenate([r.ravel() for r in px])
+    redundancy = max(allpx.size - (x.size - taken), 1.0)
+    model.w_px = 1.0 / max(float(np.sqrt(np.sum(allpx**2) / redundancy)), 1e-6)
+
+
+def _pose_bodies(
+    model: _Model,
+    x: FloatArray,
+    cov: FloatArray,
+    where: dict[int, int],
+    pose: dict[str, FloatArray],
+) -> dict[str, PoseBodyFit]:
+    """Each pose-only body's noise, residuals and every corner camera's board in its world."""
+    L, ref = model.L, model.topo.reference
+    out = {}
+    for b in model.bodies:
+        boards: dict[str, FloatArray] = {}
+        covs: dict[str, FloatArray] = {}
+        for c in model.cams:
+
+            def T(xx: FloatArray, c: str = c, b: str = b) -> FloatArray:
+                Rb, tb = model.board(xx, b)
+                Rc, tc = model.board(xx, c)
+                return se3.transforms_from_rt(Rb.T @ Rc, Rb.T @ (tc - tb))
+
+            T0 = T(x)
+
+            def vec(xx: FloatArray, T: object = T, T0: FloatArray = T0) -> FloatArray:
+                Tx = T(xx)  # type: ignore[operator]
+                return np.concatenate(
+                    [se3.rotvec_from_matrix(T0[:3, :3].T @ Tx[:3, :3]), Tx[:3, 3]]
+                )
+
+            cols = [i for w in (b, c) if w != ref for i in range(L.world[w].start, L.world[w].stop)]
+            idx = [where[i] for i in cols]
+            boards[c] = T0
+            covs[c] = lsq.propagate(vec, x, cols, cov[np.ix_(idx, idx)])[1]
+        e = pose[b]
+        out[b] = PoseBodyFit(
+            frames=int(model.L.n),
+            sigma_rot_deg=float(np.degrees(1.0 / model.w_rot[b])),
+            sigma_trans=float(1.0 / model.w_trans[b]),
+            rms_rot_deg=float(np.degrees(np.sqrt(np.mean(np.sum(e[:, :3] ** 2, axis=1))))),
+            rms_trans=float(np.sqrt(np.mean(np.sum(e[:, 3:] ** 2, axis=1)))),
+            T_world_board=boards,
+            T_world_board_covariance=covs,
+        )
+    return out
 
 
 def _relative(T_q_ref: FloatArray | None, T_p_ref: FloatArray | None) -> FloatArray:
@@ -523,14 +867,30 @@ def _assemble(
             poses_in_reference_world=world,
             world_to_reference_world=W,
         )
-    edges = {}
+    edges: dict[str, EdgeEstimate] = {}
     for j in topo.joints:
         p, q = j.between
         e0 = initial.edges[j.name]
         cols = list(range(L.n_shared))[L.geom[j.name]]
         T_q_p = _relative(cams[q].T_cam_ref, cams[p].T_cam_ref)
         if j.type == "rigid":
-            edges[j.name] = dataclasses.replace(e0, T_q_p=T_q_p)
+
+            def T_q_p_of(xx: FloatArray, j: RigJoint = j) -> FloatArray:
+                e = xx[L.geom[j.name]]
+                R = model.R0[j.name] @ se3.matrix_from_rotvec(e[:3])
+                return se3.transforms_from_rt(R.T, -R.T @ (model.geom0[j.name]["t"] + e[3:]))
+
+            T_rig = T_q_p_of(x)
+
+            def rel(xx: FloatArray, T0: FloatArray = T_rig, f: object = T_q_p_of) -> FloatArray:
+                T = f(xx)  # type: ignore[operator]
+                return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
+
+            C = lsq.propagate(rel, x, cols, sub(cols))[1]
+            edges[j.name] = RigidEdgeEstimate(
+                **{f.name: getattr(e0, f.name) for f in dataclasses.fields(e0)}
+                | {"T_q_p": T_rig, "T_q_p_covariance": C}
+            )
             continue
 
         def geometry(xx: FloatArray, j: RigJoint = j) -> FloatArray:

@@ -16,6 +16,13 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         T_ref_world: 4x4                # the camera's trajectory world (x scale) -> ref frame
         time_offset_s, time_offset_s_std   # with estimate_time_offset: this camera's clock
                                         # minus the reference camera's, seconds
+        pose_only:                      # a body without corners in the bundle adjustment
+          frames: int                   # (a robot's flange, a mocap segment, an INS)
+          sigma_rotation_deg: float     # fitted noise of its measured poses, per axis
+          sigma_translation: float      # (length units)
+          rms_rotation_deg, rms_translation: float   # its pose residuals
+          T_world_board: {cam: 4x4}     # each corner camera's board in this body's world
+          T_world_board_std: {cam: {rotation_deg: [3], translation: [3]}}
     joints:
       <name>:
         type: ball | hinge | rigid
@@ -24,6 +31,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         position_std_in: {p: [3], q: [3]}
         axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, largest component in p > 0
         axis_std_deg_in: {p: float, q: float}
+        T_q_p: 4x4                      # rigid only: maps p's frame into q's (hand-eye X)
+        T_q_p_std: {rotation_deg: [3], translation: [3]}   # when bundle-adjusted
         residual_rms: float             # of the joint constraint over the frames used
         frames_used: int
         frames_rejected: int
@@ -69,7 +78,89 @@ from acs_cli.io.verdict import VerdictSection
 
 KIND = "rig"
 
-__all__ = ["KIND", "RigArtifact", "RigCameraResult", "RigJointResult", "RigRecordingResult"]
+__all__ = [
+    "KIND",
+    "PoseOnlySection",
+    "RigArtifact",
+    "RigCameraResult",
+    "RigJointResult",
+    "RigRecordingResult",
+]
+
+
+def _std_plain(std: tuple[FloatArray, FloatArray]) -> dict[str, FloatArray]:
+    return {"rotation_deg": std[0], "translation": std[1]}
+
+
+def _std_parse(value: Any, key: str, path: Path) -> tuple[FloatArray, FloatArray]:
+    d = as_mapping(value, key, path)
+    return (
+        as_vector(d.get("rotation_deg"), f"{key}.rotation_deg", path),
+        as_vector(d.get("translation"), f"{key}.translation", path),
+    )
+
+
+@dataclass(frozen=True)
+class PoseOnlySection:
+    """``cameras.<body>.pose_only``: a body with poses and no corners, in the rig's bundle
+    adjustment (its measured poses fitted with their own noise levels).
+
+    Attributes
+    ----------
+    frames : int
+    sigma_rotation_deg, sigma_translation : float
+        The fitted noise of its poses, per axis (degrees; length units).
+    rms_rotation_deg, rms_translation : float
+        RMS of its pose residuals (angle; distance).
+    T_world_board : dict of camera to ndarray (4, 4)
+        Each corner camera's board frame in this body's world (for a camera on a robot's
+        flange: the board in the robot's base, the hand-eye ``Z``).
+    T_world_board_std : dict of camera to (rotation_deg (3,), translation (3,))
+        Right rotation perturbation, then translation.
+    """
+
+    frames: int
+    sigma_rotation_deg: float
+    sigma_translation: float
+    rms_rotation_deg: float
+    rms_translation: float
+    T_world_board: dict[str, FloatArray] = field(default_factory=dict)
+    T_world_board_std: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+
+    def to_plain(self) -> dict[str, Any]:
+        return {
+            "frames": self.frames,
+            "sigma_rotation_deg": self.sigma_rotation_deg,
+            "sigma_translation": self.sigma_translation,
+            "rms_rotation_deg": self.rms_rotation_deg,
+            "rms_translation": self.rms_translation,
+            "T_world_board": dict(self.T_world_board),
+            "T_world_board_std": {c: _std_plain(v) for c, v in self.T_world_board_std.items()},
+        }
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Path) -> PoseOnlySection:
+        d = as_mapping(value, key, path)
+        boards = as_mapping(d.get("T_world_board") or {}, f"{key}.T_world_board", path)
+        stds = as_mapping(d.get("T_world_board_std") or {}, f"{key}.T_world_board_std", path)
+
+        def num(k: str) -> float:
+            return as_number(d.get(k), f"{key}.{k}", path, non_negative=True)
+
+        return cls(
+            frames=int(as_number(d.get("frames", 0), f"{key}.frames", path, non_negative=True)),
+            sigma_rotation_deg=num("sigma_rotation_deg"),
+            sigma_translation=num("sigma_translation"),
+            rms_rotation_deg=num("rms_rotation_deg"),
+            rms_translation=num("rms_translation"),
+            T_world_board={
+                str(c): as_matrix(T, (4, 4), f"{key}.T_world_board.{c}", path)
+                for c, T in boards.items()
+            },
+            T_world_board_std={
+                str(c): _std_parse(v, f"{key}.T_world_board_std.{c}", path) for c, v in stds.items()
+            },
+        )
 
 
 @dataclass(frozen=True)
@@ -91,6 +182,8 @@ class RigCameraResult:
     #: estimated (``estimate_time_offset``)
     time_offset_s: float | None = None
     time_offset_s_std: float | None = None
+    #: a body without corners in the rig's bundle adjustment (None: a camera, or no bundle)
+    pose_only: PoseOnlySection | None = None
 
 
 @dataclass(frozen=True)
@@ -131,6 +224,10 @@ class RigJointResult:
     residual_rms: float = 0.0
     frames_used: int = 0
     frames_rejected: int = 0
+    #: a rigid joint's transform (maps p's frame into q's) and, when bundle-adjusted, its
+    #: std (rotation_deg (3,) as a right perturbation, translation (3,))
+    T_q_p: FloatArray | None = None
+    T_q_p_std: tuple[FloatArray, FloatArray] | None = None
 
 
 @dataclass(frozen=True)
@@ -228,8 +325,32 @@ class RigArtifact(YamlArtifact):
             if j.type == "hinge":
                 a = j.axis_in[j.between[0]]
                 s += ", axis [" + " ".join(f"{v:+.3f}" for v in a) + "]"
+            if j.T_q_p is not None:
+                s += (
+                    f": T_{j.between[1]}_{j.between[0]} t ["
+                    + " ".join(f"{v:+.4f}" for v in j.T_q_p[:3, 3])
+                    + f"] {u}"
+                )
+                if j.T_q_p_std is not None:
+                    s += (
+                        f" (std {float(np.max(j.T_q_p_std[1])):.2g} {u}, "
+                        f"{float(np.max(j.T_q_p_std[0])):.2g} deg)"
+                    )
             s += f", residual RMS {j.residual_rms:.3g}"
             lines.append(s)
+        for c in self.cameras.values():
+            po = c.pose_only
+            if po is not None:
+                lines.append(
+                    f"  {c.name}: poses only, noise {po.sigma_rotation_deg:.3g} deg and "
+                    f"{po.sigma_translation:.3g} {u} per axis"
+                    + "".join(
+                        f"; {b}'s board in its world at ["
+                        + " ".join(f"{v:+.4f}" for v in T[:3, 3])
+                        + f"] {u}"
+                        for b, T in po.T_world_board.items()
+                    )
+                )
         if self.bundle_adjustment:
             b = next(iter(self.bundle_adjustment.values()))
             lines.append(
@@ -261,6 +382,8 @@ class RigArtifact(YamlArtifact):
             if c.time_offset_s is not None:
                 cams[c.name]["time_offset_s"] = c.time_offset_s
                 cams[c.name]["time_offset_s_std"] = c.time_offset_s_std
+            if c.pose_only is not None:
+                cams[c.name]["pose_only"] = c.pose_only.to_plain()
         joints = {}
         for j in self.joints.values():
             d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
@@ -270,6 +393,10 @@ class RigArtifact(YamlArtifact):
             if j.type == "hinge":
                 d["axis_in"] = dict(j.axis_in)
                 d["axis_std_deg_in"] = dict(j.axis_std_deg_in)
+            if j.type == "rigid" and j.T_q_p is not None:
+                d["T_q_p"] = j.T_q_p
+                if j.T_q_p_std is not None:
+                    d["T_q_p_std"] = _std_plain(j.T_q_p_std)
             d["residual_rms"] = j.residual_rms
             d["frames_used"] = j.frames_used
             d["frames_rejected"] = j.frames_rejected
@@ -323,11 +450,25 @@ class RigArtifact(YamlArtifact):
                 se3.check_transforms(c.T_cam_ref, name=f"cameras.{c.name}.T_cam_ref")
             except InputError as exc:
                 raise InputError(exc.message, path=self.source) from None
+            boards = {} if c.pose_only is None else c.pose_only.T_world_board
+            for b, T in boards.items():
+                key = f"cameras.{c.name}.pose_only.T_world_board.{b}"
+                if b not in self.cameras:
+                    raise InputError(f"'{key}' is not one of the cameras", path=self.source)
+                try:
+                    se3.check_transforms(T, name=key)
+                except InputError as exc:
+                    raise InputError(exc.message, path=self.source) from None
         for j in self.joints.values():
             if any(b not in self.cameras for b in j.between):
                 raise InputError(
                     f"'joints.{j.name}.between' names an unknown camera", path=self.source
                 )
+            if j.T_q_p is not None:
+                try:
+                    se3.check_transforms(j.T_q_p, name=f"joints.{j.name}.T_q_p")
+                except InputError as exc:
+                    raise InputError(exc.message, path=self.source) from None
 
     @classmethod
     def from_doc(cls, doc: dict[str, Any], path: Path) -> RigArtifact:
@@ -370,6 +511,9 @@ class RigArtifact(YamlArtifact):
                 time_offset_s_std=optional_number(
                     c.get("time_offset_s_std"), f"{k}.time_offset_s_std", p, non_negative=True
                 ),
+                pose_only=None
+                if c.get("pose_only") is None
+                else PoseOnlySection.parse(c["pose_only"], f"{k}.pose_only", p),
             )
         reference = str(ref["camera"])
         if reference not in cameras:
@@ -414,6 +558,12 @@ class RigArtifact(YamlArtifact):
                 residual_rms=as_number(j.get("residual_rms", 0.0), f"{k}.residual_rms", p),
                 frames_used=int(j.get("frames_used", 0)),
                 frames_rejected=int(j.get("frames_rejected", 0)),
+                T_q_p=None
+                if jtype != "rigid" or j.get("T_q_p") is None
+                else as_matrix(j["T_q_p"], (4, 4), f"{k}.T_q_p", p),
+                T_q_p_std=None
+                if jtype != "rigid" or j.get("T_q_p_std") is None
+                else _std_parse(j["T_q_p_std"], f"{k}.T_q_p_std", p),
             )
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):

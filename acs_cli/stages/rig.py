@@ -42,7 +42,13 @@ from acs_cli.core.quality import (
     length_scale,
 )
 from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
-from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
+from acs_cli.core.rig_bundle import (
+    MIN_RIG_BUNDLE_FRAMES,
+    CameraViews,
+    PoseBodyEstimate,
+    RigidEdgeEstimate,
+    bundle_adjust_rig,
+)
 from acs_cli.core.rig_solve import CameraTrack, EdgePrior, Recordings, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.targets import MarkerTarget
@@ -56,6 +62,7 @@ from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import (
+    PoseOnlySection,
     RigArtifact,
     RigCameraResult,
     RigJointResult,
@@ -688,6 +695,7 @@ def rig_artifact(
             T_ref_world=None
             if e.T_cam_ref is None
             else T_ref_refworld @ e.world_to_reference_world,
+            pose_only=_pose_only(e) if isinstance(e, PoseBodyEstimate) else None,
         )
         for c, e in est.cameras.items()
     }
@@ -717,6 +725,9 @@ def rig_artifact(
             )
     joints = {}
     for name, e in est.edges.items():
+        T_q_p_std = None
+        if isinstance(e, RigidEdgeEstimate):
+            T_q_p_std = _stds(e.T_q_p_covariance)
         joints[name] = RigJointResult(
             name=name,
             type=e.joint.type,
@@ -730,6 +741,8 @@ def rig_artifact(
             residual_rms=e.residual_rms,
             frames_used=e.frames_used,
             frames_rejected=e.frames_rejected,
+            T_q_p=e.T_q_p if e.joint.type == "rigid" else None,
+            T_q_p_std=T_q_p_std,
         )
     return RigArtifact(
         reference_camera=est.topology.reference,
@@ -739,6 +752,28 @@ def rig_artifact(
         joints=joints,
         warnings=list(warnings),
         recordings=recs,
+    )
+
+
+def _stds(C: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rotation (deg) and translation stds of a pose covariance ``(6, 6)``."""
+    d = np.sqrt(np.maximum(np.diag(C), 0.0))
+    return np.degrees(d[:3]), d[3:]
+
+
+def _pose_only(e: PoseBodyEstimate) -> PoseOnlySection | None:
+    """The ``pose_only`` section of a body the bundle fitted on its poses."""
+    f = e.pose_fit
+    if f is None:
+        return None
+    return PoseOnlySection(
+        frames=f.frames,
+        sigma_rotation_deg=f.sigma_rot_deg,
+        sigma_translation=f.sigma_trans,
+        rms_rotation_deg=f.rms_rot_deg,
+        rms_translation=f.rms_trans,
+        T_world_board=dict(f.T_world_board),
+        T_world_board_std={c: _stds(C) for c, C in f.T_world_board_covariance.items()},
     )
 
 
@@ -1212,11 +1247,12 @@ def rig_bundle(
     index: dict[str, np.ndarray],
     est: RigEstimate,
 ) -> tuple[RigEstimate, dict[str, BundleSection], list[str]]:
-    """Refine a rig on its corners when every camera's poses carry them (poses NPZs of
-    ``acscal poses``): the estimate, each camera's bundle section, and warnings.
+    """Refine a rig on its corners when at least one camera's poses carry them (poses NPZs
+    of ``acscal poses``): the estimate, each camera's bundle section, and warnings.
 
-    A rig where only some cameras carry corners is solved from poses, with a warning; so
-    is one whose bundle adjustment fails (the pose-based estimate is kept).
+    The other bodies (a robot's flange, a motion-capture segment, an INS: poses without
+    corners) enter the bundle with their measured poses and their own fitted noise levels.
+    A rig whose bundle adjustment fails keeps the pose-based estimate, with a warning.
     """
     views: dict[str, CameraViews] = {}
     without: list[str] = []
@@ -1242,7 +1278,7 @@ def rig_bundle(
         sources[name] = got
     if not views:
         return est, {}, notes
-    unknown = [c for c in views if config.cameras[c].unknown_scale]
+    unknown = [c for c in config.topology.cameras if config.cameras[c].unknown_scale]
     if unknown:
         return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
                          f"{', '.join(unknown)} are configured with scale: unknown, but board "
@@ -1251,10 +1287,13 @@ def rig_bundle(
         return est, {}, [*notes, "no bundle adjustment of the rig: it does not take joint "
                          "priors (position_in, fixed_joint) yet, so the rig is solved from "
                          "poses with them"]  # fmt: skip
-    if without:
-        return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
-                         f"{', '.join(without)} have no usable corners, so the rig is solved "
-                         "from poses"]  # fmt: skip
+    poses: dict[str, CameraTrack] = {}  # the bodies without corners: their measured poses
+    for name in without:
+        rows = index[name]
+        valid = rows >= 0
+        T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        T[valid] = trajectories[name].T_world_cam[rows[valid]]
+        poses[name] = CameraTrack(T, valid)
     use = np.ones(n, bool)
     for e in est.edges.values():
         inl = np.zeros(n, bool)
@@ -1269,21 +1308,21 @@ def rig_bundle(
                          "reference frame among them; at least "
                          f"{MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
     try:
-        ba = bundle_adjust_rig(config.topology, views, est, np.flatnonzero(mask))
+        ba = bundle_adjust_rig(config.topology, views, est, np.flatnonzero(mask), poses)
     except DegenerateMotionError as exc:
         return est, {}, [*notes, f"no bundle adjustment of the rig: {exc.message}; the "
                          "pose-based estimate is kept"]  # fmt: skip
     if not ba.success:
         return est, {}, [*notes, "the rig's bundle adjustment did not converge; the "
                          "pose-based estimate is kept"]  # fmt: skip
-    for c in config.topology.cameras:
+    for c in views:
         notes += degenerate_warning(
             c, views[c].model, ba.intrinsics[c], ba.intrinsics_covariance[c]
         )
     sections = {
         c: bundle_section(sources[c], ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c],
                           ba.sigma_px, int(ba.frames.size))
-        for c in config.topology.cameras
+        for c in config.topology.cameras if c in views
     }  # fmt: skip
     return ba.estimate, sections, notes
 

@@ -99,3 +99,50 @@ def test_bad_rig_yaml_names_the_key(artifact: RigArtifact, tmp_path: Path, edit,
     with pytest.raises(InputError) as err:
         RigArtifact.load(path)
     assert key in str(err.value) and str(path) in str(err.value)
+
+
+def test_round_trip_with_a_pose_only_body_and_a_rigid_joints_std(
+    artifact: RigArtifact, tmp_path: Path
+) -> None:
+    """Issue 19: a body without corners (``cameras.<body>.pose_only``: its pose noise and
+    the board in its world, with stds) and a rigid joint's ``T_q_p`` with its std."""
+    from acs_cli.io.rig import PoseOnlySection
+
+    Z = np.eye(4)
+    Z[:3, 3] = [0.7, 0.2, -0.1]
+    po = PoseOnlySection(
+        frames=29,
+        sigma_rotation_deg=0.05,
+        sigma_translation=3e-4,
+        rms_rotation_deg=0.09,
+        rms_translation=5e-4,
+        T_world_board={"cam1": Z},
+        T_world_board_std={"cam1": (np.array([0.01, 0.02, 0.03]), np.array([1e-4, 2e-4, 3e-4]))},
+    )
+    rigid = next(j for j in artifact.joints.values() if j.type == "rigid")
+    assert rigid.T_q_p is not None  # written for every rigid joint
+    std = (np.array([0.1, 0.2, 0.3]), np.array([1e-3, 2e-3, 3e-3]))
+    art = dataclasses.replace(
+        artifact,
+        cameras=artifact.cameras
+        | {"cam2": dataclasses.replace(artifact.cameras["cam2"], pose_only=po)},
+        joints=artifact.joints | {rigid.name: dataclasses.replace(rigid, T_q_p_std=std)},
+    )
+    path = tmp_path / "rig.yaml"
+    art.save(path)
+    back = RigArtifact.load(path)
+    got = back.cameras["cam2"].pose_only
+    assert got is not None and got.frames == 29
+    assert got.sigma_rotation_deg == pytest.approx(0.05)
+    np.testing.assert_allclose(got.T_world_board["cam1"], Z)
+    np.testing.assert_allclose(got.T_world_board_std["cam1"][1], [1e-4, 2e-4, 3e-4])
+    j = back.joints[rigid.name]
+    assert j.T_q_p is not None and j.T_q_p_std is not None
+    np.testing.assert_allclose(j.T_q_p, rigid.T_q_p, atol=1e-12)
+    np.testing.assert_allclose(j.T_q_p_std[0], std[0])
+    assert "poses only" in back.summary() and "std" in back.summary()
+    doc = yaml.safe_load(path.read_text())
+    doc["cameras"]["cam2"]["pose_only"]["T_world_board"]["ghost"] = Z.tolist()
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError, match=r"pose_only\.T_world_board\.ghost"):
+        RigArtifact.load(path)

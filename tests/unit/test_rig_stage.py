@@ -175,13 +175,19 @@ def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
     # the same rig with bundle: false is solved from poses, with no section
     off = config("off.yaml", text + "bundle: false\n")
     assert not run_rig(off, output=tmp_path / "off.yaml").artifact.bundle_adjustment
-    # a camera given as a TUM file carries no corners: solved from poses, and said so
+    # a camera given as a TUM file carries no corners: a body with poses only in the bundle
+    # (issue 19), its pose noise fitted and cam0's board placed in its world
     t1 = read_trajectory(files["cam1"])
     write_tum(tmp_path / "cam1.tum", t1.timestamps, t1.T_world_cam)
     mixed = config("mixed.yaml", text.replace("cam1.npz", "cam1.tum"))
     res = run_rig(mixed, output=tmp_path / "mixed.yaml")
-    assert not res.artifact.bundle_adjustment
-    assert any("camera(s) cam1 have no usable corners" in w for w in res.warnings), res.warnings
+    assert set(res.artifact.bundle_adjustment) == {"cam0"}, res.warnings
+    po = res.artifact.cameras["cam1"].pose_only
+    assert po is not None and set(po.T_world_board) == {"cam0"}
+    assert 0 < po.sigma_translation < 0.05 and 0 < po.sigma_rotation_deg < 2
+    back = RigArtifact.load(tmp_path / "mixed.yaml").cameras["cam1"].pose_only
+    assert back is not None and back.sigma_translation == pytest.approx(po.sigma_translation)
+    np.testing.assert_allclose(back.T_world_board["cam0"], po.T_world_board["cam0"], atol=1e-9)
     # joint priors are not taken by the bundle adjustment: said so, solved from poses
     o = run.artifact.joints["j"].position_in["cam0"]
     prior = text.replace(
