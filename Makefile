@@ -17,8 +17,8 @@ demo: install
 	$(BIN)/python -m sample_data_gen.demo demo_out
 
 lint: install
-	$(BIN)/ruff check acs_cli sample_data_gen tests benchmarks
-	$(BIN)/ruff format --check acs_cli sample_data_gen tests benchmarks
+	$(BIN)/ruff check acs_cli sample_data_gen tests benchmarks examples
+	$(BIN)/ruff format --check acs_cli sample_data_gen tests benchmarks examples
 
 typecheck: install
 	$(BIN)/mypy

@@ -1142,10 +1142,15 @@ def estimate_rig(
     Raises
     ------
     InputError
-        Missing cameras, tracks off the timeline, a bad reference frame.
+        Missing cameras, poses that are not rigid transforms, tracks off the timeline, a
+        bad reference frame (or one where the reference camera is on no joint), the bodies
+        of a shared world disagreeing on their scale, a prior that does not fit its joint
+        (a rigid joint, an axis on a joint that is not a hinge, a camera not on the joint,
+        a covariance that is not positive definite).
     DegenerateMotionError
-        An edge with too few frames in common, or a motion that leaves part of the rig
-        undetermined; the message names the edge and what to record (or configure) instead.
+        An edge with too few frames in common, a joint that does not fit its declared type
+        (:func:`check_joint_types`), or a motion that leaves part of the rig undetermined;
+        the message names the edge and what to record (or configure) instead.
     """
     n = tracks[topology.cameras[0]].T_w_c.shape[0] if topology.cameras[0] in tracks else 0
     recs = recordings if recordings is not None else Recordings.single(n)
