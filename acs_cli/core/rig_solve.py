@@ -185,6 +185,85 @@ class EdgePrior:
     axis_in: dict[str, tuple[FloatArray, float]] = field(default_factory=dict)
 
 
+def fixed_joint_prior(joint: RigJoint, camera: str, T_w_c: FloatArray, label: str) -> EdgePrior:
+    """A joint held still while ``camera`` turned about it (the paper's Algorithm II), as a
+    prior of the rig solve.
+
+    Parameters
+    ----------
+    joint : RigJoint
+        A ball (its centre, :func:`~acs_cli.core.joint.estimate_pivot`) or a hinge (its axis
+        and line, :func:`~acs_cli.core.joint.estimate_hinge_fixed`; the point itself when
+        ``camera`` is the edge's first, whose nearest axis point the rig reports).
+    camera : str
+    T_w_c : ndarray, shape (n, 4, 4)
+        ``T_world_cam`` of the fixed-joint motion (metres, the reference's units).
+    label : str
+        Names the session in messages.
+
+    Raises
+    ------
+    InputError
+        A rigid joint (nothing to hold still).
+    DegenerateMotionError
+        Too little rotation about the joint.
+    """
+    from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
+
+    if joint.type == "ball":
+        pv = estimate_pivot(T_w_c, "refined", label)
+        return EdgePrior(
+            position_in={camera: pv.position_in_cam}, covariance_in={camera: pv.covariance}
+        )
+    if joint.type != "hinge":
+        raise InputError(f"{label}: joint {joint.name} is rigid: nothing to hold still")
+    h = estimate_hinge_fixed(T_w_c, label)
+    axis = {camera: (h.axis_in_cam, max(float(np.radians(h.axis_std_deg)), 1e-6))}
+    if camera == joint.between[0]:  # the rig's hinge point is the one nearest this camera
+        return EdgePrior(
+            position_in={camera: h.point_in_cam},
+            covariance_in={camera: h.covariance_point + np.eye(3) * 1e-12},
+            axis_in=axis,
+        )
+    # only the line: the rig's point is nearest the other camera
+    std = float(np.sqrt(max(np.linalg.eigvalsh(h.covariance_point)[-1], 1e-18)))
+    return EdgePrior(line_in={camera: (h.point_in_cam, h.axis_in_cam, std)}, axis_in=axis)
+
+
+def merge_priors(first: EdgePrior, second: EdgePrior) -> EdgePrior:
+    """Both priors of one joint; where both give the same part, ``first``'s."""
+    return EdgePrior(
+        position_in={**second.position_in, **first.position_in},
+        covariance_in={**second.covariance_in, **first.covariance_in},
+        line_in={**second.line_in, **first.line_in},
+        axis_in={**second.axis_in, **first.axis_in},
+    )
+
+
+def _held_priors(
+    topology: RigTopology, tracks: dict[str, CameraTrack], recs: Recordings
+) -> dict[str, EdgePrior]:
+    """The priors of the joints that recordings hold still: each camera of such a joint that
+    the recording saw gives it by Algorithm II (:func:`fixed_joint_prior`)."""
+    out: dict[str, EdgePrior] = {}
+    for r, held in enumerate(recs.held):
+        for name in held:
+            j = topology.joint(name)
+            for c in j.between:
+                f = (recs.of_frame == r) & tracks[c].valid
+                if not f.any():
+                    continue
+                if tracks[c].unknown_scale:
+                    raise InputError(
+                        f"recordings.{recs.names[r]}.fixed_joints ({name}, camera {c}): a "
+                        f"fixed-joint motion gives metres; it needs {c} to be metric"
+                    )
+                label = f"recordings.{recs.names[r]}.fixed_joints ({name}, camera {c})"
+                p = fixed_joint_prior(j, c, tracks[c].T_w_c[f], label)
+                out[name] = merge_priors(out[name], p) if name in out else p
+    return out
+
+
 @dataclass(frozen=True)
 class CameraEstimate:
     """``T_cam_ref`` ``(4, 4)`` with the covariance ``(6, 6)`` of (right rotation
@@ -1132,8 +1211,10 @@ def estimate_rig(
         Return joints whose std alone is past the refusal level instead of refusing them
         (``--accept-weak``); exact degeneracies are refused whatever it says.
     recordings : Recordings, optional
-        Which recording each instant belongs to and which recordings' bodies share one
-        world (default: one recording, a world per camera).
+        Which recording each instant belongs to, which recordings' bodies share one world
+        and which joints each holds still (default: one recording, a world per camera). A
+        held joint gets its prior from that recording by Algorithm II
+        (:func:`fixed_joint_prior`; ``priors`` given for the same part win).
 
     Returns
     -------
@@ -1155,7 +1236,9 @@ def estimate_rig(
     n = tracks[topology.cameras[0]].T_w_c.shape[0] if topology.cameras[0] in tracks else 0
     recs = recordings if recordings is not None else Recordings.single(n)
     k = _check_tracks(topology, tracks, reference_frame, recs)
-    priors = priors or {}
+    priors = dict(priors or {})
+    for name, held in _held_priors(topology, tracks, recs).items():
+        priors[name] = merge_priors(priors[name], held) if name in priors else held
     frames: dict[str, np.ndarray] = {}
     for j in topology.joints:
         p, q = j.between

@@ -49,7 +49,15 @@ from acs_cli.core.rig_bundle import (
     RigidEdgeEstimate,
     bundle_adjust_rig,
 )
-from acs_cli.core.rig_solve import CameraTrack, EdgePrior, Recordings, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import (
+    CameraTrack,
+    EdgePrior,
+    Recordings,
+    RigEstimate,
+    estimate_rig,
+    fixed_joint_prior,
+    merge_priors,
+)
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.targets import MarkerTarget
 from acs_cli.core.time_offset import (
@@ -612,64 +620,29 @@ def check_prior_units(config: RigRunConfig) -> None:
                 )
 
 
-def _priors(
-    config: RigRunConfig, by_rec: dict[str, dict[str, Trajectory]] | None = None
-) -> dict[str, EdgePrior]:
-    """Joint priors: positions given in the config, and fixed-joint sessions (a ball's
-    centre by :func:`~acs_cli.core.joint.estimate_pivot`, a hinge's axis and line by
-    :func:`~acs_cli.core.joint.estimate_hinge_fixed`): files (``joints.<j>.fixed_joint``)
-    and recordings that hold the joint still (``recordings.<r>.fixed_joints``)."""
-    from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
-
-    held: dict[str, list[tuple[str, str, FloatArray]]] = {}
-    for rname, rec in config.recordings.items():
-        for jn in rec.fixed_joints:
-            for cam in config.joints[jn].between:
-                if cam in rec.cameras and by_rec is not None:
-                    key = f"recordings.{rname}.fixed_joints ({jn}, camera {cam})"
-                    held.setdefault(jn, []).append((key, cam, by_rec[rname][cam].T_world_cam))
-
+def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
+    """Joint priors: positions given in the config, and fixed-joint session files
+    (``joints.<j>.fixed_joint``: Algorithm II, :func:`~acs_cli.core.rig_solve.fixed_joint_prior`).
+    Recordings that hold a joint still (``recordings.<r>.fixed_joints``) are the engine's
+    (:class:`~acs_cli.core.rig_solve.Recordings`)."""
     check_prior_units(config)
     out = {}
     for name, j in config.joints.items():
         cov = None if j.position_std is None else np.eye(3) * j.position_std**2
-        position = dict(j.position_in)
-        covariance: dict[str, FloatArray] = (
-            {c: cov for c in j.position_in} if cov is not None else {}
+        prior = EdgePrior(
+            position_in=dict(j.position_in),
+            covariance_in={c: cov for c in j.position_in} if cov is not None else {},
         )
-        line: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
-        axis: dict[str, tuple[np.ndarray, float]] = {}
-        sessions: list[tuple[str, str, Path | FloatArray]] = [
-            (f"joints.{name}.fixed_joint.{cam}", cam, path) for cam, path in j.fixed_joint.items()
-        ]
-        sessions += held.get(name, [])
-        for key, cam, src in sessions:
-            if isinstance(src, Path):
-                try:
-                    T = read_trajectory(src).T_world_cam
-                except InputError as exc:
-                    raise InputError(
-                        f"{key}: {exc.message}", path=exc.path, line=exc.line
-                    ) from None
-            else:
-                T = src
-            if j.type == "ball":
-                pv = estimate_pivot(T, "refined", f"{key} (camera {cam})")
-                position.setdefault(cam, pv.position_in_cam)
-                covariance.setdefault(cam, pv.covariance)
-                continue
-            h = estimate_hinge_fixed(T, f"{key} (camera {cam})")
-            axis[cam] = (h.axis_in_cam, max(float(np.radians(h.axis_std_deg)), 1e-6))
-            if cam == j.between[0]:  # the rig's hinge point is the one nearest this camera
-                position.setdefault(cam, h.point_in_cam)
-                covariance.setdefault(cam, h.covariance_point + np.eye(3) * 1e-12)
-            else:  # only the line: the rig's point is nearest the other camera
-                std = float(np.sqrt(max(np.linalg.eigvalsh(h.covariance_point)[-1], 1e-18)))
-                line[cam] = (h.point_in_cam, h.axis_in_cam, std)
-        if position or line or axis:
-            out[name] = EdgePrior(
-                position_in=position, covariance_in=covariance, line_in=line, axis_in=axis
-            )
+        joint = config.topology.joint(name)
+        for cam, path in j.fixed_joint.items():
+            key = f"joints.{name}.fixed_joint.{cam}"
+            try:
+                T = read_trajectory(path).T_world_cam
+            except InputError as exc:
+                raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
+            prior = merge_priors(prior, fixed_joint_prior(joint, cam, T, f"{key} (camera {cam})"))
+        if prior.position_in or prior.line_in or prior.axis_in:
+            out[name] = prior
     return out
 
 
@@ -752,6 +725,15 @@ def rig_artifact(
         joints=joints,
         warnings=list(warnings),
         recordings=recs,
+        # a header of its own, so that an artifact built from arrays saves and loads back;
+        # run_rig replaces it with the run's inputs
+        header=make_header(
+            "rig",
+            {},
+            "acs_cli.core.rig_solve.estimate_rig (from arrays)",
+            {"length": length_unit, "angles": "deg"},
+            {"T_cam_ref": f"maps {ref}'s frame at instant {est.reference_frame} into the camera's"},
+        ),
     )
 
 
@@ -818,7 +800,7 @@ def run_rig(
     check_prior_units(config)
     files, by_rec = read_recordings(config, poses)
     turned = shared_board_orders(config, files, by_rec)
-    priors = _priors(config, by_rec)
+    priors = _priors(config)
     offsets: dict[str, tuple[float, float]] = {}
     single = config.single
     if single:

@@ -114,3 +114,33 @@ def test_bad_recordings_exit_2_naming_the_key(
     if key is not None:
         assert key in res.stderr
     assert not (tmp_path / "out" / "rig.yaml").exists()
+
+
+def test_the_papers_scenario_2_as_one_config(tmp_path: Path) -> None:
+    # a fixed-joint recording (the joint held still, each camera on its own board) and a
+    # general-motion recording, in one config: Algorithm II's prior, then the rig solve
+    from sample_data_gen import acs_sim
+
+    rng = np.random.default_rng(11)
+    rig = acs_sim.make_rig(rng)
+    fixed = acs_sim.fixed_joint_sequence(rng, rig, 30)
+    general = acs_sim.general_sequence(rng, rig, 40)
+    for name, seq in (("fixed", fixed), ("general", general)):
+        for cam, T in (("a", seq.T_wa_a), ("b", seq.T_wb_b)):
+            write_tum(tmp_path / f"{name}_{cam}.tum", seq.timestamps,
+                      acs_sim.add_pose_noise(rng, T, 0.3, 0.01))  # fmt: skip
+    (tmp_path / "config.yaml").write_text(
+        "schema_version: 2\noutput: out/\nreference: {camera: a, recording: general}\n"
+        "recordings:\n"
+        "  fixed:\n    fixed_joints: [j]\n"
+        "    cameras: {a: {poses: fixed_a.tum}, b: {poses: fixed_b.tum}}\n"
+        "  general:\n    cameras: {a: {poses: general_a.tum}, b: {poses: general_b.tum}}\n"
+        "joints:\n  j: {between: [a, b], type: ball}\n"
+    )
+    res = acscal("run", tmp_path / "config.yaml")
+    assert res.returncode == 0, res.stderr
+    r = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+    assert np.linalg.norm(r.joints["j"].position_in["a"] - rig.o_a) < 0.05
+    assert r.joints["j"].frames_used + r.joints["j"].frames_rejected == 40
+    T = r.posed("b")
+    assert np.linalg.norm(T[:3, 3] - general.T_b_a(0)[:3, 3]) < 0.1

@@ -146,3 +146,17 @@ def test_round_trip_with_a_pose_only_body_and_a_rigid_joints_std(
     path.write_text(yaml.safe_dump(doc))
     with pytest.raises(InputError, match=r"pose_only\.T_world_board\.ghost"):
         RigArtifact.load(path)
+
+
+def test_an_artifact_built_from_arrays_saves_and_loads(tmp_path: Path) -> None:
+    from acs_cli.stages.rig import rig_artifact
+    from sample_data_gen.rig_sim import rig_recording
+
+    rec = rig_recording(np.random.default_rng(0), 30, sigma_rot_deg=0.2, sigma_trans=0.005)
+    n = rec.timestamps.size
+    tracks = {c: CameraTrack(T, np.ones(n, bool)) for c, T in rec.T_wc_c.items()}
+    est = estimate_rig(rec.topology, tracks)
+    rig_artifact(est, "m", []).save(tmp_path / "rig.yaml")
+    back = RigArtifact.load(tmp_path / "rig.yaml")
+    assert set(back.cameras) == set(rec.topology.cameras)
+    assert back.header["schema"] == "acscal/rig"

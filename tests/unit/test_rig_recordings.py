@@ -117,21 +117,11 @@ def test_fixed_joint_recording_then_general_motion(rng: np.random.Generator) -> 
         for s, seq in (("fixed", fixed), ("general", general))
     }
     topo = rig_topology(["a", "b"], [("j", ["a", "b"], "ball")], "a")
-    # without the fixed recording as priors, its frames would try to tie two worlds that a
-    # pivot cannot tell apart: held, the recording adds no rows to the joint
-    from acs_cli.core.joint import estimate_pivot
-    from acs_cli.core.rig_solve import EdgePrior
-
-    pa = estimate_pivot(noisy["fixed"]["a"], "refined", "a")
-    pb = estimate_pivot(noisy["fixed"]["b"], "refined", "b")
-    prior = EdgePrior(
-        position_in={"a": pa.position_in_cam, "b": pb.position_in_cam},
-        covariance_in={"a": pa.covariance, "b": pb.covariance},
-    )
+    # held still, the fixed recording's frames would try to tie two worlds that a pivot
+    # cannot tell apart: the recording adds no rows to the joint, only Algorithm II's prior
     est = estimate_rig(
         topo,
         _tracks(noisy["general"], noisy["fixed"]),
-        priors={"j": prior},
         recordings=_recordings([40, 30], [False, False], ((), ("j",))),
     )
     e = est.edges["j"]
