@@ -825,14 +825,23 @@ def run_rig(
         index = {}
     warnings += turned
     k = recording_frame(config, recordings)
-    est = estimate_rig(
-        config.topology,
-        tracks,
-        reference_frame=k,
-        priors=priors,
-        accept_weak=config.accept_weak,
-        recordings=recordings,
-    )
+    try:
+        est = estimate_rig(
+            config.topology,
+            tracks,
+            reference_frame=k,
+            priors=priors,
+            accept_weak=config.accept_weak,
+            recordings=recordings,
+        )
+    except DegenerateMotionError as exc:
+        found = pose_format_diagnosis(config, tracks, k, priors, recordings)
+        if not found:
+            raise
+        # a file in another convention is bad input (exit 2), named with the key
+        raise InputError(
+            f"{found}; as given, {exc.message[0].lower()}{exc.message[1:]}", path=config.path
+        ) from None
     for name, e in est.edges.items():
         if e.frames_rejected:
             warnings.append(
@@ -1007,6 +1016,72 @@ def shared_board_orders(
                     + f" -> {rms[1]:.3g})"
                 )
     return notes
+
+
+#: Readings of a body's poses that a file in the wrong convention gives, tried when the rig
+#: does not fit: (cause, what it means, the fix).
+POSE_READINGS = (
+    ("inverted", "T_{body}_world given where T_world_{body} is expected", "invert them"),
+    ("wxyz", "quaternions written w x y z, read as TUM's x y z w", "write them x y z w"),
+    ("xyzw", "quaternions written x y z w, read as w x y z", "write them w x y z"),
+)
+
+
+def _reread(T: FloatArray, cause: str) -> FloatArray:
+    from acs_cli.core.diagnose import reordered_quaternions
+
+    if cause == "inverted":
+        return np.asarray(se3.invert_transforms(T))
+    return reordered_quaternions(T, -1 if cause == "wxyz" else 1)
+
+
+def pose_format_diagnosis(
+    config: RigRunConfig,
+    tracks: dict[str, CameraTrack],
+    k: int,
+    priors: dict[str, EdgePrior],
+    recordings: Recordings,
+) -> str:
+    """When the rig does not fit: the one body whose poses, read another way (inverted, or
+    their quaternions in the other order), make every joint fit; in words, or ``""``.
+
+    Only bodies given as ``poses`` files are tried (a robot controller's, a tracker's: a
+    board's poses come from acscal). Each reading is a whole solve without outlier
+    rejection; every reading that succeeds is named.
+    """
+    found: list[tuple[float, str]] = []
+    for c, spec in config.cameras.items():
+        if spec.poses is None:
+            continue
+        for cause, means, fix in POSE_READINGS:
+            tr = tracks[c]
+            T = tr.T_w_c.copy()
+            T[tr.valid] = _reread(T[tr.valid], cause)
+            trial = dict(tracks)
+            trial[c] = CameraTrack(T, tr.valid, tr.unknown_scale)
+            try:
+                est = estimate_rig(
+                    config.topology, trial, reference_frame=k, priors=priors,
+                    reject_outliers=False, accept_weak=True, recordings=recordings,
+                )  # fmt: skip
+            except (DegenerateMotionError, InputError):
+                continue
+            how = "inverted" if cause == "inverted" else "with their quaternions reordered"
+            worst = max(e.residual_rms for e in est.edges.values())
+            what = means.format(body=c)
+            key = camera_key(config, config.reference_recording, c) + ".poses"
+            found.append((worst, f"{key}: body {c}'s poses fit the rig {how} ({what}): {fix}"))
+    if not found:
+        return ""
+    # the readings whose worst joint residual is near the best's (a reading that only fits
+    # the rotations leaves the translations off by the rig's size)
+    best = min(w for w, _ in found)
+    fits = [text for w, text in sorted(found) if w <= 2.0 * best]
+    if len(fits) > 1:  # e.g. either body of a hand-eye pair: AX = ZB holds inverted too
+        return "one of these readings fits the rig, which the poses cannot tell apart: " + (
+            "; or ".join(fits)
+        )
+    return fits[0]
 
 
 def recording_frame(config: RigRunConfig, recordings: Recordings) -> int:
