@@ -988,6 +988,21 @@ _READERS: dict[str, Callable[[str | Path], Trajectory]] = {
 _SCHEMA_LINE = re.compile(r"^schema:\s*['\"]?(acscal/[\w.-]+)")
 
 
+def is_npz(path: str | Path) -> bool:
+    """Whether ``path`` is an NPZ archive, by its suffix or, under another name, by its
+    content (a zip archive), as the readers take it."""
+    p = Path(path)
+    if p.suffix.lower() == ".npz":
+        return True
+    try:
+        if p.is_file():  # not a FIFO or a device: opening one may block
+            with open(p, "rb") as fh:
+                return fh.read(4) == b"PK\x03\x04"
+    except OSError:
+        pass
+    return False
+
+
 def _sniff(path: Path) -> str:
     if path.suffix.lower() == ".npz":
         return "npz"

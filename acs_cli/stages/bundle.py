@@ -38,7 +38,7 @@ from acs_cli.core.joint import JointEstimate
 from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.trajectory import read_npz_header, read_npz_observations
+from acs_cli.io.trajectory import is_npz, read_npz_header, read_npz_observations
 from acs_cli.stages.common import PairedTrajectories
 
 __all__ = [
@@ -115,7 +115,7 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
     Returns ``(views, None)``, ``(None, warning)`` or ``(None, None)`` for a trajectory
     format that never carries corners.
     """
-    obs = read_npz_observations(poses) if poses.suffix.lower() == ".npz" else None
+    obs = read_npz_observations(poses) if is_npz(poses) else None
     if obs is None:
         return None, None
     if obs.corners.shape[0] != n_poses:
@@ -258,7 +258,7 @@ def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:
     :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both files are poses
     NPZs of the same, symmetric checkerboard (a target's corners are identified).
     """
-    obs = [read_npz_observations(p) if p.suffix.lower() == ".npz" else None for p in poses]
+    obs = [read_npz_observations(p) if is_npz(p) else None for p in poses]
     if obs[0] is None or obs[1] is None:
         return None
     if any("target" in read_npz_header(p) for p in poses):

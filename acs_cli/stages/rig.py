@@ -77,7 +77,7 @@ from acs_cli.io.rig import (
     RigRecordingResult,
     RigWorldResult,
 )
-from acs_cli.io.trajectory import Trajectory, read_trajectory, write_tum
+from acs_cli.io.trajectory import Trajectory, is_npz, read_trajectory, write_tum
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
     CornerViews,
@@ -850,7 +850,7 @@ def run_rig(
             )
     sections: dict[str, BundleSection] = {}
     shared = config.recording_of_reference().shared_world
-    has_corners = any(p.suffix == ".npz" for p, _ in files.values())
+    has_corners = any(is_npz(p) for p, _ in files.values())
     if config.bundle and not offsets and single and not shared:
         trajectories = by_rec[config.reference_recording]
         est, sections, notes = rig_bundle(config, files, trajectories, index, est)
@@ -984,7 +984,7 @@ def shared_board_orders(
             if a not in trajs or b not in trajs or b in settled or j.name in rec.fixed_joints:
                 continue
             pa, pb = files[label(config, rname, a)][0], files[label(config, rname, b)][0]
-            F = shared_board_flip((pa, pb)) if pa.suffix == pb.suffix == ".npz" else None
+            F = shared_board_flip((pa, pb)) if is_npz(pa) and is_npz(pb) else None
             settled.add(b)
             if F is None:
                 continue

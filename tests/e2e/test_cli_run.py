@@ -140,6 +140,24 @@ def test_bundle_adjustment_on_the_run_corners(workspace: dict[str, object], tmp_
     assert "bundle adjustment" not in plain["method"]
 
 
+def test_a_poses_npz_under_another_name_still_gets_its_bundle_adjustment(
+    workspace: dict[str, object], tmp_path: Path
+) -> None:
+    # issue 19: the bundle was chosen by the .npz suffix while the reader sniffs the content
+    run = Path(str(workspace["root"])) / "run"
+    for cam in ("a", "b"):  # their intrinsics file is found where the NPZ records it
+        data = (run / f"cam_{cam}" / "poses.npz").read_bytes()
+        (tmp_path / f"poses_{cam}.bin").write_bytes(data)
+    out = tmp_path / "joint.yaml"
+    res = acscal(
+        "joint", "--fixed-joint", "--poses-a", tmp_path / "poses_a.bin",
+        "--poses-b", tmp_path / "poses_b.bin", "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    doc = yaml.safe_load(out.read_text())
+    assert set(doc["quality"].get("bundle_adjustment", {})) == {"a", "b"}, res.stderr
+
+
 def test_second_run_skips_and_changed_image_reruns_its_camera(
     workspace: dict[str, object],
 ) -> None:
