@@ -209,7 +209,9 @@ class RigBundle:
 class _Layout:
     """Where each unknown lives: shared ones first, then one block per frame."""
 
-    def __init__(self, topo: RigTopology, n: int, free: dict[str, list[int]]) -> None:
+    def __init__(
+        self, topo: RigTopology, n: int, free: dict[str, list[int]], one_world: set[str]
+    ) -> None:
         k = 0
         self.free = free  # per camera: indices of its refined intrinsics
         self.intr = {}
@@ -219,7 +221,7 @@ class _Layout:
                 k += len(free[c])
         self.world = {}
         for c in topo.cameras:
-            if c != topo.reference:
+            if c not in one_world:  # the reference's world (a shared world) has no unknowns
                 self.world[c] = slice(k, k + 6)
                 k += 6
         self.geom = {}
@@ -350,8 +352,10 @@ class _Model:
         body's world."""
         if c == self.topo.reference:
             return np.eye(3), np.zeros(3)
-        w = x[self.L.world[c]]
         W0 = self.W0[c]
+        if c not in self.L.world:  # in the reference's (shared) world: held
+            return W0[:3, :3], W0[:3, 3]
+        w = x[self.L.world[c]]
         return W0[:3, :3] @ se3.matrix_from_rotvec(w[:3]), W0[:3, 3] + w[3:]
 
     def raw(self, x: FloatArray) -> tuple[list[FloatArray], dict[str, FloatArray]]:
@@ -452,6 +456,21 @@ def _check(
     return n
 
 
+def _in_reference_world(est: RigEstimate) -> set[str]:
+    """The bodies in the reference camera's world at the reference instant: itself, or
+    every body of its recording when they share one world (``world: shared``): their board
+    is the reference's, with no unknowns of its own."""
+    ref = est.topology.reference
+    recs = est.recordings
+    if recs is None:
+        return {ref}
+    here = recs.names[int(recs.of_frame[est.reference_frame])]
+    for w in est.worlds:
+        if w.recording == here and w.shared and ref in w.cameras:
+            return set(w.cameras)
+    return {ref}
+
+
 def _initial(
     topo: RigTopology,
     views: dict[str, CameraViews],
@@ -460,7 +479,12 @@ def _initial(
     frames: np.ndarray,
 ) -> tuple[_Model, FloatArray]:
     """The model and its starting unknowns, from the pose-based estimate."""
-    L = _Layout(topo, frames.size, {c: camera_model(v.model).free() for c, v in views.items()})
+    L = _Layout(
+        topo,
+        frames.size,
+        {c: camera_model(v.model).free() for c, v in views.items()},
+        _in_reference_world(est),
+    )
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
     x = np.zeros(L.size)
     blocks = np.zeros((frames.size, L.block))
@@ -754,7 +778,7 @@ def _pose_bodies(
     pose: dict[str, FloatArray],
 ) -> dict[str, PoseBodyFit]:
     """Each pose-only body's noise, residuals and every corner camera's board in its world."""
-    L, ref = model.L, model.topo.reference
+    L = model.L
     out = {}
     for b in model.bodies:
         boards: dict[str, FloatArray] = {}
@@ -774,7 +798,9 @@ def _pose_bodies(
                     [se3.rotvec_from_matrix(T0[:3, :3].T @ Tx[:3, :3]), Tx[:3, 3]]
                 )
 
-            cols = [i for w in (b, c) if w != ref for i in range(L.world[w].start, L.world[w].stop)]
+            cols = [
+                i for w in (b, c) if w in L.world for i in range(L.world[w].start, L.world[w].stop)
+            ]
             idx = [where[i] for i in cols]
             boards[c] = T0
             covs[c] = lsq.propagate(vec, x, cols, cov[np.ix_(idx, idx)])[1]

@@ -799,7 +799,7 @@ def run_rig(
     poses = dict(poses or {})
     check_prior_units(config)
     files, by_rec = read_recordings(config, poses)
-    turned = shared_board_orders(config, files, by_rec)
+    turned, turns = shared_board_orders(config, files, by_rec)
     priors = _priors(config)
     offsets: dict[str, tuple[float, float]] = {}
     single = config.single
@@ -849,16 +849,15 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    shared = config.recording_of_reference().shared_world
     has_corners = any(is_npz(p) for p, _ in files.values())
-    if config.bundle and not offsets and single and not shared:
+    if config.bundle and not offsets and single:
         trajectories = by_rec[config.reference_recording]
-        est, sections, notes = rig_bundle(config, files, trajectories, index, est)
+        est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns)
         warnings += notes
-    elif config.bundle and has_corners and (shared or not single):
+    elif config.bundle and has_corners and not single:
         warnings.append(
-            "no bundle adjustment of the rig: it takes one recording with a world per camera "
-            "yet, so a rig of several recordings or a shared world is solved from poses"
+            "no bundle adjustment of the rig: it takes a config of one recording yet, so a "
+            "rig of several recordings is solved from poses"
         )
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
@@ -960,7 +959,7 @@ def shared_board_orders(
     config: RigRunConfig,
     files: dict[str, tuple[Path, str]],
     by_rec: dict[str, dict[str, Trajectory]],
-) -> list[str]:
+) -> tuple[list[str], dict[str, FloatArray]]:
     """Bring every camera of a shared world to one labelling of a symmetric checkerboard.
 
     Two cameras that see one checkerboard can label it in its two orders (see
@@ -968,11 +967,13 @@ def shared_board_orders(
     turn. For each joint between two cameras of a shared recording whose poses carry that
     board, the second camera's trajectory is turned to the first's order when its joint
     then fits with less than half the residual (as ``acscal joint --overlap`` does); the
-    trajectories in ``by_rec`` are replaced. Returns what was turned, as warnings.
+    trajectories in ``by_rec`` are replaced. Returns what was turned, as warnings, and the
+    half turn of each camera turned (by :func:`label`).
     """
     from acs_cli.stages.bundle import shared_board_flip
 
     notes: list[str] = []
+    turns: dict[str, FloatArray] = {}
     for rname, rec in config.recordings.items():
         if not rec.shared_world:
             continue
@@ -1009,13 +1010,14 @@ def shared_board_orders(
             if rms[1] < 0.5 * rms[0]:
                 t = trajs[b]
                 trajs[b] = dataclasses.replace(t, T_world_cam=F @ t.T_world_cam)
+                turns[label(config, rname, b)] = F
                 notes.append(
                     f"recording {rname}: camera {b} labelled the shared board in the other "
                     f"order than {a}; turned to {a}'s (joint {j.name}'s residual "
                     + (f"{rms[0]:.3g}" if np.isfinite(rms[0]) else "did not fit")
                     + f" -> {rms[1]:.3g})"
                 )
-    return notes
+    return notes, turns
 
 
 #: Readings of a body's poses that a file in the wrong convention gives, tried when the rig
@@ -1303,9 +1305,13 @@ def rig_bundle(
     trajectories: dict[str, Trajectory],
     index: dict[str, np.ndarray],
     est: RigEstimate,
+    turned: dict[str, FloatArray] | None = None,
 ) -> tuple[RigEstimate, dict[str, BundleSection], list[str]]:
     """Refine a rig on its corners when at least one camera's poses carry them (poses NPZs
     of ``acscal poses``): the estimate, each camera's bundle section, and warnings.
+    ``turned``: cameras whose trajectory was brought to another's labelling of a shared
+    board by a half turn ``F`` (:func:`shared_board_orders`): their corners' board points
+    are turned with it.
 
     The other bodies (a robot's flange, a motion-capture segment, an INS: poses without
     corners) enter the bundle with their measured poses and their own fitted noise levels.
@@ -1331,7 +1337,10 @@ def rig_bundle(
         corners = np.full((n, *got.corners.shape[1:]), np.nan)  # NaN: not seen
         corners[valid] = got.corners[rows[valid]]
         ok = np.asarray(np.isfinite(corners).all(axis=2))
-        views[name] = CameraViews(corners, ok, got.board_points, got.intrinsics, got.model)
+        X = got.board_points
+        if turned and name in turned:
+            X = se3.transform_points(turned[name], X)
+        views[name] = CameraViews(corners, ok, X, got.intrinsics, got.model)
         sources[name] = got
     if not views:
         return est, {}, notes

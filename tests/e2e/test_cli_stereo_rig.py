@@ -75,6 +75,9 @@ def test_a_rigid_pair_seeing_one_board_is_stereo_calibration(stereo: Path) -> No
     assert np.linalg.norm(T[:3, 3] - ref[:3, 3]) < 0.001
     assert se3.rotation_angle_deg((T[:3, :3].T @ ref[:3, :3])[None])[0] < 0.2
     assert rig.recordings["default"].shared_world
+    # refined on both cameras' corners, with one board for both (no world between them)
+    assert set(rig.bundle_adjustment) == {"left", "right"}
+    assert all(b.rms_px < 0.25 for b in rig.bundle_adjustment.values())
 
 
 @needs_data
