@@ -530,6 +530,24 @@ def joint_geometry(
     return o_p, e[2:5], up, uq
 
 
+def residual_geometry(
+    st: _State, x: FloatArray, j: RigJoint
+) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
+    """:func:`joint_geometry` as the constraints use it: a hinge's point moved along its axis
+    to the one nearest both cameras' centres together (least ``|o_p|^2 + |o_q|^2``).
+
+    Any point of the axis satisfies the constraint, but the pose noise reaches the residual
+    through the lever arms, so the point used must not depend on which camera is named
+    first: this one is symmetric in ``p`` and ``q`` (swapping ``between`` changes no
+    estimate), and the least-noisy point of the line. Priors and results keep the reported
+    point (nearest ``p``'s centre)."""
+    o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
+    if u_p is None or u_q is None:
+        return o_p, o_q, u_p, u_q
+    s = -0.5 * float(o_p @ u_p + o_q @ u_q)
+    return o_p + s * u_p, o_q + s * u_q, u_p, u_q
+
+
 def hinge_axes(st: _State, x: FloatArray, j: RigJoint) -> tuple[FloatArray, FloatArray]:
     """A hinge's unit axes ``u_p, u_q`` (see :func:`joint_geometry`)."""
     _, _, u_p, u_q = joint_geometry(st, x, j)
@@ -547,7 +565,7 @@ def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, F
     Rq, tq = G[q][0][f], G[q][1][f]
     out: dict[str, FloatArray] = {}
     if j.type in ("ball", "hinge"):
-        o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
+        o_p, o_q, u_p, u_q = residual_geometry(st, x, j)
         out["pos"] = (se3.rotate(Rp, o_p) + tp) - (se3.rotate(Rq, o_q) + tq)  # eq. (24)
         if u_p is not None and u_q is not None:
             out["rot"] = se3.rotate(Rp, u_p) - se3.rotate(Rq, u_q)  # one axis
@@ -586,7 +604,9 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
     return np.concatenate(parts)
 
 
-def _geometry_jacobian(st: _State, x: FloatArray, j: RigJoint) -> FloatArray:
+def _geometry_jacobian(
+    st: _State, x: FloatArray, j: RigJoint, for_residuals: bool = False
+) -> FloatArray:
     """``(12, k)``: derivatives of ``(o_p, o_q, u_p, u_q)`` by the edge's ``k`` unknowns.
 
     Central differences of :func:`joint_geometry` (a few vector operations, no frames).
@@ -599,7 +619,7 @@ def _geometry_jacobian(st: _State, x: FloatArray, j: RigJoint) -> FloatArray:
     def g(dx: FloatArray) -> FloatArray:
         xx = x.copy()
         xx[sl] += dx
-        parts = joint_geometry(st, xx, j)
+        parts = (residual_geometry if for_residuals else joint_geometry)(st, xx, j)
         return np.concatenate([v if v is not None else np.zeros(3) for v in parts])
 
     return np.stack([(g(E[i]) - g(-E[i])) / (2 * h) for i in range(size)], axis=1)
@@ -671,8 +691,8 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
         RGp = np.matmul(W.R[st.widx[p][f]], Rp)
         RGq = np.matmul(W.R[st.widx[q][f]], Rq)
         if j.type in ("ball", "hinge"):
-            o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
-            Dg = _geometry_jacobian(st, x, j)
+            o_p, o_q, u_p, u_q = residual_geometry(st, x, j)
+            Dg = _geometry_jacobian(st, x, j, for_residuals=True)
             Wp = st.whiten_pos[j.name] * mask
             yp = se3.rotate(Rp, o_p) + W.s[st.widx[p][f], None] * meas[p][1][f]
             yq = se3.rotate(Rq, o_q) + W.s[st.widx[q][f], None] * meas[q][1][f]
@@ -930,7 +950,7 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
         b = _edge_blocks(st, x, j, G)
         d: dict[str, float] = {}
         if "pos" in b:
-            o_p, o_q, _, _ = joint_geometry(st, x, j)
+            o_p, o_q, _, _ = residual_geometry(st, x, j)
             Lsh = lever_shapes(G[p][0][f], o_p) + lever_shapes(G[q][0][f], o_q)
             th = fit_variance_components(b["pos"][m], Lsh[m], int(np.ceil(share * m.sum())))
             th = np.maximum(th, [(NOISE_FLOOR_LENGTH * st.length) ** 2, NOISE_FLOOR_ROT**2])

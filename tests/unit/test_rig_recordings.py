@@ -241,3 +241,24 @@ def test_swapping_a_rigid_edge_or_the_reference_changes_nothing(
         assert (
             se3.rotation_angle_deg((T[:3, :3].T @ got[0][:3, :3])[None])[0] < 1e-4
         )  # solver tolerance
+
+
+@pytest.mark.parametrize("joint_type", ["ball", "hinge"])
+def test_swapping_a_ball_or_hinge_changes_nothing(joint_type: str) -> None:
+    from sample_data_gen.rig_sim import rig_recording
+
+    rec = rig_recording(np.random.default_rng(5), 60, joints=(("j", ("a", "b"), joint_type),),
+                        reference="a", sigma_rot_deg=0.3, sigma_trans=0.005)  # fmt: skip
+    n = rec.timestamps.size
+    tracks = {c: CameraTrack(T, np.ones(n, bool)) for c, T in rec.T_wc_c.items()}
+    got = []
+    for between, ref in ((["a", "b"], "a"), (["b", "a"], "a"), (["a", "b"], "b")):
+        e = estimate_rig(rig_topology(["a", "b"], [("j", between, joint_type)], ref), tracks)
+        j = e.edges["j"]
+        o, u = j.position_in["a"], j.axis_in.get("a")
+        if u is not None:  # the hinge's line: its point nearest a's centre, its direction
+            u = u * np.sign(u[np.argmax(np.abs(u))])
+            o = np.concatenate([o - (o @ u) * u, u])
+        got.append(o)
+    for g in got[1:]:
+        assert np.abs(g - got[0]).max() < 2e-5  # solver tolerance (the reference's gauge)
