@@ -4,8 +4,9 @@
 Keys (after the header): ``scenario`` (``fixed_joint`` or ``overlap``), ``joint``
 (:class:`JointSection`: ``position_in_a`` and ``_std``, ``position_in_b`` and ``_std``,
 ``covariance_a``, ``covariance_b``, ``units``), ``quality`` (:class:`JointQuality`) and
-``warnings``; ``docs/formats.md`` has the meaning of each. :func:`load_joint_section` reads
-the joint of a ``joint.yaml`` or of a ``relpose.yaml`` (``relpose --joint`` takes either).
+``warnings``; ``docs/formats.md`` has the meaning of each.
+:func:`acs_cli.io.relpose.load_joint_section` reads the joint of a ``joint.yaml`` or of a
+``relpose.yaml`` (``relpose --joint`` takes either).
 """
 
 from __future__ import annotations
@@ -45,13 +46,10 @@ __all__ = [
     "MotionQuality",
     "Pairing",
     "PoseNoise",
-    "load_joint_artifact",
-    "load_joint_section",
 ]
 
 if TYPE_CHECKING:
     from acs_cli.core.joint import MotionSummary
-    from acs_cli.io.relpose import RelposeArtifact
 
 Source = Path | str | None
 
@@ -682,41 +680,3 @@ class JointArtifact(YamlArtifact):
             lines.append(f"  residual RMS: {rms:.3g} {u}")
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
-
-
-def load_joint_artifact(path: str | Path) -> JointArtifact | RelposeArtifact:
-    """A ``joint.yaml``, or a ``relpose.yaml`` with a joint (``relpose --joint`` takes either);
-    the caller reads the joint's unit from it (``length_unit``, ``unknown_scale``).
-
-    Raises
-    ------
-    InputError
-        Neither kind, or a joint that is missing or malformed.
-    """
-    p = Path(path)
-    try:
-        return JointArtifact.load(p)
-    except InputError as exc:
-        if "acscal/relpose" not in exc.message:
-            raise
-    from acs_cli.io.relpose import RelposeArtifact
-
-    rel = RelposeArtifact.load(p)
-    if rel.joint is None:
-        raise InputError("missing key 'joint.position_in_a'", path=p)
-    return rel
-
-
-def load_joint_section(path: str | Path) -> JointSection:
-    """The joint of a ``joint.yaml``, or of a ``relpose.yaml`` (its estimated joint), in the
-    file's own units (:func:`load_joint_artifact`).
-
-    Raises
-    ------
-    InputError
-        Neither kind, or a joint that is missing or malformed.
-    """
-    joint = load_joint_artifact(path).joint
-    if joint is None:  # load_joint_artifact refuses this; the check keeps the type
-        raise InputError("missing key 'joint.position_in_a'", path=path)
-    return joint

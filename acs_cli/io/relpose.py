@@ -6,6 +6,8 @@ Keys (after the header): ``scenario`` (``general``), ``relative_pose``
 (:class:`RelposeQuality`) and ``warnings``; ``docs/formats.md`` has the meaning of each.
 Reading requires ``relative_pose.T_b_a`` (a rigid 4x4); ``acscal trajectory`` also needs
 the joint in both cameras (:meth:`RelposeArtifact.require_joint`).
+:func:`load_joint_section` reads the joint of a ``joint.yaml`` or of a ``relpose.yaml``
+(``relpose --joint`` takes either).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.joint import (
     BundleSection,
     FramesUsed,
+    JointArtifact,
     JointSection,
     Pairing,
     PoseNoise,
@@ -39,7 +42,14 @@ from acs_cli.io.validate import (
 )
 from acs_cli.io.verdict import VerdictSection
 
-__all__ = ["RelativePose", "RelposeArtifact", "RelposeQuality", "Scale"]
+__all__ = [
+    "RelativePose",
+    "RelposeArtifact",
+    "RelposeQuality",
+    "Scale",
+    "load_joint_artifact",
+    "load_joint_section",
+]
 
 Source = Path | str | None
 
@@ -386,3 +396,39 @@ class RelposeArtifact(YamlArtifact):
             lines.append(f"  residual RMS: {self.quality.residual_rms:.3g} {unit_b}")
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
+
+
+def load_joint_artifact(path: str | Path) -> JointArtifact | RelposeArtifact:
+    """A ``joint.yaml``, or a ``relpose.yaml`` with a joint (``relpose --joint`` takes either);
+    the caller reads the joint's unit from it (``length_unit``, ``unknown_scale``).
+
+    Raises
+    ------
+    InputError
+        Neither kind, or a joint that is missing or malformed.
+    """
+    p = Path(path)
+    try:
+        return JointArtifact.load(p)
+    except InputError as exc:
+        if "acscal/relpose" not in exc.message:
+            raise
+    rel = RelposeArtifact.load(p)
+    if rel.joint is None:
+        raise InputError("missing key 'joint.position_in_a'", path=p)
+    return rel
+
+
+def load_joint_section(path: str | Path) -> JointSection:
+    """The joint of a ``joint.yaml``, or of a ``relpose.yaml`` (its estimated joint), in the
+    file's own units (:func:`load_joint_artifact`).
+
+    Raises
+    ------
+    InputError
+        Neither kind, or a joint that is missing or malformed.
+    """
+    joint = load_joint_artifact(path).joint
+    if joint is None:  # load_joint_artifact refuses this; the check keeps the type
+        raise InputError("missing key 'joint.position_in_a'", path=path)
+    return joint

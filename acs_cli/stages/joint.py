@@ -39,9 +39,8 @@ from acs_cli.io.joint import (
     MotionQuality,
     Pairing,
     PoseNoise,
-    load_joint_artifact,
-    load_joint_section,
 )
+from acs_cli.io.relpose import RelposeArtifact, load_joint_artifact, load_joint_section
 from acs_cli.io.trajectory import Trajectory
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap, shared_board_flip
@@ -412,7 +411,7 @@ def joint_verdict_measures(est: JointEstimate, poses: dict[str, np.ndarray]) -> 
 
 def read_joint(path: Path) -> JointSection:
     """The joint of a ``joint.yaml`` (or of a ``relpose.yaml``), checked
-    (:func:`acs_cli.io.joint.load_joint_section`)."""
+    (:func:`acs_cli.io.relpose.load_joint_section`)."""
     return load_joint_section(path)
 
 
@@ -443,7 +442,6 @@ def read_joint_in_units(
     """
     from acs_cli.io.artifacts import sha256_of
     from acs_cli.io.export import METRES_PER_UNIT
-    from acs_cli.io.relpose import RelposeArtifact
 
     art = load_joint_artifact(path)
     joint = art.joint

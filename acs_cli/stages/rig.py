@@ -14,24 +14,22 @@ A rig run config (``schema_version: 2``) names cameras and the joints between th
       j01: {between: [cam0, cam1], type: ball}
       j12: {between: [cam1, cam2], type: hinge}
 
-:func:`parse_rig_config` checks it (every error names the key); :func:`run_rig` reads each
-camera's trajectory, puts all cameras on one timeline, solves the whole rig
-(:func:`acs_cli.core.rig_solve.estimate_rig`) and writes ``rig.yaml``
+:func:`parse_rig_config` (:mod:`acs_cli.io.config`) checks it (every error names the key);
+:func:`run_rig` reads each camera's trajectory, puts all cameras on one timeline, solves the
+whole rig (:func:`acs_cli.core.rig_solve.estimate_rig`) and writes ``rig.yaml``
 (:class:`acs_cli.io.rig.RigArtifact`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.intrinsics import MODELS
-from acs_cli.core.pairing import PAIR_BY, common_timeline
+from acs_cli.core.pairing import common_timeline
 from acs_cli.core.quality import (
     JOINT_STD,
     REJECTED,
@@ -41,7 +39,7 @@ from acs_cli.core.quality import (
     largest_std,
     length_scale,
 )
-from acs_cli.core.rig import JOINT_TYPES, RigJoint, RigTopology, rig_topology
+from acs_cli.core.rig import RigJoint, rig_topology
 from acs_cli.core.rig_bundle import (
     MIN_RIG_BUNDLE_FRAMES,
     CameraViews,
@@ -59,7 +57,6 @@ from acs_cli.core.rig_solve import (
     merge_priors,
 )
 from acs_cli.core.se3 import FloatArray
-from acs_cli.core.targets import MarkerTarget
 from acs_cli.core.time_offset import (
     Fit,
     PoseInterpolator,
@@ -68,6 +65,11 @@ from acs_cli.core.time_offset import (
 )
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header
+from acs_cli.io.config import RigCameraSpec as RigCameraSpec  # the config, as before
+from acs_cli.io.config import RigJointSpec as RigJointSpec
+from acs_cli.io.config import RigRecordingSpec, RigRunConfig
+from acs_cli.io.config import is_rig_config as is_rig_config
+from acs_cli.io.config import parse_rig_config as parse_rig_config
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.rig import (
     PoseOnlySection,
@@ -87,405 +89,7 @@ from acs_cli.stages.bundle import (
     degenerate_warning,
 )
 
-RIG_CONFIG_VERSION = 2
-SCALES = ("known", "unknown")
-FRONT_ENDS = ("board", "sfm")
-SFM_MATCHING = ("auto", "sequential", "exhaustive")
-TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
 RIG_FILE = "rig.yaml"
-#: Camera keys that only apply to a camera given as an image folder.
-_IMAGE_KEYS = ("front_end", "intrinsics", "timestamps", "fps")
-
-
-@dataclass(frozen=True)
-class RigCameraSpec:
-    """One camera of a rig config: a trajectory file, or an image folder of a board."""
-
-    name: str
-    poses: Path | None = None
-    format: str = "auto"
-    images: Path | None = None
-    model: str = "pinhole"
-    unknown_scale: bool = False
-    #: how an image folder becomes poses: ``board`` (checkerboard intrinsics and PnP) or
-    #: ``sfm`` (structure from motion on natural images: up to scale)
-    front_end: str = "board"
-    #: for ``front_end: sfm``: an intrinsics file (else COLMAP self-calibrates)
-    intrinsics: Path | None = None
-    #: with ``images``: where image times come from (``acscal poses --timestamps``/``--fps``)
-    timestamps: Path | None = None
-    fps: float | None = None
-
-
-@dataclass(frozen=True)
-class RigJointSpec:
-    """One joint of a rig config, with an optional prior on its position (metres)."""
-
-    name: str
-    between: tuple[str, str]
-    type: str
-    position_in: dict[str, np.ndarray] = field(default_factory=dict)
-    position_std: float | None = None
-    fixed_joint: dict[str, Path] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class RigRecordingSpec:
-    """One recording of a rig config: the bodies it saw, and whether they share a world.
-
-    ``fixed_joints``: joints held still in the recording's world (the paper's fixed-joint
-    motion, a pivot): each camera of such a joint gives the joint's position in its frame
-    by Algorithm II, a prior of the rig solve; the recording adds no rows to those joints.
-    """
-
-    name: str
-    cameras: dict[str, RigCameraSpec]
-    shared_world: bool = False
-    fixed_joints: tuple[str, ...] = ()
-
-
-#: The recording of a config written without ``recordings`` (one recording).
-DEFAULT_RECORDING = "default"
-#: ``world``: every body's poses in one world, or each in its own.
-WORLDS = ("separate", "shared")
-
-
-@dataclass(frozen=True)
-class RigRunConfig:
-    """A checked rig run configuration (``schema_version: 2``); paths are resolved."""
-
-    path: Path
-    output: Path
-    reference_camera: str
-    reference_frame: int
-    cameras: dict[str, RigCameraSpec]
-    joints: dict[str, RigJointSpec]
-    topology: RigTopology
-    board: tuple[int, int, float] | None = None
-    #: an AprilGrid or ChArUco (config key ``target``) instead of the board
-    target: MarkerTarget | None = None
-    pair_by: str = "auto"
-    max_dt: float | None = None
-    workers: int | None = None
-    bundle: bool = True
-    estimate_time_offset: bool = False
-    max_offset: float = 0.5
-    #: options of the cameras with ``front_end: sfm`` (``acscal poses --sfm``'s)
-    sfm: dict[str, Any] = field(default_factory=dict)
-    #: write joints past a refusal level, marked weak (``acscal run --accept-weak``)
-    accept_weak: bool = False
-    #: every recording of the rig (one, named ``default``, for a config without
-    #: ``recordings``); ``cameras`` holds each body's settings, common to its recordings
-    recordings: dict[str, RigRecordingSpec] = field(default_factory=dict)
-    reference_recording: str = DEFAULT_RECORDING
-
-    def __post_init__(self) -> None:
-        if not self.recordings:  # built by hand with cameras only: their one recording
-            rec = RigRecordingSpec(DEFAULT_RECORDING, dict(self.cameras))
-            object.__setattr__(self, "recordings", {DEFAULT_RECORDING: rec})
-            object.__setattr__(self, "reference_recording", DEFAULT_RECORDING)
-
-    @property
-    def single(self) -> bool:
-        """Whether the config has one recording."""
-        return len(self.recordings) <= 1
-
-    def recording_of_reference(self) -> RigRecordingSpec:
-        """The reference recording's spec."""
-        return self.recordings[self.reference_recording]
-
-
-def is_rig_config(doc: Any) -> bool:
-    """Whether a loaded run config is a rig config (version 2, or it has ``joints``)."""
-    return isinstance(doc, dict) and (
-        doc.get("schema_version") == RIG_CONFIG_VERSION or "joints" in doc
-    )
-
-
-def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
-    """Check a rig run config; every error is an :class:`InputError` naming the key.
-
-    Raises
-    ------
-    InputError
-        Unknown or missing keys, wrong values, and a joint graph that is not a tree: a
-        cycle, an unknown camera in a joint, two joints between one pair, a camera in no
-        joint.
-    """
-    from acs_cli.stages.run import CONFIG_SCHEMA, _Checker
-
-    c = _Checker(path)
-    top = c.mapping(
-        doc,
-        "",
-        required=("output", "joints"),
-        optional=(
-            "schema", "schema_version", "reference", "board", "target", "pair_by", "max_dt",
-            "workers", "bundle", "estimate_time_offset", "max_offset", "sfm", "cameras",
-            "recordings", "world",
-        ),
-    )  # fmt: skip
-    if top.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
-        raise c.fail("schema", f"must be {CONFIG_SCHEMA}, got {str(top['schema'])[:60]!r}")
-    version = c.integer(top.get("schema_version", RIG_CONFIG_VERSION), "schema_version", 1)
-    if version != RIG_CONFIG_VERSION:
-        raise c.fail(
-            "schema_version",
-            f"a config with joints is version {RIG_CONFIG_VERSION}, got {version}",
-        )
-    output = c.path(top["output"], "output")
-    if ("cameras" in top) == ("recordings" in top):
-        raise c.fail("cameras", "give either 'cameras' (one recording) or 'recordings' (several)")
-    recordings: dict[str, RigRecordingSpec] = {}
-    if "cameras" in top:
-        shared = c.choice(top.get("world", "separate"), "world", WORLDS) == "shared"
-        cams = _camera_specs(c, top["cameras"], "cameras")
-        recordings[DEFAULT_RECORDING] = RigRecordingSpec(DEFAULT_RECORDING, cams, shared)
-    else:
-        if "world" in top:
-            raise c.fail("world", "goes in each recording (recordings.<name>.world)")
-        recs_doc = c.mapping(
-            top["recordings"], "recordings", optional=tuple(map(str, top["recordings"] or {}))
-        )
-        if not recs_doc:
-            raise c.fail("recordings", "names no recording")
-        for rname, rec in recs_doc.items():
-            key = f"recordings.{rname}"
-            rec = c.mapping(rec, key, required=("cameras",), optional=("world", "fixed_joints"))
-            shared = c.choice(rec.get("world", "separate"), f"{key}.world", WORLDS) == "shared"
-            held = rec.get("fixed_joints") or []
-            if not isinstance(held, list) or not all(isinstance(h, str) for h in held):
-                raise c.fail(f"{key}.fixed_joints", "must be a list of joint names")
-            recordings[str(rname)] = RigRecordingSpec(
-                str(rname), _camera_specs(c, rec["cameras"], f"{key}.cameras"), shared,
-                tuple(held),
-            )  # fmt: skip
-    cameras = _body_settings(c, recordings)
-    ref = c.mapping(
-        top.get("reference", {}), "reference", optional=("camera", "frame", "recording")
-    )
-    ref_rec = ref.get("recording", next(iter(recordings)))
-    if not isinstance(ref_rec, str) or ref_rec not in recordings:
-        raise c.fail(
-            "reference.recording", f"must name one of the recordings ({', '.join(recordings)})"
-        )
-    ref_cam = ref.get("camera", next(iter(recordings[ref_rec].cameras)))
-    if not isinstance(ref_cam, str) or ref_cam not in cameras:
-        raise c.fail("reference.camera", f"must name one of the cameras ({', '.join(cameras)})")
-    if ref_cam not in recordings[ref_rec].cameras:
-        raise c.fail("reference.camera", f"{ref_cam} is not in the reference recording {ref_rec}")
-    ref_frame = c.integer(ref.get("frame", 0), "reference.frame", 0)
-    joints_doc = c.mapping(top["joints"], "joints", optional=tuple(map(str, top["joints"])))
-    joints: dict[str, RigJointSpec] = {}
-    raw: list[tuple[str, list[str], str]] = []
-    for name, j in joints_doc.items():
-        key = f"joints.{name}"
-        j = c.mapping(
-            j,
-            key,
-            required=("between", "type"),
-            optional=("position_in", "position_std", "fixed_joint"),
-        )
-        between = j["between"]
-        if not isinstance(between, list) or not all(isinstance(b, str) for b in between):
-            raise c.fail(f"{key}.between", "must be a list of two camera names")
-        jtype = c.choice(j["type"], f"{key}.type", JOINT_TYPES)
-        raw.append((name, between, jtype))
-        pos: dict[str, np.ndarray] = {}
-        if j.get("position_in") is not None:
-            pm = c.mapping(j["position_in"], f"{key}.position_in", optional=tuple(between))
-            for cam_name, v in pm.items():
-                arr = np.asarray(v, dtype=float) if isinstance(v, list) else np.zeros(0)
-                if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-                    raise c.fail(f"{key}.position_in.{cam_name}", "must be three numbers (m)")
-                pos[cam_name] = arr
-        std = None
-        if j.get("position_std") is not None:
-            std = c.positive(j["position_std"], f"{key}.position_std")
-        if jtype == "rigid" and pos:
-            raise c.fail(f"{key}.position_in", "a rigid joint has no position")
-        fixed: dict[str, Path] = {}
-        if j.get("fixed_joint") is not None:
-            if jtype == "rigid":
-                raise c.fail(f"{key}.fixed_joint", "a rigid joint has no fixed-joint session")
-            fm = c.mapping(j["fixed_joint"], f"{key}.fixed_joint", optional=tuple(between))
-            fixed = {n: c.path(v, f"{key}.fixed_joint.{n}") for n, v in fm.items()}
-        joints[name] = RigJointSpec(
-            name, (str(between[0]), str(between[-1])), jtype, pos, std, fixed
-        )
-    if not raw:
-        raise c.fail("joints", "names no joint: a rig needs two cameras and a joint between them")
-    try:
-        topo = rig_topology(list(cameras), raw, ref_cam)
-    except InputError as exc:
-        raise InputError(exc.message, path=path) from None
-    _check_recordings(c, recordings, joints)
-    board, target = c.board_or_target(top)
-    image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
-    if image_cams and board is None and target is None:
-        raise c.fail("board", f"missing (camera {image_cams[0]} has images; or a 'target')")
-    max_dt = None
-    if top.get("max_dt") is not None:
-        max_dt = c.positive(top["max_dt"], "max_dt")
-    workers = None
-    if top.get("workers") is not None:
-        workers = c.integer(top["workers"], "workers", 1)
-    return RigRunConfig(
-        path=path,
-        output=output,
-        reference_camera=ref_cam,
-        reference_frame=ref_frame,
-        cameras=cameras,
-        joints=joints,
-        topology=topo,
-        board=board,
-        target=target,
-        pair_by=c.choice(top.get("pair_by", "auto"), "pair_by", PAIR_BY),
-        max_dt=max_dt,
-        workers=workers,
-        bundle=c.boolean(top.get("bundle", True), "bundle"),
-        estimate_time_offset=c.boolean(
-            top.get("estimate_time_offset", False), "estimate_time_offset"
-        ),
-        max_offset=c.positive(top.get("max_offset", 0.5), "max_offset"),
-        sfm=_sfm_options(c, top.get("sfm")),
-        recordings=recordings,
-        reference_recording=ref_rec,
-    )
-
-
-def _camera_specs(c: Any, doc: Any, where: str) -> dict[str, RigCameraSpec]:
-    """The camera entries of one recording (``cameras`` or ``recordings.<r>.cameras``)."""
-    from acs_cli.stages.run import camera_times
-
-    cams_doc = c.mapping(doc, where, optional=tuple(map(str, doc or {})))
-    if not cams_doc:
-        raise c.fail(where, "names no camera")
-    cameras: dict[str, RigCameraSpec] = {}
-    for name, cam in cams_doc.items():
-        key = f"{where}.{name}"
-        cam = c.mapping(
-            cam if cam is not None else {},
-            key,
-            optional=(
-                "poses",
-                "format",
-                "images",
-                "model",
-                "scale",
-                "front_end",
-                "intrinsics",
-                "timestamps",
-                "fps",
-            ),
-        )
-        if ("poses" in cam) == ("images" in cam):
-            raise c.fail(key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
-        front_end = c.choice(cam.get("front_end", "board"), f"{key}.front_end", FRONT_ENDS)
-        if "images" not in cam and any(k in cam for k in _IMAGE_KEYS):
-            raise c.fail(key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
-        stamps, fps = camera_times(c, cam, key)
-        if front_end == "board" and "intrinsics" in cam:
-            raise c.fail(f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)")
-        default_scale = "unknown" if front_end == "sfm" else "known"
-        scale = c.choice(cam.get("scale", default_scale), f"{key}.scale", SCALES)
-        if front_end == "sfm" and scale == "known":
-            raise c.fail(
-                f"{key}.scale", "structure from motion gives trajectories up to scale: unknown"
-            )
-        cameras[name] = RigCameraSpec(
-            name=name,
-            poses=c.path(cam["poses"], f"{key}.poses") if "poses" in cam else None,
-            format=c.choice(cam.get("format", "auto"), f"{key}.format", TRAJECTORY_FORMATS),
-            images=c.path(cam["images"], f"{key}.images") if "images" in cam else None,
-            model=c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS),
-            unknown_scale=scale == "unknown",
-            front_end=front_end,
-            intrinsics=c.path(cam["intrinsics"], f"{key}.intrinsics")
-            if "intrinsics" in cam
-            else None,
-            timestamps=stamps,
-            fps=fps,
-        )
-    return cameras
-
-
-#: Settings of a body that every recording of it must give alike.
-_BODY_KEYS = ("unknown_scale", "model", "front_end", "intrinsics")
-
-
-def _body_settings(c: Any, recordings: dict[str, RigRecordingSpec]) -> dict[str, RigCameraSpec]:
-    """Each body's settings (its first recording's entry); a body whose recordings disagree
-    on its scale, camera model, front end or intrinsics is refused naming the key."""
-    out: dict[str, RigCameraSpec] = {}
-    first: dict[str, str] = {}
-    for rname, rec in recordings.items():
-        for name, spec in rec.cameras.items():
-            if name not in out:
-                out[name], first[name] = spec, rname
-                continue
-            for k in _BODY_KEYS:
-                if getattr(spec, k) != getattr(out[name], k):
-                    what = "scale" if k == "unknown_scale" else k
-                    raise c.fail(
-                        f"recordings.{rname}.cameras.{name}.{what}",
-                        f"differs from recordings.{first[name]}.cameras.{name}: a body's "
-                        f"{what} is the same in every recording",
-                    )
-    return out
-
-
-def _check_recordings(
-    c: Any, recordings: dict[str, RigRecordingSpec], joints: dict[str, RigJointSpec]
-) -> None:
-    """Every joint is seen by some recording with both its bodies (or held still in one);
-    every held joint exists, is not rigid and is seen by its recording."""
-    determined = set()
-    for rname, rec in recordings.items():
-        for h in rec.fixed_joints:
-            if h not in joints:
-                raise c.fail(f"recordings.{rname}.fixed_joints", f"{h!r} is not a joint")
-            if joints[h].type == "rigid":
-                raise c.fail(
-                    f"recordings.{rname}.fixed_joints", f"{h} is rigid: it cannot be held still"
-                )
-            if not any(b in rec.cameras for b in joints[h].between):
-                raise c.fail(
-                    f"recordings.{rname}.fixed_joints", f"the recording sees neither body of {h}"
-                )
-        for jn, j in joints.items():
-            if all(b in rec.cameras for b in j.between) and jn not in rec.fixed_joints:
-                determined.add(jn)
-            if jn in rec.fixed_joints:
-                determined.add(jn)
-    for jn in joints:
-        if jn not in determined:
-            raise c.fail(
-                f"joints.{jn}",
-                "no recording sees both of its bodies (or holds it still): nothing determines it",
-            )
-
-
-def _sfm_options(c: Any, doc: Any) -> dict[str, Any]:
-    """The ``sfm`` mapping of a rig config: options of the ``front_end: sfm`` cameras."""
-    if doc is None:
-        return {}
-    d = c.mapping(
-        doc,
-        "sfm",
-        optional=("matching", "loop_closure", "refine_intrinsics", "max_features",
-                  "max_image_size"),
-    )  # fmt: skip
-    out: dict[str, Any] = {}
-    if "matching" in d:
-        out["matching"] = c.choice(d["matching"], "sfm.matching", SFM_MATCHING)
-    for key in ("loop_closure", "refine_intrinsics"):
-        if key in d:
-            out[key] = c.boolean(d[key], f"sfm.{key}")
-    for key in ("max_features", "max_image_size"):
-        if key in d:
-            out[key] = c.integer(d[key], f"sfm.{key}", 16)
-    return out
 
 
 # --------------------------------------------------------------------------- stage

@@ -1,8 +1,8 @@
 """The pipeline stage: ``acscal run CONFIG`` (intrinsics, poses, joint and relpose in one go).
 
-:func:`load_run_config` reads and checks a run configuration (``schema: acscal/run-config``,
-see ``configs/*.yaml``); :func:`run_pipeline` runs the stages it names, each only when its
-inputs changed since its last successful run.
+:func:`load_run_config` (:mod:`acs_cli.io.config`) reads and checks a run configuration
+(``schema: acscal/run-config``, see ``configs/*.yaml``); :func:`run_pipeline` runs the
+stages it names, each only when its inputs changed since its last successful run.
 
 A stage's *stamp* is the SHA-256 of its name, the tool's version, its options and the
 SHA-256 of each input file (or folder of images). After a stage succeeds, its stamp and the
@@ -28,17 +28,24 @@ import numpy as np
 import yaml
 
 import acs_cli
-from acs_cli.core.checkerboard import MAX_BOARD_CORNERS
-from acs_cli.core.intrinsics import MODELS
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
+from acs_cli.io.config import (
+    CONFIG_SCHEMA,
+    CameraSpec,
+    JointSpec,
+    RelposeSpec,
+    RigCameraSpec,
+    RigRunConfig,
+    RunConfig,
+    load_run_config,
+    parse_run_config,
+)
 from acs_cli.io.images import list_images
-from acs_cli.io.validate import short_repr
 
 if TYPE_CHECKING:
-    from acs_cli.core.targets import MarkerTarget, Target
-    from acs_cli.stages.rig import RigCameraSpec, RigRunConfig
+    from acs_cli.core.targets import MarkerTarget
 
 __all__ = [
     "CONFIG_SCHEMA",
@@ -55,349 +62,14 @@ __all__ = [
     "run_pipeline",
 ]
 
-CONFIG_SCHEMA = "acscal/run-config"
-CONFIG_VERSION = 1
 STATE_SCHEMA = "acscal/run-state"
 STATE_FILE = ".acscal-run.yaml"
 #: Stage kinds, in the order they run (``--only`` takes one of them).
 STAGE_KINDS = ("intrinsics", "poses", "joint", "relpose", "rig")
 #: The HTML report every run ends with (regenerated each time, see :func:`write_run_report`).
 REPORT_FILE = "report.html"
-CAMERAS = ("a", "b")
-METHODS = ("refined", "paper")
-JOINT_SCENARIOS = ("fixed_joint", "overlap")
-INTRINSICS_FROM = ("all", "joint")
 
 StageCallback = Callable[["StageResult"], None]
-
-
-# --------------------------------------------------------------------------- configuration
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    """One camera of a run: its joint-motion images (optional) and its lens model."""
-
-    name: str
-    images: Path | None
-    model: str = "pinhole"
-    #: where image times come from (``acscal poses --timestamps`` / ``--fps``), for every
-    #: folder of this camera
-    timestamps: Path | None = None
-    fps: float | None = None
-
-
-@dataclass(frozen=True)
-class JointSpec:
-    """The joint stage's options (Algorithm I or II)."""
-
-    scenario: str
-    method: str = "refined"
-    bundle: bool = True
-
-
-@dataclass(frozen=True)
-class RelposeSpec:
-    """The relpose stage's options and its general-motion image folders."""
-
-    images: dict[str, Path]
-    method: str = "refined"
-    unknown_scale: bool = False
-    self_calibrate: bool = False
-    reference: int = 0
-    bundle: bool = True
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """A checked run configuration; every path is resolved against the config's folder."""
-
-    path: Path
-    output: Path
-    cols: int
-    rows: int
-    square: float
-    cameras: dict[str, CameraSpec]
-    intrinsics_from: dict[str, Path] | None = None
-    #: an AprilGrid or ChArUco (config key ``target``) instead of the ``cols x rows`` board
-    target: MarkerTarget | None = None
-    intrinsics_images: str = "all"
-    joint: JointSpec | None = None
-    relpose: RelposeSpec | None = None
-    workers: int | None = None
-    #: write results past a refusal level, marked weak (``acscal run --accept-weak``)
-    accept_weak: bool = False
-
-
-class _Checker:
-    """Type checks of config values; errors name the config file and the dotted key."""
-
-    def __init__(self, path: Path):
-        self.file = path
-        self.base = path.parent
-
-    def fail(self, key: str, problem: str) -> InputError:
-        return InputError(f"key '{key}': {problem}", path=self.file)
-
-    def mapping(
-        self,
-        value: Any,
-        key: str,
-        required: tuple[str, ...] = (),
-        optional: tuple[str, ...] = (),
-    ) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"must be a mapping, got {_describe(value)}")
-        prefix = f"{key}." if key else ""
-        allowed = set(required) | set(optional)
-        for k in value:
-            if not isinstance(k, str) or k not in allowed:
-                known = ", ".join(sorted(allowed))
-                raise self.fail(f"{prefix}{k}", f"unknown key (known keys: {known})")
-        for k in required:
-            if k not in value:
-                raise self.fail(f"{prefix}{k}", "missing (required)")
-        return value
-
-    def integer(self, value: Any, key: str, minimum: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"must be an integer, got {_describe(value)}")
-        if minimum is not None and value < minimum:
-            raise self.fail(key, f"must be at least {minimum}, got {value}")
-        return value
-
-    def positive(self, value: Any, key: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(key, f"must be a number, got {_describe(value)}")
-        if not (np.isfinite(value) and value > 0):
-            raise self.fail(key, f"must be a positive number, got {value}")
-        return float(value)
-
-    def boolean(self, value: Any, key: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.fail(key, f"must be true or false, got {_describe(value)}")
-        return value
-
-    def choice(self, value: Any, key: str, choices: tuple[str, ...]) -> str:
-        if not isinstance(value, str) or value not in choices:
-            raise self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}")
-        return value
-
-    def board(self, value: Any) -> tuple[int, int, float]:
-        """``board: {cols, rows, square}``: inner corners and the square's side (m)."""
-        b = self.mapping(value, "board", required=("cols", "rows", "square"))
-        cols = self.integer(b["cols"], "board.cols", 2)
-        rows = self.integer(b["rows"], "board.rows", 2)
-        for key, n in (("board.cols", cols), ("board.rows", rows)):
-            if n > MAX_BOARD_CORNERS:
-                raise self.fail(key, f"at most {MAX_BOARD_CORNERS} inner corners, got {n}")
-        return cols, rows, self.positive(b["square"], "board.square")
-
-    def target(self, value: Any) -> Target:
-        """``target``: a target mapping (Kalibr's or OpenCV's names, as a target YAML), a
-        short form (``aprilgrid:6x6:0.088:0.3``) or a target YAML file (relative to the
-        config's folder)."""
-        from acs_cli.io.target import parse_target_short, read_target_yaml, target_from_mapping
-
-        if isinstance(value, dict):
-            return target_from_mapping(value, self.file, "target")
-        if isinstance(value, str) and ":" in value:
-            return parse_target_short(value, option=f"{self.file}: key 'target'")
-        return read_target_yaml(self.path(value, "target"))
-
-    def board_or_target(
-        self, top: dict[str, Any]
-    ) -> tuple[tuple[int, int, float] | None, MarkerTarget | None]:
-        """The config's ``board`` or ``target`` (not both): a checkerboard (named either
-        way) as ``(cols, rows, square)``, an AprilGrid or ChArUco as the target."""
-        from acs_cli.core.targets import Checkerboard
-
-        if top.get("board") is not None and top.get("target") is not None:
-            raise self.fail("target", "give either 'board' or 'target', not both")
-        if top.get("target") is None:
-            return (None if top.get("board") is None else self.board(top["board"])), None
-        target = self.target(top["target"])
-        if isinstance(target, Checkerboard):
-            return (target.cols, target.rows, target.square), None
-        return None, target
-
-    def path(self, value: Any, key: str) -> Path:
-        if not isinstance(value, str) or not value.strip():
-            raise self.fail(key, f"must be a path (a string), got {_describe(value)}")
-        p = Path(os.path.expanduser(value))
-        return Path(os.path.normpath(p if p.is_absolute() else self.base / p))
-
-
-def _describe(value: Any) -> str:
-    if value is None:
-        return "nothing (null)"
-    return f"{type(value).__name__} {short_repr(value, 40)}"
-
-
-def parse_run_config(doc: Any, path: Path) -> RunConfig:
-    """Check a loaded run configuration and resolve its paths against ``path``'s folder.
-
-    Raises
-    ------
-    InputError
-        An unknown key, a missing required key, or a value of the wrong type or range; the
-        message names the file and the dotted key.
-    """
-    c = _Checker(path)
-    if isinstance(doc, dict) and doc.get("schema", CONFIG_SCHEMA) != CONFIG_SCHEMA:
-        raise c.fail(
-            "schema", f"must be {CONFIG_SCHEMA}, got {str(doc['schema'])[:60]!r}: not a run config"
-        )
-    top = c.mapping(
-        doc,
-        "",
-        required=("schema", "schema_version", "output", "cameras"),
-        optional=(
-            "board",
-            "target",
-            "intrinsics_from",
-            "intrinsics",
-            "joint",
-            "relpose",
-            "workers",
-        ),
-    )
-    if top["schema"] != CONFIG_SCHEMA:
-        raise c.fail("schema", f"must be {CONFIG_SCHEMA}, got {top['schema']!r}")
-    version = c.integer(top["schema_version"], "schema_version", 1)
-    if version > CONFIG_VERSION:
-        raise c.fail(
-            "schema_version",
-            f"{version} is newer than this acscal reads ({CONFIG_VERSION}); upgrade acscal",
-        )
-    output = c.path(top["output"], "output")
-    from acs_cli.stages.intrinsics import IntrinsicsConfig
-
-    board, target = c.board_or_target(top)
-    if board is None and target is None:
-        raise c.fail("board", "missing (required, or a 'target')")
-    defaults = IntrinsicsConfig()  # the board's fields, unused with a target
-    cols, rows, square = board or (defaults.cols, defaults.rows, defaults.square)
-
-    cams_doc = c.mapping(top["cameras"], "cameras", required=("a",), optional=("b",))
-    cameras: dict[str, CameraSpec] = {}
-    for name in CAMERAS:
-        if name not in cams_doc:
-            continue
-        key = f"cameras.{name}"
-        cam = cams_doc[name] if cams_doc[name] is not None else {}
-        cam = c.mapping(cam, key, optional=("images", "model", "timestamps", "fps"))
-        images = c.path(cam["images"], f"{key}.images") if cam.get("images") is not None else None
-        model = c.choice(cam.get("model", "pinhole"), f"{key}.model", MODELS)
-        stamps, fps = camera_times(c, cam, key)
-        cameras[name] = CameraSpec(name, images, model, stamps, fps)
-
-    intrinsics_from: dict[str, Path] | None = None
-    src = top.get("intrinsics_from")
-    if isinstance(src, dict):
-        m = c.mapping(src, "intrinsics_from", optional=tuple(cameras))
-        intrinsics_from = {n: c.path(m[n], f"intrinsics_from.{n}") for n in cameras if n in m}
-        missing = [n for n in cameras if n not in intrinsics_from]
-        if missing:
-            raise c.fail(f"intrinsics_from.{missing[0]}", "missing (one file per camera)")
-    elif src is not None:
-        run_dir = c.path(src, "intrinsics_from")
-        intrinsics_from = {n: run_dir / f"cam_{n}" / "intrinsics.yaml" for n in cameras}
-
-    intr = top.get("intrinsics")
-    intrinsics_images = "all"
-    if intr is not None:
-        intr = c.mapping(intr, "intrinsics", optional=("from",))
-        intrinsics_images = c.choice(intr.get("from", "all"), "intrinsics.from", INTRINSICS_FROM)
-
-    joint: JointSpec | None = None
-    if top.get("joint") is not None:
-        j = c.mapping(top["joint"], "joint", required=("scenario",), optional=("method", "bundle"))
-        joint = JointSpec(
-            c.choice(j["scenario"], "joint.scenario", JOINT_SCENARIOS),
-            c.choice(j.get("method", "refined"), "joint.method", METHODS),
-            c.boolean(j.get("bundle", True), "joint.bundle"),
-        )
-        for name, cam in cameras.items():
-            if cam.images is None:
-                raise c.fail(f"cameras.{name}.images", "missing (the joint stage needs it)")
-        if joint.scenario == "overlap" and "b" not in cameras:
-            raise c.fail("cameras.b", "missing (joint.scenario overlap needs both cameras)")
-
-    relpose: RelposeSpec | None = None
-    if top.get("relpose") is not None:
-        r = c.mapping(
-            top["relpose"],
-            "relpose",
-            required=("images",),
-            optional=("method", "unknown_scale", "self_calibrate", "reference", "bundle"),
-        )
-        imgs = c.mapping(r["images"], "relpose.images", required=CAMERAS)
-        if "b" not in cameras:
-            raise c.fail("cameras.b", "missing (relpose needs both cameras)")
-        relpose = RelposeSpec(
-            images={n: c.path(imgs[n], f"relpose.images.{n}") for n in CAMERAS},
-            method=c.choice(r.get("method", "refined"), "relpose.method", METHODS),
-            unknown_scale=c.boolean(r.get("unknown_scale", False), "relpose.unknown_scale"),
-            self_calibrate=c.boolean(r.get("self_calibrate", False), "relpose.self_calibrate"),
-            reference=c.integer(r.get("reference", 0), "relpose.reference", 0),
-            bundle=c.boolean(r.get("bundle", True), "relpose.bundle"),
-        )
-        if relpose.self_calibrate and joint is not None:
-            raise c.fail(
-                "relpose.self_calibrate",
-                "true estimates the joint from the general motion: remove the 'joint' section",
-            )
-        if not relpose.self_calibrate and joint is None:
-            raise c.fail("joint", "missing (relpose needs it, or relpose.self_calibrate: true)")
-    if joint is None and relpose is None:
-        raise c.fail("joint", "missing: name a 'joint' section, a 'relpose' section or both")
-
-    if intrinsics_from is None:
-        for name, cam in cameras.items():
-            if intrinsics_images == "joint" and cam.images is None:
-                raise c.fail(
-                    "intrinsics.from",
-                    f"'joint' but camera {name} has no joint images (cameras.{name}.images)",
-                )
-    workers = None
-    if top.get("workers") is not None:
-        workers = c.integer(top["workers"], "workers", 1)
-    return RunConfig(
-        path=path,
-        output=output,
-        cols=cols,
-        rows=rows,
-        square=square,
-        cameras=cameras,
-        intrinsics_from=intrinsics_from,
-        target=target,
-        intrinsics_images=intrinsics_images,
-        joint=joint,
-        relpose=relpose,
-        workers=workers,
-    )
-
-
-def load_run_config(path: Path) -> RunConfig | RigRunConfig:
-    """Read a run configuration file and check it.
-
-    A config with ``joints`` (``schema_version: 2``) is a rig of named cameras
-    (:func:`acs_cli.stages.rig.parse_rig_config`); version 1 (cameras ``a`` and ``b``) is
-    checked by :func:`parse_run_config`.
-
-    Raises
-    ------
-    InputError
-        A missing or unreadable file, bad YAML, or a bad key.
-    """
-    from acs_cli.stages.rig import is_rig_config, parse_rig_config
-
-    p = Path(path)
-    doc = load_yaml_file(p, "a run config (YAML)")
-    if is_rig_config(doc):
-        return parse_rig_config(doc, p)
-    return parse_run_config(doc, p)
 
 
 # --------------------------------------------------------------------------- pipeline
@@ -582,15 +254,6 @@ def _numbers(kind: str, output: Path) -> str:
     except (OSError, KeyError, TypeError, ValueError, IndexError, yaml.YAMLError):
         return ""
     return ""
-
-
-def camera_times(c: Any, cam: dict[str, Any], key: str) -> tuple[Path | None, float | None]:
-    """A camera's ``timestamps`` (a CSV file) and ``fps`` keys, checked."""
-    stamps = c.path(cam["timestamps"], f"{key}.timestamps") if "timestamps" in cam else None
-    fps = c.positive(cam["fps"], f"{key}.fps") if "fps" in cam else None
-    if stamps is not None and fps is not None:
-        raise c.fail(key, "give either 'timestamps' or 'fps', not both")
-    return stamps, fps
 
 
 def _poses_stage(
@@ -988,8 +651,6 @@ def run_pipeline(
     out = config.output
     state_file = out / STATE_FILE
     state = _read_state(state_file)
-    from acs_cli.stages.rig import RigRunConfig
-
     if isinstance(config, RigRunConfig):
         stages, intrinsics = _plan_rig(config)
     else:

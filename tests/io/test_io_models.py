@@ -24,10 +24,15 @@ from acs_cli.io.joint import (
     JointSection,
     Pairing,
     PoseNoise,
-    load_joint_section,
 )
 from acs_cli.io.poses import PosesArtifact
-from acs_cli.io.relpose import RelativePose, RelposeArtifact, RelposeQuality, Scale
+from acs_cli.io.relpose import (
+    RelativePose,
+    RelposeArtifact,
+    RelposeQuality,
+    Scale,
+    load_joint_section,
+)
 from acs_cli.io.trajectory import Trajectory, read_npz_poses
 from acs_cli.io.validate import (
     as_covariance3,

@@ -17,8 +17,8 @@ import yaml
 
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
-from acs_cli.io.joint import JointArtifact, JointSection, load_joint_section
-from acs_cli.io.relpose import RelativePose, RelposeArtifact, Scale
+from acs_cli.io.joint import JointArtifact, JointSection
+from acs_cli.io.relpose import RelativePose, RelposeArtifact, Scale, load_joint_section
 from acs_cli.io.validate import as_covariance3
 from acs_cli.stages.joint import read_joint_in_units
 

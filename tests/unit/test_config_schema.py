@@ -1,0 +1,107 @@
+"""The run config's models (``acs_cli/io/config.py``): the published JSON Schema is theirs,
+and every bad value is one line naming its key (never a crash)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from acs_cli.errors import InputError
+from acs_cli.io.config import _main, json_schema, load_run_config, parse_rig_config
+
+REPO = Path(__file__).resolve().parents[2]
+SCHEMA_FILE = REPO / "docs" / "run-config.schema.json"
+
+RIG: dict[str, Any] = {
+    "schema_version": 2,
+    "output": "out",
+    "board": {"cols": 9, "rows": 6, "square": 0.025},
+    "cameras": {
+        "cam0": {"poses": "c0.tum"},
+        "cam1": {"poses": "c1.tum", "scale": "unknown"},
+        "cam2": {"images": "imgs/c2", "fps": 25},
+    },
+    "joints": {
+        "j01": {"between": ["cam0", "cam1"], "type": "ball", "position_in": {"cam0": [0, 0, 1]}},
+        "j12": {"between": ["cam1", "cam2"], "type": "hinge"},
+    },
+}
+
+
+def test_the_committed_schema_is_the_generated_one() -> None:
+    """Regenerate with ``python -m acs_cli.io.config --schema > docs/run-config.schema.json``."""
+    out: list[str] = []
+    assert _main(["--schema"], out.append) == 0
+    assert SCHEMA_FILE.read_text(encoding="utf-8") == "".join(out)
+    assert json.loads("".join(out)) == json.loads(json.dumps(json_schema()))
+    assert _main([], out.append) == 2
+
+
+def test_the_schema_accepts_the_example_configs_and_refuses_a_typo() -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    validator = jsonschema.Draft202012Validator(json.loads(SCHEMA_FILE.read_text()))
+    for path in sorted((REPO / "configs").glob("*.yaml")):
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        assert not list(validator.iter_errors(doc)), path
+        load_run_config(path)  # and acscal agrees
+    assert not list(validator.iter_errors(RIG))
+    for key, value in (("scal", "unknown"), ("scale", "metric"), ("fps", -1)):
+        bad = copy.deepcopy(RIG)
+        bad["cameras"]["cam1"][key] = value
+        assert list(validator.iter_errors(bad)), key
+
+
+@pytest.mark.parametrize(
+    ("change", "key", "says"),
+    [
+        ({"cameras": 5}, "cameras", "must be a mapping, got int 5"),
+        ({"cameras.cam1.scale": "metric"}, "cameras.cam1.scale", "must be one of known, unknown"),
+        ({"cameras.cam2.fps": "25"}, "cameras.cam2.fps", "must be a number, got str '25'"),
+        ({"cameras.cam2.fps": True}, "cameras.cam2.fps", "must be a number, got bool True"),
+        ({"workers": 1.0}, "workers", "must be an integer, got float 1.0"),
+        ({"board.cols": 5000}, "board.cols", "at most 1000 inner corners, got 5000"),
+        ({"joints.j12.between": []}, "joints.j12.between", "must be a list of two camera names"),
+        ({"joints.j12.between": ["cam1"]}, "joints.j12.between", "two camera names"),
+        ({"joints.j01.position_in.cam0": ["x", 0, 1]}, "joints.j01.position_in.cam0", "three"),
+        ({"joints.j01.position_in.cam0": [0, 0, True]}, "joints.j01.position_in.cam0", "three"),
+        ({"joints.j01.position_in.cam0": [0, 0, ".inf"]}, "joints.j01.position_in.cam0", "three"),
+        ({"joints.j01.position_in.cam9": [0, 0, 1]}, "joints.j01.position_in.cam9", "unknown key"),
+        ({"joints.j01.colour": 1}, "joints.j01.colour", "known keys: between, fixed_joint"),
+        ({"reference": {"camera": 3}}, "reference.camera", "must be a name (a string), got int 3"),
+        ({"cameras.cam0": {"poses": "  "}}, "cameras.cam0.poses", "must be a path (a string)"),
+        ({"sfm": {"max_features": 8}}, "sfm.max_features", "must be at least 16, got 8"),
+        ({"max_dt": float("inf")}, "max_dt", "must be a positive number, got inf"),
+    ],
+)
+def test_a_bad_rig_value_is_one_line_naming_its_key(
+    tmp_path: Path, change: dict[str, Any], key: str, says: str
+) -> None:
+    doc = copy.deepcopy(RIG)
+    for dotted, value in change.items():
+        *parents, last = dotted.split(".")
+        node = doc
+        for p in parents:
+            node = node[p]
+        node[last] = value
+    path = tmp_path / "rig.yaml"
+    with pytest.raises(InputError) as info:
+        parse_rig_config(doc, path)
+    assert info.value.message.startswith(f"key '{key}': "), info.value.message
+    assert says in info.value.message
+    line = info.value.one_line()
+    assert line.startswith(f"{path}: ") and "\n" not in line
+
+
+def test_null_is_a_key_left_out(tmp_path: Path) -> None:
+    doc = copy.deepcopy(RIG)
+    doc["cameras"]["cam2"]["timestamps"] = None
+    doc["reference"] = None
+    doc["sfm"] = None
+    cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert cfg.cameras["cam2"].timestamps is None and cfg.reference_camera == "cam0"
+    assert cfg.sfm == {} and cfg.cameras["cam2"].images == tmp_path / "imgs" / "c2"
