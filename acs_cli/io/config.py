@@ -176,6 +176,9 @@ class RigCameraSpec:
     #: with ``images``: where image times come from (``acscal poses --timestamps``/``--fps``)
     timestamps: Path | None = None
     fps: float | None = None
+    #: with ``poses``: the file holds ``T_cam_world`` (a robot's ``T_flange_base``): inverted
+    #: on reading
+    invert: bool = False
 
 
 @dataclass(frozen=True)
@@ -439,6 +442,11 @@ class RigCamera(Section):
     intrinsics: ConfigPath | None = Field(default=None, description="with front_end: sfm")
     timestamps: ConfigPath | None = None
     fps: Positive | None = None
+    invert: bool = Field(
+        default=False,
+        description="with poses: the file holds T_cam_world (e.g. a robot's T_flange_base), "
+        "inverted on reading",
+    )
 
 
 class Recording(Section):
@@ -911,6 +919,8 @@ def _camera_specs(
         if not cam.given("images") and any(cam.given(k) for k in _IMAGE_KEYS):
             raise _fail(path, key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
         _camera_times(cam, key, path)
+        if cam.invert and not cam.given("poses"):
+            raise _fail(path, f"{key}.invert", "goes with 'poses' (a trajectory file)")
         if cam.front_end == "board" and cam.given("intrinsics"):
             raise _fail(
                 path, f"{key}.intrinsics", "is for front_end: sfm (a board calibrates them)"
@@ -933,6 +943,7 @@ def _camera_specs(
             intrinsics=_opt_path(cam.intrinsics, path),
             timestamps=_opt_path(cam.timestamps, path),
             fps=cam.fps,
+            invert=cam.invert,
         )
     return cameras
 

@@ -552,7 +552,10 @@ def read_recordings(
                 raise InputError(f"{key}: no poses (run its poses stage first)")
             path, fmt = files[lab]
             try:
-                by_rec[rname][name] = read_trajectory(path, fmt)
+                t = read_trajectory(path, fmt)
+                if spec.invert:  # the file holds T_cam_world
+                    t = dataclasses.replace(t, T_world_cam=se3.invert_transforms(t.T_world_cam))
+                by_rec[rname][name] = t
             except InputError as exc:  # name the config key with the file
                 where = f"{key}.poses" if spec.poses is not None else f"poses of {lab}"
                 raise InputError(f"{where}: {exc.message}", path=exc.path, line=exc.line) from None
@@ -627,7 +630,11 @@ def shared_board_orders(
 #: Readings of a body's poses that a file in the wrong convention gives, tried when the rig
 #: does not fit: (cause, what it means, the fix).
 POSE_READINGS = (
-    ("inverted", "T_{body}_world given where T_world_{body} is expected", "invert them"),
+    (
+        "inverted",
+        "T_{body}_world given where T_world_{body} is expected",
+        "invert them (invert: true)",
+    ),
     ("wxyz", "quaternions written w x y z, read as TUM's x y z w", "write them x y z w"),
     ("xyzw", "quaternions written x y z w, read as w x y z", "write them w x y z"),
 )

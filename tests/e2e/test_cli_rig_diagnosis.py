@@ -35,3 +35,11 @@ def test_a_robots_poses_given_inverted_are_named(tmp_path: Path) -> None:
     assert "cameras.flange.poses: body flange's poses fit the rig inverted" in res.stderr
     assert "T_flange_world given where T_world_flange is expected" in res.stderr
     assert not (tmp_path / "out" / "rig.yaml").exists()
+    # the fix the message names: the entry's invert key
+    text = (tmp_path / "c.yaml").read_text()
+    (tmp_path / "c.yaml").write_text(
+        text.replace("{poses: flange.tum}", "{poses: flange.tum, invert: true}")
+    )
+    res = acscal("run", tmp_path / "c.yaml")
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "out" / "rig.yaml").is_file()
