@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test lint typecheck unit bench clean
+.PHONY: install demo test lint typecheck unit fuzz bench clean
 
 install: $(STAMP)
 
@@ -28,8 +28,13 @@ unit: install
 
 test: lint typecheck unit
 
+# the property tests (Hypothesis's `hypothesis` marker) with fresh randomness and ten times the
+# examples; `make test` runs them derandomized (tests/hypothesis_profiles.py)
+fuzz: install
+	HYPOTHESIS_PROFILE=fuzz $(BIN)/pytest -q -m hypothesis
+
 bench: install
 	$(BIN)/python benchmarks/bench_estimators.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache demo_out
+	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis demo_out
