@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from test_fuzz_readers import NUMBER, READERS, YAML_KINDS, _paths, _set, seeds
+from test_fuzz_readers import NUMBER, READERS, YAML_KINDS, _paths, _rig_kalibr, _set, seeds
 
 from acs_cli.errors import InputError
 from acs_cli.io.detections import read_detections
@@ -205,7 +205,8 @@ def _numbers_replaced(kind: str) -> list[tuple[str, bytes]]:
 def test_every_number_of_absurd_magnitude_reads_or_is_refused(tmp_path: Path, kind: str) -> None:
     """Each number of a valid file, in turn, replaced by an absurd value: every reader of the
     file reads it or raises a one-line InputError (no warning, no other exception)."""
-    readers = [(name, read) for k, name, read in READERS if k == kind]
+    # (the rig's Kalibr export is left to test_fuzz_readers: this test is exhaustive, and slow)
+    readers = [(name, read) for k, name, read in READERS if k == kind and read is not _rig_kalibr]
     for i, (label, blob) in enumerate(_numbers_replaced(kind)):
         folder = tmp_path / str(i)
         folder.mkdir()
