@@ -2,8 +2,13 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# pytest-xdist workers for `make unit` (0: one process). Each module runs on one worker
+# (--dist loadscope: its module fixtures are built once), and each worker's BLAS on one
+# thread (two workers on two cores; threaded BLAS under contention spins).
+WORKERS ?= 2
+SERIAL_BLAS := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-.PHONY: install demo test lint typecheck unit bench clean
+.PHONY: install demo test lint typecheck unit fuzz bench clean
 
 install: $(STAMP)
 
@@ -24,12 +29,17 @@ typecheck: install
 	$(BIN)/mypy
 
 unit: install
-	$(BIN)/pytest -q
+	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope
 
 test: lint typecheck unit
+
+# the property tests (Hypothesis's `hypothesis` marker) with fresh randomness and ten times the
+# examples; `make test` runs them derandomized (tests/hypothesis_profiles.py)
+fuzz: install
+	HYPOTHESIS_PROFILE=fuzz $(SERIAL_BLAS) $(BIN)/pytest -q -m hypothesis -n $(WORKERS)
 
 bench: install
 	$(BIN)/python benchmarks/bench_estimators.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache demo_out
+	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis demo_out

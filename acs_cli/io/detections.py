@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from acs_cli.io.atomic import atomic_path
 from acs_cli.io.trajectory import check_npz_members
+from acs_cli.io.validate import MAX_MAGNITUDE
 
 __all__ = [
     "CACHE_SCHEMA",
@@ -131,6 +132,8 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
             c = np.array(corners[i, :k], dtype=np.float64)
             # a target of identified corners (see detection_key) has NaN rows for unseen ones
             if np.any(np.isinf(c)) or not (np.all(np.isfinite(c)) or _identified(key)):
+                continue
+            if np.nanmax(np.abs(c), initial=0.0) > MAX_MAGNITUDE:  # pixels: a corrupt entry
                 continue
         out[key] = Detection(names[i], bool(found[i]), (w, h), c)
     return out

@@ -30,6 +30,7 @@ from acs_cli.io.validate import (
     as_mapping,
     as_number,
     as_str_list,
+    check_magnitude,
     optional_number,
 )
 from acs_cli.io.verdict import VerdictSection
@@ -57,6 +58,7 @@ def check_camera(
     K = np.asarray(camera_matrix, dtype=float)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"'{prefix}camera_matrix' must be 3x3 with positive fx, fy", path=path)
+    check_magnitude(K, f"{prefix}camera_matrix", path)
     n = len(DISTORTION_NAMES[model])
     D = np.asarray(distortion, dtype=float)
     if D.shape != (n,) or not np.all(np.isfinite(D)):
@@ -65,6 +67,7 @@ def check_camera(
             f"shape {D.shape}",
             path=path,
         )
+    check_magnitude(D, f"{prefix}distortion", path)
     w, h = image_size
     if w <= 0 or h <= 0:
         raise InputError(f"'{prefix}image_size' must be [width, height] in pixels", path=path)

@@ -35,6 +35,7 @@ from acs_cli.io.validate import (
     as_mapping,
     as_matrix,
     as_number,
+    as_scale,
     as_str_list,
     optional_matrix,
     optional_number,
@@ -102,7 +103,12 @@ class RelativePose:
         return cls(
             T_b_a,
             optional_matrix(
-                d.get("T_b_a_covariance"), (6, 6), f"{k}.T_b_a_covariance", path, allow_nan=True
+                d.get("T_b_a_covariance"),
+                (6, 6),
+                f"{k}.T_b_a_covariance",
+                path,
+                allow_nan=True,
+                squared=True,
             ),
             optional_vector(d.get("rpy_deg"), f"{k}.rpy_deg", path),
             optional_vector(d.get("rpy_deg_std"), f"{k}.rpy_deg_std", path, allow_nan=True),
@@ -146,12 +152,18 @@ class Scale:
     @classmethod
     def parse(cls, value: Any, path: Source) -> Scale:
         d = as_mapping(value, "scale", path)
+
+        def mu(key: str) -> float | None:
+            # trajectory units per metre: exports divide lengths by a positive one
+            v = optional_number(d.get(key), f"scale.{key}", path)
+            return v if v is None or v <= 0 else as_scale(v, f"scale.{key}", path)
+
         return cls(
-            as_number(d.get("phi_ba"), "scale.phi_ba", path, positive=True),
+            as_scale(d.get("phi_ba"), "scale.phi_ba", path),
             optional_number(d.get("phi_ba_std"), "scale.phi_ba_std", path, allow_nan=True),
-            optional_number(d.get("mu_a"), "scale.mu_a", path),
+            mu("mu_a"),
             optional_number(d.get("mu_a_std"), "scale.mu_a_std", path, allow_nan=True),
-            optional_number(d.get("mu_b"), "scale.mu_b", path),
+            mu("mu_b"),
             optional_number(d.get("mu_b_std"), "scale.mu_b_std", path, allow_nan=True),
         )
 
@@ -327,7 +339,7 @@ class RelposeArtifact(YamlArtifact):
         if self.joint is not None:
             self.joint.validate(p)
         if self.scale is not None:
-            as_number(self.scale.phi_ba, "scale.phi_ba", p, positive=True)
+            as_scale(self.scale.phi_ba, "scale.phi_ba", p)
 
     @classmethod
     def from_doc(cls, doc: dict[str, Any], path: Path) -> RelposeArtifact:

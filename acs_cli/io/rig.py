@@ -73,7 +73,15 @@ from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.validate import as_mapping, as_matrix, as_number, as_vector, optional_number
+from acs_cli.io.validate import (
+    as_int,
+    as_mapping,
+    as_matrix,
+    as_number,
+    as_scale,
+    as_vector,
+    optional_number,
+)
 from acs_cli.io.verdict import VerdictSection
 
 KIND = "rig"
@@ -500,7 +508,7 @@ class RigArtifact(YamlArtifact):
                     std.get("translation", [0, 0, 0]), f"{k}.T_cam_ref_std.translation", p
                 ),
                 unknown_scale=bool(c.get("unknown_scale", False)),
-                scale=as_number(c.get("scale", 1.0), f"{k}.scale", p, positive=True),
+                scale=as_scale(c.get("scale", 1.0), f"{k}.scale", p),
                 scale_std=None
                 if scale_std == "fixed"
                 else as_number(scale_std, f"{k}.scale_std", p, non_negative=True),
@@ -556,8 +564,10 @@ class RigArtifact(YamlArtifact):
                     str(c): as_number(v, f"{k}.axis_std_deg_in.{c}", p) for c, v in ax_std.items()
                 },
                 residual_rms=as_number(j.get("residual_rms", 0.0), f"{k}.residual_rms", p),
-                frames_used=int(j.get("frames_used", 0)),
-                frames_rejected=int(j.get("frames_rejected", 0)),
+                frames_used=as_int(j.get("frames_used", 0), f"{k}.frames_used", p, minimum=0),
+                frames_rejected=as_int(
+                    j.get("frames_rejected", 0), f"{k}.frames_rejected", p, minimum=0
+                ),
                 T_q_p=None
                 if jtype != "rigid" or j.get("T_q_p") is None
                 else as_matrix(j["T_q_p"], (4, 4), f"{k}.T_q_p", p),

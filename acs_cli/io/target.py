@@ -38,7 +38,13 @@ from acs_cli.core.targets import (
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import load_yaml_file
 from acs_cli.io.atomic import atomic_write_text
-from acs_cli.io.validate import as_int, as_mapping, as_number
+from acs_cli.io.validate import (
+    MAX_MAGNITUDE,
+    as_int,
+    as_mapping,
+    as_number,
+    check_magnitude,
+)
 
 __all__ = [
     "parse_target",
@@ -62,7 +68,9 @@ def _int(d: Mapping[str, Any], key: str, path: Source, prefix: str, minimum: int
 def _length(d: Mapping[str, Any], key: str, path: Source, prefix: str) -> float:
     if key not in d:
         raise InputError(f"missing key '{prefix}{key}'", path=path)
-    return as_number(d[key], prefix + key, path, positive=True)
+    v = as_number(d[key], prefix + key, path, positive=True)
+    check_magnitude(v, prefix + key, path)
+    return v
 
 
 def _dictionary(value: Any, key: str, path: Source) -> str:
@@ -256,8 +264,11 @@ def parse_target_short(text: str, option: str = "--target") -> Target:
             v = float(value)
         except ValueError:
             v = float("nan")
-        if not v > 0 or v == float("inf"):
-            raise InputError(f"{option} {text!r}: {name} must be a positive number, got {value!r}")
+        if not 0 < v <= MAX_MAGNITUDE:
+            raise InputError(
+                f"{option} {text!r}: {name} must be a positive number (at most "
+                f"{MAX_MAGNITUDE:.0e}), got {value!r}"
+            )
         lengths.append(v)
     where = f"{option} {text!r}"
     if kind == "aprilgrid":

@@ -147,6 +147,7 @@ class Trajectory:
             )
         if not np.all(np.isfinite(t)):
             raise InputError("timestamps contain NaN or inf", path=src)
+        check_magnitude(t, "timestamps", src)  # seconds (1e10 s is the year 2286)
         with np.errstate(all="ignore"):
             bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
@@ -883,6 +884,8 @@ def parse_npz_observations(
     # a corner a view did not see is NaN (a partial view of an AprilGrid or ChArUco target)
     if np.any(np.isinf(corners)) or not np.all(np.isfinite(board)):
         raise InputError("'corners' contain inf, or 'board_points' NaN or inf", path=p)
+    check_magnitude(corners, "corners", p)  # pixels
+    check_magnitude(board, "board_points", p)  # metres
     if corners.ndim != 3 or corners.shape[2] != 2 or board.shape != (corners.shape[1], 3):
         raise InputError(
             f"'corners' {corners.shape} and 'board_points' {board.shape} do not match "

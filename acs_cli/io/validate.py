@@ -30,6 +30,7 @@ __all__ = [
     "as_mapping",
     "as_matrix",
     "as_number",
+    "as_scale",
     "as_str_list",
     "as_vector",
     "check_magnitude",
@@ -70,10 +71,13 @@ def short_repr(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def check_magnitude(values: Any, key: str, path: Source, *, extent: bool = False) -> None:
+def check_magnitude(
+    values: Any, key: str, path: Source, *, extent: bool = False, squared: bool = False
+) -> None:
     """Refuse finite values beyond :data:`MAX_MAGNITUDE` (NaN and inf are left to the
     caller); with ``extent``, also a non-zero set of values all below :data:`MIN_EXTENT`
-    (a trajectory's translations).
+    (a trajectory's translations); with ``squared``, values in squared units (variances,
+    covariances) beyond ``MAX_MAGNITUDE ** 2``.
 
     Parameters
     ----------
@@ -85,6 +89,8 @@ def check_magnitude(values: Any, key: str, path: Source, *, extent: bool = False
         Their file, for the message.
     extent : bool
         Also check the smallest scale.
+    squared : bool
+        The values are in the file's units squared: the limit is ``MAX_MAGNITUDE ** 2``.
 
     Raises
     ------
@@ -94,10 +100,12 @@ def check_magnitude(values: Any, key: str, path: Source, *, extent: bool = False
     arr = np.abs(np.asarray(values, dtype=float))
     finite = arr[np.isfinite(arr)]
     largest = float(finite.max(initial=0.0))
-    if largest > MAX_MAGNITUDE:
+    limit = MAX_MAGNITUDE**2 if squared else MAX_MAGNITUDE
+    if largest > limit:
+        units = "the file's units, squared" if squared else "the file's units"
         raise InputError(
-            f"'{key}' holds {largest:.3g}, beyond the {MAX_MAGNITUDE:.0e} in size acscal "
-            "accepts (in the file's units): a wrong unit, or a corrupt file?",
+            f"'{key}' holds {largest:.3g}, beyond the {limit:.0e} in size acscal "
+            f"accepts (in {units}): a wrong unit, or a corrupt file?",
             path=path,
         )
     if extent and 0.0 < largest < MIN_EXTENT:
@@ -207,9 +215,15 @@ def as_bool(value: Any, key: str, path: Source) -> bool:
 
 
 def as_matrix(
-    value: Any, shape: tuple[int, ...], key: str, path: Source, *, allow_nan: bool = False
+    value: Any,
+    shape: tuple[int, ...],
+    key: str,
+    path: Source,
+    *,
+    allow_nan: bool = False,
+    squared: bool = False,
 ) -> FloatArray:
-    """Finite numbers of the given shape.
+    """Finite numbers of the given shape, none beyond :data:`MAX_MAGNITUDE`.
 
     Parameters
     ----------
@@ -222,25 +236,56 @@ def as_matrix(
     allow_nan : bool
         Accept NaN and inf entries (standard deviations, covariances that could not be
         computed).
+    squared : bool
+        The entries are in squared units (a covariance): the limit is ``MAX_MAGNITUDE ** 2``
+        (:func:`check_magnitude`).
 
     Raises
     ------
     InputError
-        Not numbers, another shape, or a NaN/inf.
+        Not numbers, another shape, a NaN/inf, or an entry beyond the limit.
     """
     arr = _floats(value)
     what = "x".join(map(str, shape))
     if arr is None or arr.shape != shape or not (allow_nan or np.all(np.isfinite(arr))):
         got = "" if arr is None else f", got shape {arr.shape}"
         raise InputError(f"'{key}' must be a finite {what} array{got}", path=path)
+    check_magnitude(arr, key, path, squared=squared)
     return arr
 
 
 def optional_matrix(
-    value: Any, shape: tuple[int, ...], key: str, path: Source, *, allow_nan: bool = False
+    value: Any,
+    shape: tuple[int, ...],
+    key: str,
+    path: Source,
+    *,
+    allow_nan: bool = False,
+    squared: bool = False,
 ) -> FloatArray | None:
     """:func:`as_matrix`, or ``None`` for ``None``."""
-    return None if value is None else as_matrix(value, shape, key, path, allow_nan=allow_nan)
+    if value is None:
+        return None
+    return as_matrix(value, shape, key, path, allow_nan=allow_nan, squared=squared)
+
+
+def as_scale(value: Any, key: str, path: Source) -> float:
+    """A scale factor or a ratio of units: a number within ``[1 / MAX_MAGNITUDE,
+    MAX_MAGNITUDE]`` (beyond, lengths multiplied or divided by it overflow).
+
+    Raises
+    ------
+    InputError
+        Not a finite positive number, or outside that range.
+    """
+    v = as_number(value, key, path, positive=True)
+    if not 1.0 / MAX_MAGNITUDE <= v <= MAX_MAGNITUDE:
+        raise InputError(
+            f"'{key}' is {v:.3g}, outside the [{1.0 / MAX_MAGNITUDE:.0e}, {MAX_MAGNITUDE:.0e}] "
+            "acscal accepts for a scale: a wrong unit, or a corrupt file?",
+            path=path,
+        )
+    return v
 
 
 def as_vector(
@@ -272,38 +317,43 @@ def optional_vector(
 
 
 def as_covariance3(value: Any, key: str, path: Source) -> FloatArray:
-    """A 3x3 covariance: finite, symmetric and positive semi-definite.
+    """A 3x3 covariance: finite, within ``MAX_MAGNITUDE ** 2``, symmetric and positive
+    semi-definite.
 
     Both checks are made on the correlation matrix ``C_ij / (s_i s_j)`` (``s_i`` the standard
     deviations, floored at ``sqrt(COV_TOL)`` times the largest), within :data:`COV_TOL`: a
     covariance whose axes differ by orders of magnitude is judged on each axis's own scale.
+    An entry larger than the largest variance (which no covariance has) is refused before
+    any division, so no value overflows.
 
     Raises
     ------
     InputError
-        Not a finite 3x3 matrix, not symmetric, or with a negative eigenvalue.
+        Not a finite 3x3 matrix, an entry beyond ``MAX_MAGNITUDE ** 2`` (a variance in the
+        file's units squared), not symmetric, or with a negative eigenvalue.
     """
-    C = as_matrix(value, (3, 3), key, path)
+    C = as_matrix(value, (3, 3), key, path, squared=True)
     diag = np.diag(C)
     top = float(diag.max())
+    not_psd = f"'{key}' must be a positive semi-definite 3x3 covariance"
     if top <= 0.0:
         if np.any(C != 0.0):
-            raise InputError(
-                f"'{key}' must be a positive semi-definite 3x3 covariance (its diagonal is "
-                "not positive)",
-                path=path,
-            )
+            raise InputError(f"{not_psd} (its diagonal is not positive)", path=path)
         return C
+    # |R - R^T| > COV_TOL for R = C / (s s^T), without dividing (entries within 1e20)
     s = np.sqrt(np.maximum(diag, COV_TOL * top))
-    R = C / np.outer(s, s)
-    if np.abs(R - R.T).max() > COV_TOL:
+    if np.any(np.abs(C - C.T) > COV_TOL * np.outer(s, s)):
         raise InputError(f"'{key}' must be a symmetric 3x3 covariance", path=path)
-    if diag.min() < 0.0 or np.linalg.eigvalsh(0.5 * (R + R.T)).min() < -COV_TOL:
-        raise InputError(
-            f"'{key}' must be a positive semi-definite 3x3 covariance (it has a negative "
-            "eigenvalue)",
-            path=path,
-        )
+    if diag.min() < 0.0:
+        raise InputError(f"{not_psd} (a variance is negative)", path=path)
+    if float(np.abs(C).max()) > top * (1.0 + COV_TOL):
+        # |C_ij| <= sqrt(C_ii C_jj) <= top for every covariance
+        raise InputError(f"{not_psd} (an entry exceeds the largest variance)", path=path)
+    Cn = C / top  # entries within 1 + COV_TOL: nothing below overflows or divides by 0
+    sn = np.sqrt(np.maximum(np.diag(Cn), COV_TOL))
+    R = Cn / np.outer(sn, sn)
+    if np.linalg.eigvalsh(0.5 * (R + R.T)).min() < -COV_TOL:
+        raise InputError(f"{not_psd} (it has a negative eigenvalue)", path=path)
     return C
 
 

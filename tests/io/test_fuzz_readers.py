@@ -12,7 +12,6 @@ from __future__ import annotations
 import copy
 import io
 import math
-import os
 import re
 import tempfile
 import zipfile
@@ -27,6 +26,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
@@ -34,6 +34,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.detections import Detection, read_detections, write_detections
 from acs_cli.io.export import read_opencv_yaml, write_opencv_yaml
+from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
     Trajectory,
     read_colmap,
@@ -47,17 +48,16 @@ from acs_cli.io.trajectory import (
     write_npz_poses,
     write_tum,
 )
-from acs_cli.stages.export import run_export
+from acs_cli.stages.export import run_export, run_rig_export
 from acs_cli.stages.joint import read_joint
 from acs_cli.stages.poses import read_intrinsics
 from acs_cli.stages.relpose import load_prior
 from acs_cli.stages.run import STATE_FILE, load_run_config
 
-#: ``ACSCAL_FUZZ_SCALE=10 pytest tests/io/test_fuzz_readers.py`` for a longer soak.
-SCALE = float(os.environ.get("ACSCAL_FUZZ_SCALE", "1"))
+#: ``make fuzz`` (``HYPOTHESIS_PROFILE=fuzz``) for fresh examples, ten times as many;
+#: ``ACSCAL_FUZZ_SCALE=50`` for a longer soak (tests/hypothesis_profiles.py).
 FUZZ = settings(
-    max_examples=int(200 * SCALE),
-    deadline=None,
+    max_examples=examples(200),
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 
@@ -186,6 +186,32 @@ def seeds() -> dict[str, bytes]:
             {"T_b_a": np.array(T_b_a), "phi_ba": 0.75, "length_unit": "m", "reference": 3},
         )
         out["opencv"] = (root / "cv.yaml").read_bytes()
+        Tc = _poses(3, 5)
+        Tc[0] = np.eye(4)
+        cams = {
+            c: RigCameraResult(c, Tc[i], np.full(3, 0.1), np.full(3, 0.001))
+            for i, c in enumerate("abc")
+        }
+        cams["c"] = RigCameraResult(
+            "c", Tc[2], np.full(3, 0.1), np.full(3, 0.001), True, 0.8, 0.01, _poses(1, 6)[0]
+        )
+        ball = RigJointResult(
+            "ab", "ball", ("a", "b"), {"a": np.array([0.1, 0, 0]), "b": np.array([0, 0.1, 0])}
+        )
+        hinge = RigJointResult(
+            "bc",
+            "hinge",
+            ("b", "c"),
+            {"b": np.array([0.0, 0.2, 0.0]), "c": np.array([0.0, 0.0, 0.1])},
+            {"b": np.full(3, 0.001), "c": np.full(3, 0.001)},
+            {"b": np.array([1.0, 0.0, 0.0]), "c": np.array([0.0, 1.0, 0.0])},
+            {"b": 0.5, "c": 0.5},
+            residual_rms=0.01,
+            frames_used=20,
+        )
+        rig = RigArtifact("a", 0, "m", cams, {"ab": ball, "bc": hinge}, header=_header("rig"))
+        rig.save(root / "rig.yaml")
+        out["rig"] = (root / "rig.yaml").read_bytes()
     out["run_config"] = b"""\
 schema: acscal/run-config
 schema_version: 1
@@ -269,6 +295,17 @@ def _check_state(path: Path) -> None:
     assert isinstance(got, dict)
 
 
+def _rig_urdf(path: Path) -> None:
+    run_rig_export(path, path.with_name("rig.urdf"), "urdf")
+
+
+def _rig_kalibr(path: Path) -> None:
+    intr = path.with_name("seed_intrinsics.yaml")
+    intr.write_bytes(seeds()["intrinsics"])
+    cams = dict.fromkeys("abc", intr)
+    run_rig_export(path, path.with_name("rig_chain.yaml"), "kalibr", intrinsics=cams)
+
+
 def _opencv(path: Path) -> None:
     read_opencv_yaml(path, ["T_b_a", "phi_ba", "length_unit"])
 
@@ -304,13 +341,16 @@ READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
     ("relpose", "relpose.yaml", _export_opencv),
     ("relpose", "relpose.yaml", _export_kalibr),
     ("opencv", "cv.yaml", _opencv),
+    ("rig", "rig.yaml", RigArtifact.load),
+    ("rig", "rig.yaml", _rig_urdf),
+    ("rig", "rig.yaml", _rig_kalibr),
 ]
 
 
 KINDS = sorted({k for k, _, _ in READERS})
 TEXT_KINDS = [k for k in KINDS if k not in ("npz", "detections")]
 NPZ_KINDS = ["npz", "detections"]
-YAML_KINDS = ["run_config", "run_state", "intrinsics", "joint", "relpose"]
+YAML_KINDS = ["run_config", "run_state", "intrinsics", "joint", "relpose", "rig"]
 
 
 def _readers_of(kind: str) -> list[tuple[str, Callable[[Path], Any]]]:
@@ -348,8 +388,12 @@ WEIRD_NUMBERS = [
     b".inf",
     b"1e308",
     b"-1e308",
+    b"1e200",
+    b"1e25",
     b"1e999",
     b"1e-320",
+    b"5e-324",
+    b"-1e-308",
     b"0",
     b"-0",
     b"99999999999999999999999999999",
@@ -433,7 +477,7 @@ def test_mutated_text_files(kind: str, ops: list[tuple[Any, ...]]) -> None:
     _only_input_error(kind, apply_byte_ops(seeds()[kind], ops))
 
 
-@settings(FUZZ, max_examples=int(100 * SCALE))
+@settings(FUZZ, max_examples=examples(100))
 @given(kind=st.sampled_from(NPZ_KINDS), ops=st.lists(byte_op, min_size=1, max_size=3))
 def test_mutated_npz_bytes(kind: str, ops: list[tuple[Any, ...]]) -> None:
     _only_input_error(kind, apply_byte_ops(seeds()[kind], ops))
@@ -475,7 +519,8 @@ REPLACEMENTS: list[Callable[[np.ndarray], Any]] = [
     lambda a: a.astype(np.float32) if a.dtype.kind in "biuf" else a,
     lambda a: a.astype(np.int64) if a.dtype.kind in "biuf" else a,
     lambda a: a.astype(bool) if a.dtype.kind in "biuf" else a,
-    lambda a: a.astype(str),
+    # bytes decoded as Latin-1 (astype(str) decodes ASCII and fails on b"\xff")
+    lambda a: np.char.decode(a, "latin-1") if a.dtype.kind == "S" else a.astype(str),
     lambda a: np.full(a.shape, np.nan),
     lambda a: np.full(a.shape, np.inf),
     lambda a: np.full(a.shape, 1e308),
@@ -486,7 +531,7 @@ REPLACEMENTS: list[Callable[[np.ndarray], Any]] = [
 ]
 
 
-@settings(FUZZ, max_examples=int(300 * SCALE))
+@settings(FUZZ, max_examples=examples(300))
 @given(
     kind=st.sampled_from(NPZ_KINDS),
     edits=st.lists(
@@ -555,6 +600,10 @@ WEIRD_VALUES: list[Any] = [
     2,
     10**30,
     1e308,
+    -1e308,
+    1e25,
+    1e-308,
+    5e-324,
     math.nan,
     math.inf,
     -math.inf,
@@ -565,6 +614,7 @@ WEIRD_VALUES: list[Any] = [
     [[1, 2], [3, 4]],
     [[math.nan] * 3] * 3,
     [[1e308] * 4] * 4,
+    [[1e-300, 1e10, 0], [1e10, 1e-300, 0], [0, 0, 1e-300]],
     [None, None, None],
     ["a", "b", "c"],
     [[1, 2, 3], [4, 5]],
@@ -601,7 +651,7 @@ def _set(doc: Any, path: tuple[Any, ...], op: str, value: Any) -> Any:
     return doc
 
 
-@settings(FUZZ, max_examples=int(300 * SCALE))
+@settings(FUZZ, max_examples=examples(300))
 @given(
     kind=st.sampled_from(YAML_KINDS),
     edits=st.lists(

@@ -13,6 +13,7 @@ import pytest
 import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 import acs_cli
 from acs_cli.errors import InputError
@@ -183,7 +184,7 @@ def test_read_accepts_older_or_equal_version(tmp_path: Path) -> None:
     assert read_yaml_artifact(path, "joint")["schema_version"] == 0
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150))
 @given(data=st.binary(max_size=200) | st.text(max_size=200))
 def test_reader_raises_only_input_error(data: bytes | str) -> None:
     blob = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data

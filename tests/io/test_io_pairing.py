@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from acs_cli.core.pairing import (
     default_max_dt,
@@ -122,7 +123,7 @@ def _greedy(t_a: list[float], t_b: list[float], max_dt: float) -> set[tuple[int,
     return out
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200))
 @given(
     t_a=st.lists(st.integers(0, 1000), min_size=1, max_size=12, unique=True),
     t_b=st.lists(st.integers(0, 1000), min_size=1, max_size=12, unique=True),

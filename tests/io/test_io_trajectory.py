@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
@@ -143,7 +144,7 @@ def test_write_tum_rejects_bad_input(tmp_path: Path) -> None:
     assert not (tmp_path / "x.txt").exists()
 
 
-@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(50), suppress_health_check=[HealthCheck.too_slow])
 @given(
     n=st.integers(1, 8),
     seed=st.integers(0, 2**32 - 1),
@@ -492,7 +493,7 @@ def test_trajectory_validation() -> None:
 # ----------------------------------------------------------------------------- fuzz
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150))
 @given(data=st.binary(max_size=300) | st.text(alphabet="0123456789.-e naif#\n\t", max_size=300))
 def test_readers_raise_only_input_error(data: bytes | str) -> None:
     blob = data.encode() if isinstance(data, str) else data

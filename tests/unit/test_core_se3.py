@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from acs_cli.core import se3
@@ -74,7 +74,6 @@ def test_quaternion_order_is_xyzw() -> None:
     np.testing.assert_allclose(se3.matrix_from_quat_xyzw([0, 0, 0, 1])[0], np.eye(3))
 
 
-@settings(max_examples=100, deadline=None)
 @given(quaternions())
 def test_quaternion_round_trip(q: np.ndarray) -> None:
     R = se3.matrix_from_quat_xyzw(q)
@@ -121,7 +120,6 @@ def test_rpy_convention_is_zyx() -> None:
     np.testing.assert_allclose(se3.matrix_from_rpy_deg([90, 0, 0]), _Rx(90), atol=1e-12)
 
 
-@settings(max_examples=100, deadline=None)
 @given(
     st.floats(-179.9, 179.9),
     st.floats(-89.5, 89.5),
@@ -133,7 +131,6 @@ def test_rpy_round_trip(roll: float, pitch: float, yaw: float) -> None:
     np.testing.assert_allclose(se3.rpy_deg_from_matrix(R), [roll, pitch, yaw], atol=1e-7)
 
 
-@settings(max_examples=100, deadline=None)
 @given(rotations())
 def test_matrix_rpy_matrix_round_trip(R: np.ndarray) -> None:
     assume(abs(R[2, 0]) < 1.0 - 1e-6)  # away from gimbal lock (pitch = +-90 deg)
@@ -164,7 +161,6 @@ def test_rpy_stack_shapes(rng: np.random.Generator) -> None:
 # ----------------------------------------------------------------------------- rotation vectors
 
 
-@settings(max_examples=100, deadline=None)
 @given(st.tuples(_unit, _unit, _unit), st.floats(0.0, np.pi - 1e-3))
 def test_rotvec_round_trip(axis: tuple[float, float, float], angle: float) -> None:
     a = np.array(axis)
@@ -206,7 +202,6 @@ def test_skew_is_cross_product(rng: np.random.Generator) -> None:
 # ----------------------------------------------------------------------------- transforms
 
 
-@settings(max_examples=100, deadline=None)
 @given(transforms())
 def test_invert_transforms_single(T: np.ndarray) -> None:
     Ti = se3.invert_transforms(T)
@@ -279,7 +274,6 @@ def test_left_multiply(rng: np.random.Generator, k: int) -> None:
 # ----------------------------------------------------------------------------- projection
 
 
-@settings(max_examples=100, deadline=None)
 @given(rotations(), st.floats(0.05, 20.0), st.integers(0, 2**32 - 1))
 def test_project_to_rotation_recovers_rotation_and_scale(
     R: np.ndarray, phi: float, seed: int
