@@ -364,7 +364,7 @@ class Board(Section):
 
     cols: BoardCorners = Field(description="inner corners along the board's x axis")
     rows: BoardCorners = Field(description="inner corners along the board's y axis")
-    square: Positive = Field(description="the square's side, metres")
+    square: Positive = Field(le=10.0, description="the square's side, metres (at most 10)")
 
 
 class RunCamera(Section):

@@ -194,3 +194,15 @@ def test_rig_cameras_take_times_only_with_images(tmp_path: Path) -> None:
     doc["cameras"]["b"] = {"images": "imgs/b", "timestamps": "b.csv"}
     cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
     assert cfg.cameras["a"].fps == 25.0 and cfg.cameras["b"].timestamps == tmp_path / "b.csv"
+
+
+def test_an_absurd_square_is_refused_naming_the_key(tmp_path: Path) -> None:
+    text = (
+        "schema_version: 2\noutput: out/\n"
+        "board: {cols: 9, rows: 6, square: 1000000000000000000000000000000}\n"
+        "cameras:\n  a: {images: imgs}\n  b: {poses: b.tum}\n"
+        "joints:\n  j: {between: [a, b], type: ball}\n"
+    )
+    (tmp_path / "c.yaml").write_text(text)
+    with pytest.raises(InputError, match=r"board\.square"):
+        load_run_config(tmp_path / "c.yaml")
