@@ -41,7 +41,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse
 import datetime as dt
-import platform
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -50,7 +49,6 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-import scipy
 from scipy.stats import chi2
 
 from acs_cli.core.joint import estimate_joint_overlap
@@ -60,6 +58,7 @@ from acs_cli.errors import AcsError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # its helper, when imported
 import mocap_trc as trc
+from bench_rig import load, log, machine_info
 
 from sample_data_gen import mocap_sim as M
 
@@ -81,24 +80,6 @@ _U = M.KNEE_AXIS_IN_FEMUR
 KNEE_POINT_IN_FEMUR = M.KNEE_IN_FEMUR - (M.KNEE_IN_FEMUR @ _U) * _U
 CHI2_95_3D = float(chi2.ppf(0.95, 3))
 T = TypeVar("T")
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def log(text: str) -> None:
-    print(text, file=sys.stderr, flush=True)
-
-
-def load() -> str:
-    return "{:.2f} {:.2f} {:.2f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else "?"
-
-
-def machine_info() -> str:
-    threads = {k: os.environ[k] for k in _THREAD_VARS if k in os.environ}
-    return (
-        f"{platform.platform()}, Python {platform.python_version()}, numpy {np.__version__}, "
-        f"scipy {scipy.__version__}, {os.cpu_count()} CPUs, BLAS threads "
-        + (", ".join(f"{k}={v}" for k, v in threads.items()) or "default")
-    )
 
 
 def table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:

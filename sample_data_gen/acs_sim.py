@@ -314,3 +314,20 @@ def pluslib_stylus_recording(
     T[bad, :3, :3] = rx @ ry @ rz
     T[bad, :3, 3] = rng.uniform(-1000.0, 1000.0, size=(outliers, 3))
     return T, bad, tip
+
+
+def hand_eye_pair(
+    rng: np.random.Generator, n: int = 30, sigma_rot_deg: float = 0.2, sigma_trans: float = 0.002
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Two bodies on one rigid body, each in its own world (a camera on a robot's flange):
+    noisy ``T_world_a``, ``T_world_b`` ``(n, 4, 4)`` and the true ``T_b_a``."""
+    T_b_a = se3.transforms_from_rt(
+        se3.matrix_from_rotvec(np.array([0.3, -0.5, 0.2])), np.array([0.05, 0.1, 0.12])
+    )
+    T_w_a = se3.transforms_from_rt(random_rotations(rng, n, 60.0), rng.uniform(-0.5, 0.5, (n, 3)))
+    T_w_b = random_transform(rng) @ T_w_a @ se3.invert_transforms(T_b_a)
+    return (
+        add_pose_noise(rng, T_w_a, sigma_rot_deg, sigma_trans),
+        add_pose_noise(rng, T_w_b, sigma_rot_deg, sigma_trans),
+        T_b_a,
+    )

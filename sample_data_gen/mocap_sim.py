@@ -81,6 +81,29 @@ def _slide(rng: np.random.Generator, angle: FloatArray, rot_deg: float, trans: f
     return np.asarray(a[:, None] * gains[None, :] + 0.3 * a[:, None] ** 2 * gains[None, ::-1])
 
 
+def _trial(
+    rng: np.random.Generator,
+    t: FloatArray,
+    parent: tuple[str, FloatArray],
+    child: tuple[str, FloatArray],
+    angle: FloatArray,
+    sigma_rot_deg: float,
+    sigma_trans: float,
+    slide_mm: float,
+) -> MocapTrial:
+    """Both segments measured with noise; the child's skin-marker error (``slide_mm``)
+    follows the joint ``angle``."""
+    slide = _slide(rng, angle, slide_mm / 5.0, slide_mm / 1000.0) if slide_mm else None
+    return MocapTrial(
+        t,
+        {
+            parent[0]: _noisy(rng, parent[1], sigma_rot_deg, sigma_trans),
+            child[0]: _noisy(rng, child[1], sigma_rot_deg, sigma_trans, slide),
+        },
+        {parent[0]: parent[1], child[0]: child[1]},
+    )
+
+
 def hip_trial(
     rng: np.random.Generator,
     n: int = 300,
@@ -102,15 +125,8 @@ def hip_trial(
     R_pf = se3.matrix_from_rotvec(hip)
     t_pf = HIP_IN_PELVIS - np.einsum("nij,j->ni", R_pf, HIP_IN_FEMUR)
     T_fem = np.matmul(T_pel, se3.transforms_from_rt(R_pf, t_pf))
-    slide = _slide(rng, flex, slide_mm / 5.0, slide_mm / 1000.0) if slide_mm else None
-    return MocapTrial(
-        t,
-        {
-            "pelvis": _noisy(rng, T_pel, sigma_rot_deg, sigma_trans),
-            "femur": _noisy(rng, T_fem, sigma_rot_deg, sigma_trans, slide),
-        },
-        {"pelvis": T_pel, "femur": T_fem},
-    )
+    return _trial(rng, t, ("pelvis", T_pel), ("femur", T_fem), flex, sigma_rot_deg,
+                  sigma_trans, slide_mm)  # fmt: skip
 
 
 def knee_trial(
@@ -132,15 +148,8 @@ def knee_trial(
     R_ft = np.matmul(se3.matrix_from_rotvec(theta[:, None] * KNEE_AXIS_IN_FEMUR), R0)
     t_ft = KNEE_IN_FEMUR - np.einsum("nij,j->ni", R_ft, KNEE_IN_TIBIA)
     T_tib = np.matmul(T_fem, se3.transforms_from_rt(R_ft, t_ft))
-    slide = _slide(rng, theta, slide_mm / 5.0, slide_mm / 1000.0) if slide_mm else None
-    return MocapTrial(
-        t,
-        {
-            "femur": _noisy(rng, T_fem, sigma_rot_deg, sigma_trans),
-            "tibia": _noisy(rng, T_tib, sigma_rot_deg, sigma_trans, slide),
-        },
-        {"femur": T_fem, "tibia": T_tib},
-    )
+    return _trial(rng, t, ("femur", T_fem), ("tibia", T_tib), theta, sigma_rot_deg,
+                  sigma_trans, slide_mm)  # fmt: skip
 
 
 def knee_axis_in_tibia() -> FloatArray:

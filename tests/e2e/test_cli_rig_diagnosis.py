@@ -15,16 +15,9 @@ from sample_data_gen import acs_sim
 
 def test_a_robots_poses_given_inverted_are_named(tmp_path: Path) -> None:
     rng = np.random.default_rng(3)
-    n = 30
-    T_b_a = se3.transforms_from_rt(se3.matrix_from_rotvec(np.array([0.3, -0.5, 0.2])),
-                                   np.array([0.05, 0.1, 0.12]))  # fmt: skip
-    T_w_a = se3.transforms_from_rt(
-        acs_sim.random_rotations(rng, n, 60.0), rng.uniform(-0.5, 0.5, (n, 3))
-    )
-    T_w_b = acs_sim.random_transform(rng) @ T_w_a @ se3.invert_transforms(T_b_a)
-    t = np.arange(n) / 10.0
-    write_tum(tmp_path / "cam.tum", t, acs_sim.add_pose_noise(rng, T_w_a, 0.1, 0.001))
-    flange = acs_sim.add_pose_noise(rng, T_w_b, 0.1, 0.001)
+    cam, flange, _ = acs_sim.hand_eye_pair(rng, 30, 0.1, 0.001)
+    t = np.arange(30) / 10.0
+    write_tum(tmp_path / "cam.tum", t, cam)
     write_tum(tmp_path / "flange.tum", t, se3.invert_transforms(flange))  # the wrong way round
     (tmp_path / "c.yaml").write_text(
         "schema_version: 2\noutput: out/\ncameras:\n  cam: {poses: cam.tum}\n"

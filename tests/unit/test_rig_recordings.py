@@ -216,16 +216,8 @@ def test_swapping_a_rigid_edge_or_the_reference_changes_nothing(
 ) -> None:
     # a hand-eye pair (separate worlds): T_b_a the same whichever way it is written down
     n = 30
-    T_b_a = se3.transforms_from_rt(se3.matrix_from_rotvec(np.array([0.3, -0.5, 0.2])),
-                                   np.array([0.05, 0.1, 0.12]))  # fmt: skip
-    T_w_a = se3.transforms_from_rt(
-        acs_sim.random_rotations(rng, n, 60.0), rng.uniform(-0.5, 0.5, (n, 3))
-    )
-    T_w_b = acs_sim.random_transform(rng) @ T_w_a @ se3.invert_transforms(T_b_a)
-    tracks = {
-        "a": CameraTrack(acs_sim.add_pose_noise(rng, T_w_a, 0.2, 0.002), np.ones(n, bool)),
-        "b": CameraTrack(acs_sim.add_pose_noise(rng, T_w_b, 0.2, 0.002), np.ones(n, bool)),
-    }
+    T_w_a, T_w_b, _ = acs_sim.hand_eye_pair(rng, n)
+    tracks = {"a": CameraTrack(T_w_a, np.ones(n, bool)), "b": CameraTrack(T_w_b, np.ones(n, bool))}
     got = []
     for between, ref in (
         (["a", "b"], "a"),
