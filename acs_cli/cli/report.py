@@ -210,8 +210,11 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
 
     art = RigArtifact.load(rig_file)
     files: dict[str, Path] = {}
-    for c in art.cameras:
-        rec = art.inputs.get(f"poses_{c}")
+    for c, cam in art.cameras.items():
+        if cam.T_cam_ref is None:  # a body seen only in another recording
+            continue
+        key = f"poses_{art.reference_recording}_{c}" if art.reference_recording else f"poses_{c}"
+        rec = art.inputs.get(key)
         if isinstance(rec, dict) and rec.get("path"):
             p = Path(str(rec["path"]))
             files[c] = p if p.is_file() or p.is_absolute() else rig_file.parent / p

@@ -253,10 +253,11 @@ def _held_priors(
                 f = (recs.of_frame == r) & tracks[c].valid
                 if not f.any():
                     continue
-                if tracks[c].unknown_scale:
+                if tracks[c].unknown_scale or tracks[topology.reference].unknown_scale:
                     raise InputError(
                         f"recordings.{recs.names[r]}.fixed_joints ({name}, camera {c}): a "
-                        f"fixed-joint motion gives metres; it needs {c} to be metric"
+                        f"fixed-joint motion gives metres; it needs {c} and the reference "
+                        "camera to be metric"
                     )
                 label = f"recordings.{recs.names[r]}.fixed_joints ({name}, camera {c})"
                 p = fixed_joint_prior(j, c, tracks[c].T_w_c[f], label)
@@ -283,6 +284,9 @@ class CameraEstimate:
     #: instant (scaled by ``scale``) into the reference world:
     #: ``G_c = [R_X R_c, scale R_X t_c + t_X]``
     world_to_reference_world: FloatArray = field(default_factory=lambda: np.eye(4))
+    #: ``(n,)`` bool: the instants whose ``poses_in_reference_world`` are in the reference
+    #: world (a pose there, in a world tied to the reference's); empty: wherever it has one
+    in_reference_world: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def rotation_std_deg(self) -> FloatArray:
@@ -1135,6 +1139,12 @@ class _WorldGraph:
     root: np.ndarray  # per world: the first world of its group (itself for a group's frame)
     unknown_scale: np.ndarray  # per world
     ref_world: int
+    has_world: dict[str, np.ndarray]  # per camera: (n,) instants where it has a world
+
+    def tied(self, c: str) -> np.ndarray:
+        """``(n,)`` bool: the instants where camera ``c``'s pose is in the reference world
+        (its world there is tied to the reference's)."""
+        return self.has_world[c] & (self.root[self.widx[c]] == self.ref_world)
 
 
 def _world_graph(
@@ -1157,11 +1167,13 @@ def _world_graph(
     cams: list[list[str]] = []
     shared: list[bool] = []
     widx: dict[str, np.ndarray] = {}
+    has_world: dict[str, np.ndarray] = {}
     for c in topo.cameras:
-        w = np.zeros(n, int)
+        w = np.zeros(n, int)  # 0 where it has none: masked by has_world
         on_edges = np.zeros(n, bool)  # a world only where the camera is on some edge
         for j in topo.edges_of(c):
             on_edges[frames[j.name]] = True
+        has_world[c] = np.isin(recs.of_frame, recs.of_frame[on_edges]) & tracks[c].valid
         for rr in np.unique(recs.of_frame[on_edges]):
             r = int(rr)
             key = (r, "" if recs.shared_world[r] else c)
@@ -1201,7 +1213,9 @@ def _world_graph(
     groups = {find(w) for w in range(len(recording))}
     first = {g: (ref_world if find(ref_world) == g else g) for g in groups}
     root = np.array([first[find(w)] for w in range(len(recording))], int)
-    return _WorldGraph(widx, recording, [tuple(m) for m in cams], shared, root, unknown, ref_world)
+    return _WorldGraph(
+        widx, recording, [tuple(m) for m in cams], shared, root, unknown, ref_world, has_world
+    )
 
 
 def estimate_rig(
@@ -1263,7 +1277,15 @@ def estimate_rig(
     for j in topology.joints:
         p, q = j.between
         f = np.flatnonzero(tracks[p].valid & tracks[q].valid)
-        f = f[~recs.holds(j.name, f)]
+        still = recs.holds(j.name, f)
+        if still.all() and f.size:
+            raise DegenerateMotionError(
+                f"joint {j.name} ({p}-{q}): held still in every recording that sees both its "
+                "bodies; that gives its position, not how the bodies turn: add a recording "
+                "of it moving",
+                details={"joint": j.name, "frames": 0},
+            )
+        f = f[~still]
         # in a shared world the joint is Algorithm I's (eq. (13)): a few frames determine it
         one_world = int(np.sum(np.asarray(recs.shared_world)[recs.of_frame[f]]))
         if f.size < MIN_EDGE_FRAMES and one_world < MIN_SHARED_WORLD_FRAMES:
@@ -1282,15 +1304,18 @@ def estimate_rig(
     ]
     if topology.reference not in with_delta:
         raise InputError(
-            f"reference.frame: camera {topology.reference} is on no joint at frame {k} (a "
-            "joint held still there): choose a frame of a recording that moves it"
+            f"reference: camera {topology.reference} is on no joint at the reference instant "
+            "(its joints' other bodies are not in that recording, or the recording holds "
+            "them still): choose a recording where it moves with a neighbour"
         )
     L = _Layout(topology, wg.root.size, wg.root, wg.unknown_scale, wg.ref_world, with_delta)
     x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L, wg.widx, wg.root)
     Rm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, :3]) for c in topology.cameras}
     tm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, 3]) for c in topology.cameras}
     # the rig's length scale: for noise floors and for judging what is determined
-    t_ref = tm[topology.reference][tracks[topology.reference].valid]
+    # (the reference recording's instants: other recordings' worlds have their own origins)
+    here = tracks[topology.reference].valid & (recs.of_frame == recs.of_frame[k])
+    t_ref = tm[topology.reference][here]
     travel = float(np.sqrt(np.mean(np.sum((t_ref - t_ref.mean(0)) ** 2, 1))))
     prior_rows: list[tuple[str, int, FloatArray, FloatArray]] = []
     for name, pr in priors.items():
@@ -1436,7 +1461,8 @@ def _assemble(
         wc = int(st.widx[c][k]) if c in L.delta else int(st.widx[c][np.argmax(st.frames_of(c))])
         T0: FloatArray | None = None
         C6: FloatArray = np.zeros((6, 6))
-        if c in L.delta and c != ref:
+        tied = wg.tied(c)
+        if c in L.delta and c != ref and tied[k]:
             T0 = se3.invert_transforms(pose_at_ref(x, c)) @ pose_at_ref(x, ref)
 
             def vec(xx: FloatArray, c: str = c, T0: FloatArray = T0) -> FloatArray:
@@ -1455,6 +1481,7 @@ def _assemble(
             scale_std,
             se3.transforms_from_rt(R, t),
             se3.transforms_from_rt(W.R[wc], W.t[wc]),
+            tied,
         )
     worlds: list[WorldEstimate] = []
     for w in range(wg.root.size):

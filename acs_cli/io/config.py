@@ -992,8 +992,9 @@ def _body_settings(recordings: dict[str, RigRecordingSpec], path: Path) -> dict[
 def _check_recordings(
     recordings: dict[str, RigRecordingSpec], joints: dict[str, RigJointSpec], path: Path
 ) -> None:
-    """Every joint is seen by some recording with both its bodies (or held still in one);
-    every held joint exists, is not rigid and is seen by its recording."""
+    """Every joint is seen moving by some recording with both its bodies (a recording that
+    holds it still gives its position, not the rig's articulation); every held joint exists,
+    is not rigid and is seen by its recording."""
     determined = set()
     for rname, rec in recordings.items():
         key = f"recordings.{rname}.fixed_joints"
@@ -1007,14 +1008,13 @@ def _check_recordings(
         for jn, j in joints.items():
             if all(b in rec.cameras for b in j.between) and jn not in rec.fixed_joints:
                 determined.add(jn)
-            if jn in rec.fixed_joints:
-                determined.add(jn)
     for jn in joints:
         if jn not in determined:
             raise _fail(
                 path,
                 f"joints.{jn}",
-                "no recording sees both of its bodies (or holds it still): nothing determines it",
+                "no recording sees both of its bodies move (one that holds it still gives "
+                "its position, not how the bodies turn): add a recording of it moving",
             )
 
 

@@ -2,7 +2,7 @@
 
 Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
 
-    reference: {camera: cam0, frame: 0}
+    reference: {camera: cam0, frame: 0}   # and recording: NAME with several recordings
     length_unit: m                      # the reference camera's trajectory unit
     cameras:
       <name>:
@@ -190,6 +190,8 @@ class RigCameraResult:
     #: estimated (``estimate_time_offset``)
     time_offset_s: float | None = None
     time_offset_s_std: float | None = None
+    #: its poses file held ``T_cam_world`` and was inverted on reading (``invert: true``)
+    invert: bool = False
     #: a body without corners in the rig's bundle adjustment (None: a camera, or no bundle)
     pose_only: PoseOnlySection | None = None
 
@@ -270,6 +272,9 @@ class RigArtifact(YamlArtifact):
     source: str | None = None
     verdict: VerdictSection | None = None
     recordings: dict[str, RigRecordingResult] = field(default_factory=dict)
+    #: with several recordings: the recording of the reference instant (``reference_frame``
+    #: is then a frame of that recording)
+    reference_recording: str | None = None
 
     KIND: ClassVar[str] = KIND
     REQUIRED: ClassVar[tuple[str, ...]] = ("reference.camera", "cameras", "joints")
@@ -387,6 +392,8 @@ class RigArtifact(YamlArtifact):
             }
             if c.T_ref_world is not None:
                 cams[c.name]["T_ref_world"] = c.T_ref_world
+            if c.invert:
+                cams[c.name]["invert"] = True
             if c.time_offset_s is not None:
                 cams[c.name]["time_offset_s"] = c.time_offset_s
                 cams[c.name]["time_offset_s_std"] = c.time_offset_s_std
@@ -410,7 +417,8 @@ class RigArtifact(YamlArtifact):
             d["frames_rejected"] = j.frames_rejected
             joints[j.name] = d
         out = {
-            "reference": {"camera": self.reference_camera, "frame": self.reference_frame},
+            "reference": {"camera": self.reference_camera, "frame": self.reference_frame}
+            | ({"recording": self.reference_recording} if self.reference_recording else {}),
             "length_unit": self.length_unit,
             "cameras": cams,
             "joints": joints,
@@ -515,6 +523,7 @@ class RigArtifact(YamlArtifact):
                 T_ref_world=None
                 if c.get("T_ref_world") is None
                 else as_matrix(c["T_ref_world"], (4, 4), f"{k}.T_ref_world", p),
+                invert=c.get("invert") is True,
                 time_offset_s=optional_number(c.get("time_offset_s"), f"{k}.time_offset_s", p),
                 time_offset_s_std=optional_number(
                     c.get("time_offset_s_std"), f"{k}.time_offset_s_std", p, non_negative=True
@@ -585,8 +594,14 @@ class RigArtifact(YamlArtifact):
                 raise InputError(f"'bundle_adjustment.{c}' is not one of the cameras", path=p)
             bundle[str(c)] = BundleSection.parse(b, f"bundle_adjustment.{c}", p)
         recordings = _parse_recordings(doc.get("recordings"), p)
+        ref_rec = ref.get("recording")
+        if ref_rec is not None and str(ref_rec) not in recordings:
+            raise InputError(
+                f"'reference.recording' {ref_rec!r} is not one of the recordings", path=p
+            )
         return cls(
             recordings=recordings,
+            reference_recording=None if ref_rec is None else str(ref_rec),
             reference_camera=reference,
             reference_frame=frame,
             length_unit=str(doc.get("length_unit", "m")),

@@ -369,7 +369,11 @@ def rig_verdict_measures(est: RigEstimate, reference: CameraTrack) -> list[Measu
     (the joint's distance, or a tenth of the reference camera's travel, as
     :func:`~acs_cli.core.rig_solve.estimate_rig` judges it); per joint, its rejected
     share."""
-    T_ref = reference.T_w_c[reference.valid]
+    here = reference.valid.copy()
+    if est.recordings is not None:  # the reference recording's world: one origin, one unit
+        recs = est.recordings
+        here &= recs.of_frame == recs.of_frame[est.reference_frame]
+    T_ref = reference.T_w_c[here]
     out: list[Measure] = []
     for name, e in est.edges.items():
         total = e.frames_used + e.frames_rejected
@@ -409,15 +413,26 @@ def run_rig(
     single = config.single
     if single:
         trajectories = by_rec[config.reference_recording]
+        if config.estimate_time_offset and config.recording_of_reference().fixed_joints:
+            raise InputError(
+                "estimate_time_offset: takes a recording that moves its joints (this one "
+                "holds some still); give it without estimate_time_offset",
+                path=config.path,
+            )
         if config.estimate_time_offset:
             offsets, warnings = rig_time_offsets(config, trajectories, priors)
             tracks, slots, index = tracks_with_offsets(config, trajectories, offsets)
         else:
             tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
             warnings += rig_synchronisation(config, trajectories, priors)
-        recordings = Recordings.single(
-            slots.size, config.recording_of_reference().shared_world, config.reference_recording
+        rec = config.recording_of_reference()
+        recordings = Recordings(
+            (config.reference_recording,),
+            np.zeros(slots.size, int),
+            (rec.shared_world,),
+            (rec.fixed_joints,),
         )
+
     else:
         if config.estimate_time_offset:
             raise InputError(
@@ -469,6 +484,9 @@ def run_rig(
     warnings += verdict.warnings()
     art = dataclasses.replace(
         rig_artifact(est, unit, warnings, None if single else config.reference_recording),
+        # the reference instant as the config gives it: a frame of the reference recording
+        reference_frame=config.reference_frame,
+        reference_recording=None if single else config.reference_recording,
         bundle_adjustment=sections,
         verdict=VerdictSection.from_verdict(verdict),
     )
@@ -478,6 +496,12 @@ def run_rig(
             for c, r in art.cameras.items()
         }
         art = dataclasses.replace(art, cameras=cams)
+    seen = config.recording_of_reference().cameras
+    cams = {
+        c: dataclasses.replace(r, invert=c in seen and seen[c].invert)
+        for c, r in art.cameras.items()
+    }
+    art = dataclasses.replace(art, cameras=cams)
     out = output if output is not None else config.output / RIG_FILE
     fixed = {
         f"fixed_joint_{jn}_{c}": p
@@ -1031,6 +1055,8 @@ def trajectories_from_rig(
     """
     out: dict[str, tuple[np.ndarray, FloatArray]] = {}
     for c, cam in rig.cameras.items():
+        if cam.T_cam_ref is None:  # seen only in another recording: not in this frame
+            continue
         if cam.T_ref_world is None:
             raise InputError(
                 f"cameras.{c}.T_ref_world is missing: rerun acscal run to record it",
@@ -1040,10 +1066,12 @@ def trajectories_from_rig(
             raise InputError(f"no trajectory for camera {c} (--poses {c}=FILE)")
         t = trajectories[c]
         T = t.T_world_cam.copy()
+        if cam.invert:  # the file holds T_cam_world (rig.yaml records it)
+            T = se3.invert_transforms(T)
         T[:, :3, 3] *= cam.scale
         out[c] = (t.timestamps, cam.T_ref_world @ T)
     for name, j in rig.joints.items():
-        if j.type == "rigid":
+        if j.type == "rigid" or j.between[0] not in out:
             continue
         p = j.between[0]
         times, T = out[p]
@@ -1076,6 +1104,8 @@ def write_rig_trajectories(
     )
     for c, e in est.cameras.items():
         ok = tracks[c].valid & here
+        if e.in_reference_world.size:  # not where its world is not the reference's
+            ok &= e.in_reference_world
         if not ok.any():
             continue
         path = folder / f"{c}.tum"
@@ -1086,6 +1116,9 @@ def write_rig_trajectories(
             continue
         p, q = edge.joint.between
         ok = tracks[p].valid & tracks[q].valid & here
+        for c in (p, q):
+            if est.cameras[c].in_reference_world.size:
+                ok &= est.cameras[c].in_reference_world
         if not ok.any():
             continue
         G = est.cameras[p].poses_in_reference_world[ok]

@@ -144,3 +144,28 @@ def test_the_papers_scenario_2_as_one_config(tmp_path: Path) -> None:
     assert r.joints["j"].frames_used + r.joints["j"].frames_rejected == 40
     T = r.posed("b")
     assert np.linalg.norm(T[:3, 3] - general.T_b_a(0)[:3, 3]) < 0.1
+
+
+def test_the_reference_in_the_second_recording_and_its_trajectories(
+    leg: Path, tmp_path: Path
+) -> None:
+    # review findings: rig.yaml gives the reference as the config does (a frame of its
+    # recording), and acscal trajectory --rig reads such a rig.yaml
+    for f in leg.glob("*.tum"):
+        (tmp_path / f.name).symlink_to(f)
+    (tmp_path / "config.yaml").write_text(
+        CONFIG.replace(
+            "{camera: pelvis, recording: hip, frame: 0}",
+            "{camera: femur, recording: knee, frame: 5}",
+        )  # fmt: skip
+    )
+    res = acscal("run", tmp_path / "config.yaml")
+    assert res.returncode == 0, res.stderr
+    doc = yaml.safe_load((tmp_path / "out" / "rig.yaml").read_text())
+    assert doc["reference"] == {"camera": "femur", "frame": 5, "recording": "knee"}
+    assert doc["cameras"]["pelvis"]["T_cam_ref"] is None
+    traj = sorted(f.name for f in (tmp_path / "out" / "trajectories").iterdir())
+    assert traj == ["femur.tum", "knee.tum", "tibia.tum"]
+    res = acscal("trajectory", "--rig", tmp_path / "out" / "rig.yaml", "-o", tmp_path / "t")
+    assert res.returncode == 0, res.stderr
+    assert sorted(f.name for f in (tmp_path / "t").iterdir()) == traj

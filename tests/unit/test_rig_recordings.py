@@ -6,6 +6,7 @@ geometry; a recording that holds a joint still gives it by Algorithm II."""
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -254,3 +255,34 @@ def test_swapping_a_ball_or_hinge_changes_nothing(joint_type: str) -> None:
         got.append(o)
     for g in got[1:]:
         assert np.abs(g - got[0]).max() < 2e-5  # solver tolerance (the reference's gauge)
+
+
+def test_a_body_whose_world_is_not_tied_to_the_reference_has_no_pose_there(
+    tmp_path: Path,
+) -> None:
+    # review finding: a chain a-b-c-d-e seen as {a, b, d, e} and {b, c, d}; d and e are in
+    # the reference recording, but nothing ties their worlds to a's (c is missing there)
+    from acs_cli.stages.rig import write_rig_trajectories
+    from sample_data_gen.rig_sim import make_edges, rig_recording
+
+    joints = tuple((f"{p}{q}", (p, q), "ball") for p, q in ("ab", "bc", "cd", "de"))
+    rng = np.random.default_rng(1)
+    edges = make_edges(rng, joints)
+    r0, r1 = (
+        rig_recording(
+            rng,
+            40,
+            joints=joints,
+            reference="a",
+            edges=edges,
+            sigma_rot_deg=0.05,
+            sigma_trans=0.001,
+        )
+        for _ in range(2)
+    )
+    tracks = _tracks({c: r0.T_wc_c[c] for c in "abde"}, {c: r1.T_wc_c[c] for c in "bcd"})
+    est = estimate_rig(r0.topology, tracks, recordings=_recordings([40, 40], [False, False]))
+    assert est.cameras["b"].T_cam_ref is not None
+    assert all(est.cameras[c].T_cam_ref is None for c in "cde")
+    written = write_rig_trajectories(est, tracks, np.arange(80) / 30.0, tmp_path)
+    assert sorted(p.name for p in written) == ["a.tum", "ab.tum", "b.tum"]
