@@ -157,7 +157,7 @@ def test_the_reference_in_the_second_recording_and_its_trajectories(
         CONFIG.replace(
             "{camera: pelvis, recording: hip, frame: 0}",
             "{camera: femur, recording: knee, frame: 5}",
-        )  # fmt: skip
+        )
     )
     res = acscal("run", tmp_path / "config.yaml")
     assert res.returncode == 0, res.stderr
