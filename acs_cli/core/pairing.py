@@ -94,6 +94,14 @@ def _median_interval(t: NDArray[np.float64]) -> float:
         return float(np.median(np.diff(np.sort(t))))
 
 
+def _smallest_gap(t: NDArray[np.float64]) -> float:
+    """The smallest positive interval between a camera's samples (``inf`` if none)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.diff(np.sort(t))
+    d = d[d > 0]
+    return float(d.min()) if d.size else float("inf")
+
+
 def default_max_dt(t_a: ArrayLike, t_b: ArrayLike) -> float:
     """Half the smaller of the two median frame intervals (seconds).
 
@@ -263,7 +271,9 @@ def common_timeline(
     times : dict of str to array, shape (n_c,)
         Each camera's increasing timestamps (seconds).
     max_dt : float, optional
-        Largest spread of one slot; default half the smallest median frame interval.
+        Largest spread of one slot; default half the smallest median frame interval, and
+        below every camera's smallest interval (two samples of one camera never share a
+        slot).
 
     Returns
     -------
@@ -275,6 +285,10 @@ def common_timeline(
     if max_dt is None:
         intervals = [_median_interval(t) for t in ts.values()]
         max_dt = min(intervals) / 2.0 if intervals else float("inf")
+        # never one slot for two samples of one camera: an unevenly spaced sequence
+        # (subsampled, dropped frames) has gaps below the median interval
+        gaps = [_smallest_gap(t) for t in ts.values()]
+        max_dt = min([max_dt, *(0.99 * g for g in gaps)])
     if not np.isfinite(max_dt):
         max_dt = float("inf")
     allt = np.sort(np.concatenate([t for t in ts.values()] or [np.zeros(0)]))

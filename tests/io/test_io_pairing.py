@@ -163,3 +163,15 @@ def test_no_common_timestamps() -> None:
     b = _traj(100 + np.arange(10) / 10.0, source="b.txt")
     with pytest.raises(InputError, match=r"no common timestamps between a.txt .* b.txt"):
         pair_trajectories(a, b)
+
+
+def test_unevenly_spaced_samples_of_one_camera_never_share_a_slot() -> None:
+    # a subsampled sequence (frames 7, 8, 11: median interval 2) lost frame 8 to frame 7's
+    # slot with the default max_dt of half the median interval
+    from acs_cli.core.pairing import common_timeline
+
+    slots, index = common_timeline({"l": [7.0, 8.0, 11.0], "r": [7.0, 8.0, 11.0]})
+    np.testing.assert_array_equal(slots, [7.0, 8.0, 11.0])
+    np.testing.assert_array_equal(index["l"], [0, 1, 2])
+    slots, index = common_timeline({"l": [0.0, 1.0, 3.0, 5.0], "r": [0.0, 1.0, 3.0, 5.0]})
+    assert slots.size == 4 and (index["r"] >= 0).all()
