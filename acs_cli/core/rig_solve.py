@@ -431,7 +431,6 @@ class _State:
     # prior rows W (g[at:at+3] - value) on a joint's geometry g = (o_p, o_q, u_p, u_q)
     priors: list[tuple[str, int, FloatArray, FloatArray]]  # (joint, at, value, W (k, 3))
     length: float = 1.0  # the rig's length scale (reference units), for noise floors
-    frames_cur: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
     def frames_of(self, c: str) -> np.ndarray:
         """``(n,)`` bool: the instants where camera ``c`` is on an edge."""
@@ -653,7 +652,7 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
 
     def by_world(c: str) -> list[tuple[np.ndarray, int]]:
         """The current edge's frames of camera ``c`` grouped by world: (positions, world)."""
-        wi = st.widx[c][st.frames_cur]
+        wi = st.widx[c][f]
         return [(np.flatnonzero(wi == w), int(w)) for w in np.unique(wi)]
 
     def cam_block(c: str, y: FloatArray, sign: float, with_t: bool, weight: FloatArray) -> None:
@@ -670,7 +669,7 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
                     blocks.append(sign * np.broadcast_to(np.eye(3), (at.size, 3, 3)))
                     cols += list(range(L.trans[w].start, L.trans[w].stop))
             if w in L.logs and with_t:
-                tf = meas[c][1][st.frames_cur[at]]
+                tf = meas[c][1][f[at]]
                 blocks.append(sign * (W.s[w] * tf @ RX.T)[:, :, None])
                 cols.append(L.logs[w])
             if blocks:
@@ -686,7 +685,6 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
     for j in st.topo.joints:
         p, q = j.between
         f = st.frames[j.name]
-        st.frames_cur = f
         m = f.size
         mask = (st.mask[j.name] * st.gain[j.name])[:, None, None]
         kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any

@@ -649,8 +649,6 @@ def _parse_recordings(doc: Any, p: Path) -> dict[str, RigRecordingResult]:
                 else as_number(scale_std, f"{kw}.scale_std", p, non_negative=True),
                 tied=bool(w.get("tied", True)),
             )
-        frames = r.get("frames", 0)
-        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 0:
-            raise InputError(f"'{k}.frames' must be a non-negative integer", path=p)
+        frames = as_int(r.get("frames", 0), f"{k}.frames", p, minimum=0)
         out[str(name)] = RigRecordingResult(str(name), world == "shared", frames, worlds)
     return out

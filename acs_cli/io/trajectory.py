@@ -1007,17 +1007,10 @@ def is_npz(path: str | Path) -> bool:
 
 
 def _sniff(path: Path) -> str:
-    if path.suffix.lower() == ".npz":
+    if is_npz(path):  # by suffix, or a zip archive under another name
         return "npz"
     if path.is_dir() or path.name == "images.txt":
         return "colmap"
-    try:
-        if path.is_file():  # not a FIFO or a device: opening one may block; _read_text says
-            with open(path, "rb") as fh:
-                if fh.read(4) == b"PK\x03\x04":  # a zip archive: an NPZ under another name
-                    return "npz"
-    except OSError:
-        pass  # _read_text names the problem
     lines, numbers = _data_lines(_read_text(path))
     if not lines:
         raise InputError("contains no poses (empty file)", path=path)

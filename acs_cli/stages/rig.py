@@ -207,19 +207,11 @@ def check_prior_units(config: RigRunConfig) -> None:
                 "reference.camera",
                 path=config.path,
             )
-        keys = [(f"joints.{name}.fixed_joint.{cam}", cam) for cam in j.fixed_joint]
-        keys += [
-            (f"recordings.{r}.fixed_joints ({name}, camera {cam})", cam)
-            for r, rec in config.recordings.items()
-            if name in rec.fixed_joints
-            for cam in j.between
-            if cam in rec.cameras
-        ]
-        for key, cam in keys:
+        for cam in j.fixed_joint:  # (recordings that hold a joint: the engine checks)
             if config.cameras[cam].unknown_scale or ref_unknown:
                 raise InputError(
-                    f"{key}: a fixed-joint session gives metres; it needs {cam} and the "
-                    "reference camera to be metric (scale: known)",
+                    f"joints.{name}.fixed_joint.{cam}: a fixed-joint session gives metres; it "
+                    f"needs {cam} and the reference camera to be metric (scale: known)",
                     path=config.path,
                 )
 
@@ -405,10 +397,9 @@ def run_rig(
         Where to write (default ``config.output / "rig.yaml"``).
     """
     poses = dict(poses or {})
-    check_prior_units(config)
+    priors = _priors(config)
     files, by_rec = read_recordings(config, poses)
     turned, turns = shared_board_orders(config, files, by_rec)
-    priors = _priors(config)
     offsets: dict[str, tuple[float, float]] = {}
     single = config.single
     if single:
@@ -425,13 +416,7 @@ def run_rig(
         else:
             tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
             warnings += rig_synchronisation(config, trajectories, priors)
-        rec = config.recording_of_reference()
-        recordings = Recordings(
-            (config.reference_recording,),
-            np.zeros(slots.size, int),
-            (rec.shared_world,),
-            (rec.fixed_joints,),
-        )
+        recordings = recordings_of(config, [slots.size])
 
     else:
         if config.estimate_time_offset:
@@ -748,7 +733,6 @@ def tracks_of_recordings(
 ) -> tuple[dict[str, CameraTrack], np.ndarray, Recordings, list[str]]:
     """Every recording's cameras on its own timeline (as :func:`tracks_on_timeline`), the
     timelines one after the other: the rig's tracks, times, recordings and warnings."""
-    names = tuple(config.recordings)
     parts: list[tuple[dict[str, CameraTrack], np.ndarray]] = []
     warnings: list[str] = []
     for rname, rec in config.recordings.items():
@@ -771,14 +755,20 @@ def tracks_of_recordings(
                 valid[at : at + slots.size] = tr[c].valid
             at += slots.size
         tracks[c] = CameraTrack(T, valid, spec.unknown_scale)
-    of_frame = np.concatenate([np.full(slots.size, i) for i, (_, slots) in enumerate(parts)])
-    recordings = Recordings(
-        names,
-        of_frame,
-        tuple(r.shared_world for r in config.recordings.values()),
-        tuple(r.fixed_joints for r in config.recordings.values()),
-    )
+    recordings = recordings_of(config, [slots.size for _, slots in parts])
     return tracks, np.concatenate([slots for _, slots in parts]), recordings, warnings
+
+
+def recordings_of(config: RigRunConfig, sizes: list[int]) -> Recordings:
+    """The engine's :class:`Recordings` of a config whose recordings have ``sizes``
+    instants, one after the other on the rig's timeline."""
+    recs = list(config.recordings.values())
+    return Recordings(
+        tuple(r.name for r in recs),
+        np.concatenate([np.full(m, i, dtype=int) for i, m in enumerate(sizes)]),
+        tuple(r.shared_world for r in recs),
+        tuple(r.fixed_joints for r in recs),
+    )
 
 
 def _edge_fit(
