@@ -9,8 +9,8 @@ Algorithm   here                                   solved in
 ==========  =====================================  ==========================================
 I           :func:`algorithm_1_overlap`            :func:`acs_cli.core.joint.estimate_joint_overlap`
 II          :func:`algorithm_2_fixed_joint`        :func:`acs_cli.core.joint.estimate_pivot`
-III         :func:`algorithm_3_relative_pose`      :func:`acs_cli.core.relpose._paper`
-IV          :func:`algorithm_4_unknown_scale`      :func:`acs_cli.core.relpose._paper`
+III         :func:`algorithm_3_relative_pose`      :func:`relative_pose_paper` (here)
+IV          :func:`algorithm_4_unknown_scale`      :func:`relative_pose_paper` (here)
 ==========  =====================================  ==========================================
 
 Rigs of more than two cameras, hinges and rigid pairs go beyond the paper: one solve over
@@ -21,15 +21,22 @@ Frames: the paper's ``H_BA`` is our ``T_b_a``, its ``O_A`` our ``position_in_a``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import numpy as np
+
+from acs_cli.core import lsq, se3
 from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
-from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
+from acs_cli.core.rig_start import kron_rows, lstsq_scaled
 from acs_cli.core.se3 import FloatArray
 
 __all__ = [
+    "PaperRelativePose",
     "algorithm_1_overlap",
     "algorithm_2_fixed_joint",
     "algorithm_3_relative_pose",
     "algorithm_4_unknown_scale",
+    "relative_pose_paper",
 ]
 
 
@@ -68,7 +75,7 @@ def algorithm_2_fixed_joint(T_wa_a: FloatArray, T_wb_b: FloatArray | None = None
 
 def algorithm_3_relative_pose(
     T_wa_a: FloatArray, T_wb_b: FloatArray, o_a: FloatArray, reference: int = 0
-) -> RelposeEstimate:
+) -> PaperRelativePose:
     """Algorithm III (section 3.2): the relative pose of non-overlapping cameras.
 
     With camera motions relative to the reference frame, ``H_A^i`` and ``H_B^i``, the joint
@@ -86,14 +93,12 @@ def algorithm_3_relative_pose(
     reference : int
         The frame of ``H_BA``.
     """
-    return estimate_relpose(
-        T_wa_a, T_wb_b, JointPrior(position_in_a=o_a), reference=reference, method="paper"
-    )
+    return relative_pose_paper(T_wa_a, T_wb_b, o_a, reference, unknown_scale=False)
 
 
 def algorithm_4_unknown_scale(
     T_wa_a: FloatArray, T_wb_b: FloatArray, o_a: FloatArray, reference: int = 0
-) -> RelposeEstimate:
+) -> PaperRelativePose:
     """Algorithm IV (section 4): Algorithm III when each trajectory has its own scale.
 
     The translations carry unknown factors ``mu_A``, ``mu_B``; eq. (24) holds with
@@ -109,11 +114,142 @@ def algorithm_4_unknown_scale(
         The joint in camera A, in A's trajectory units.
     reference : int
     """
-    return estimate_relpose(
-        T_wa_a,
-        T_wb_b,
-        JointPrior(position_in_a=o_a),
-        unknown_scale=True,
+    return relative_pose_paper(T_wa_a, T_wb_b, o_a, reference, unknown_scale=True)
+
+
+@dataclass(frozen=True)
+class PaperRelativePose:
+    """Algorithm III's or IV's result (see :func:`relative_pose_paper`).
+
+    ``T_b_a`` ``(4, 4)`` (the paper's ``H_BA``, B's units) with the covariance ``(6, 6)`` of
+    (right rotation perturbation (rad), translation); ``phi_ba`` (1 under known scale) and
+    its std; ``O_A`` refined (``position_in_a``, A's units) and ``O_B = phi R_BA O_A + T_BA``
+    (B's units) with covariances ``(3, 3)``; ``T_wb_wa`` the similarity's rotation and
+    translation from world A to world B that eq. (24) implies at the reference frame;
+    ``residuals`` ``(n, 3)`` of eq. (25) / (44).
+    """
+
+    T_b_a: FloatArray
+    covariance: FloatArray
+    phi_ba: float
+    phi_std: float
+    position_in_a: FloatArray
+    position_in_b: FloatArray
+    covariance_a: FloatArray
+    covariance_b: FloatArray
+    T_wb_wa: FloatArray
+    residuals: FloatArray
+    reference: int
+    method: str = "paper"
+
+
+def relative_pose_paper(
+    T_wa_a: FloatArray,
+    T_wb_b: FloatArray,
+    o_a: FloatArray,
+    reference: int = 0,
+    unknown_scale: bool = False,
+) -> PaperRelativePose:
+    """Algorithms III and IV as published (sections 3.2 and 4).
+
+    With motions relative to the reference frame ``k``, ``H_A^i = inv(T_wa_a[k]) T_wa_a[i]``
+    and ``H_B^i`` likewise, eq. (24) ``H_B^i H_BA O_A' = H_BA H_A^i O_A'`` is linear in
+    ``vec(R_BA)`` and ``T_BA``:
+
+        [R_B^i K(O_A) - K(R_A^i O_A + T_A^i)] vec(R_BA) + (R_B^i - I) T_BA = -T_B^i
+
+    (``K(v) vec(M) = M v``), solved by least squares; ``R_BA`` is the nearest rotation
+    (``U V^T`` of the SVD, with ``phi = trace(D) / 3`` under unknown scale, eq. (38)-(43)),
+    then Levenberg-Marquardt over roll, pitch, yaw, ``T_BA``, ``O_A`` (and ``phi``) minimises
+    eq. (25) (eq. (44)). The reference frame is taken as exact; the covariance is the
+    Gauss-Newton one with the residual variance.
+
+    Parameters
+    ----------
+    T_wa_a, T_wb_b : ndarray, shape (n, 4, 4)
+        Paired ``T_world_cam`` of A and B, each in its own world (and units).
+    o_a : ndarray, shape (3,)
+        ``O_A``: the joint in camera A (A's units).
+    reference : int
+        Index of the reference frame ``k`` (negative counts from the end).
+    unknown_scale : bool
+        Algorithm IV: estimate ``phi_BA = mu_B / mu_A``.
+
+    Returns
+    -------
+    PaperRelativePose
+    """
+    Ta, Tb = np.asarray(T_wa_a, float), np.asarray(T_wb_b, float)
+    n = Ta.shape[0]
+    reference = reference % n
+    o_a = np.asarray(o_a, dtype=float)
+    Ha = se3.invert_transforms(Ta[reference]) @ Ta  # H_A^i
+    Hb = se3.invert_transforms(Tb[reference]) @ Tb  # H_B^i
+    c = np.ascontiguousarray
+    RA, TA, RB, TB = c(Ha[:, :3, :3]), c(Ha[:, :3, 3]), c(Hb[:, :3, :3]), c(Hb[:, :3, 3])
+    RAf, RBf = RA.reshape(-1, 3), RB.reshape(-1, 3)
+    # eq. (24), linear in vec(R_BA) and T_BA
+    KO = kron_rows(np.broadcast_to(o_a, (n, 3)))
+    A_rot = np.einsum("nij,njk->nik", RB, KO) - kron_rows(np.einsum("nij,j->ni", RA, o_a) + TA)
+    A = np.concatenate([A_rot, RB - np.eye(3)], axis=2).reshape(-1, 12)
+    x, _ = lstsq_scaled(A, -TB.reshape(-1))
+    # eq. (38)-(43): R = U V^T, phi = trace(D) / 3
+    R0, s = se3.project_to_rotation(x[:9].reshape(3, 3))
+    phi0 = float(np.sum(s) / 3.0) if unknown_scale else 1.0
+    rpy0 = np.radians(se3.rpy_deg_from_matrix(R0))
+
+    def unpack(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+        R = se3.matrix_from_rpy_deg(np.degrees(p[:3]))
+        return R, p[3:6], p[6:9], (float(p[9]) if unknown_scale else 1.0)
+
+    def res(p: FloatArray) -> FloatArray:
+        # eq. (25) / (44)
+        R, T, O, phi = unpack(p)
+        ja = (RAf @ O).reshape(-1, 3) + TA
+        r = phi * (RBf @ (R @ O)).reshape(-1, 3) + (RBf @ T).reshape(-1, 3) - T
+        return np.asarray((r - phi * ja @ R.T + TB).reshape(-1))
+
+    def jac(p: FloatArray) -> FloatArray:
+        R, _T, O, phi = unpack(p)
+        ja = (RAf @ O).reshape(-1, 3) + TA
+        # d R / d rpy_k = R [e_k]x with e_k the columns of rpy_right_jacobian
+        dR = np.matmul(R, se3.skew(se3.rpy_right_jacobian(p[:3]).T))  # (3, 3, 3): k, i, j
+        Jr = phi * (np.einsum("nij,kjl,l->nik", RB, dR, O) - np.einsum("nj,kij->nik", ja, dR))
+        JT = RB - np.eye(3)
+        JO = phi * ((RBf @ R).reshape(-1, 3, 3) - np.matmul(R, RA))
+        blocks = [Jr, JT, JO]
+        if unknown_scale:
+            blocks.append(((RBf @ (R @ O)).reshape(-1, 3) - ja @ R.T)[:, :, None])
+        return np.concatenate(blocks, axis=2).reshape(3 * n, -1)
+
+    p0 = np.concatenate([rpy0, x[9:], o_a] + ([[phi0]] if unknown_scale else []))
+    sol = lsq.solve(res, p0, jac=jac, method="lm")
+    R, T, O, phi = unpack(sol.x)
+    r = sol.fun.reshape(-1, 3)
+    Jm = sol.jac
+    dof = max(r.size - Jm.shape[1], 1)
+    cov = float(np.sum(r**2) / dof) * np.linalg.pinv(Jm.T @ Jm)
+    # covariance of (R perturbation, T): rpy -> right perturbation
+    G = np.zeros((6, cov.shape[0]))
+    G[:3, :3] = se3.rpy_right_jacobian(np.radians(se3.rpy_deg_from_matrix(R)))
+    G[3:, 3:6] = np.eye(3)
+    O_b = phi * R @ O + T
+    JOb = np.concatenate([-phi * R @ se3.skew(O) @ G[:3, :3], np.eye(3), phi * R], axis=1)
+    if unknown_scale:
+        JOb = np.concatenate([JOb, (R @ O)[:, None]], axis=1)
+    # the similarity world A -> world B: j_b = phi R_X j_a + t_X (eq. (24) at the reference)
+    R_X = Tb[reference, :3, :3] @ R @ Ta[reference, :3, :3].T
+    t_X = Tb[reference, :3, 3] + Tb[reference, :3, :3] @ T - phi * R_X @ Ta[reference, :3, 3]
+    return PaperRelativePose(
+        T_b_a=se3.transforms_from_rt(R, T),
+        covariance=G @ cov @ G.T,
+        phi_ba=phi,
+        phi_std=float(np.sqrt(cov[9, 9])) if unknown_scale else 0.0,
+        position_in_a=O,
+        position_in_b=O_b,
+        covariance_a=cov[6:9, 6:9],
+        covariance_b=JOb @ cov[: JOb.shape[1], : JOb.shape[1]] @ JOb.T,
+        T_wb_wa=se3.transforms_from_rt(R_X, t_X),
+        residuals=r,
         reference=reference,
-        method="paper",
     )

@@ -53,19 +53,24 @@ from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
-from acs_cli.core.quality import OVERRIDE_HINT
-from acs_cli.core.relpose import (
-    SINGLE_AXIS_RATIO,
-    UNDETERMINED_STD_FRACTION,
-    _initial_lifted,
-    estimate_relpose,
-)
+from acs_cli.core.quality import JOINT_STD, OVERRIDE_HINT
 from acs_cli.core.rig import RigJoint, RigTopology
+from acs_cli.core.rig_start import ball_similarity, similarity_from_lifted
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
 #: Fewest frames an edge needs in common (as for a self-calibrated pair).
 MIN_EDGE_FRAMES = 14
+#: ... or, for a joint whose position is given (a prior): the relative pose alone.
+MIN_PRIOR_EDGE_FRAMES = 5
+#: A camera "turns about one axis only" when the weakest singular value of its stacked,
+#: centred rotations is below this fraction of the strongest (about 3 degrees of wobble per
+#: 60 degrees of turning).
+SINGLE_AXIS_RATIO = 0.05
+#: A joint is "not determined" when its largest standard deviation exceeds this fraction of
+#: its distance from the camera (seen in simulation: about 5% for general motion, 14-30% for
+#: a rigid or hinged joint whatever the noise level).
+UNDETERMINED_STD_FRACTION = JOINT_STD.refuse
 #: ... or, where both its cameras are in one world (Algorithm I; stereo for a rigid edge).
 MIN_SHARED_WORLD_FRAMES = 3
 #: Largest share of an edge's frames rejected as outliers.
@@ -74,8 +79,13 @@ MAX_OUTLIER_FRACTION = 0.3
 #: poses there are unknowns (tied to their measurements by the pose noise), and the joint
 #: constraints hold for them exactly, as for the two-camera estimator's reference poses.
 REFERENCE_GAIN = 1e2
-#: Noise-level refits (each followed by a solve).
-REWEIGHT_ROUNDS = 4
+#: Noise-level refits (each followed by a solve), at most; they stop when the levels settle
+#: (move by less than SETTLED_NOISE, relative): the solution is then the fixed point of the
+#: reweighting, whatever the start (a world frame, a reference camera, the order of ``between``).
+REWEIGHT_ROUNDS = 12
+SETTLED_NOISE = 1e-5
+#: Rounds of outlier tests (each followed by a refit), at most.
+REJECTION_ROUNDS = 8
 #: Normalised information eigenvalue below which a direction is not determined at all.
 NULL_EIGENVALUE = 1e-9
 #: Noise levels are kept above these (radians, and a share of the rig's length scale): a
@@ -177,12 +187,18 @@ class EdgePrior:
         joint's point lies on it, ``std`` (reference units) across it.
     axis_in : dict of camera to (direction (3,), std_rad)
         A hinge's axis direction (either sign).
+    units : {"reference", "own", "metre"}
+        The unit of ``position_in``, ``covariance_in`` and ``line_in``: the reference
+        camera's (default), each camera's own trajectory units (a fixed-joint session of a
+        camera of unknown scale), or metres while the reference's scale is unknown (then the
+        reference's units per metre are estimated too, ``CameraEstimate.units_per_metre``).
     """
 
     position_in: dict[str, FloatArray] = field(default_factory=dict)
     covariance_in: dict[str, FloatArray] = field(default_factory=dict)
     line_in: dict[str, tuple[FloatArray, FloatArray, float]] = field(default_factory=dict)
     axis_in: dict[str, tuple[FloatArray, float]] = field(default_factory=dict)
+    units: str = "reference"
 
 
 def fixed_joint_prior(joint: RigJoint, camera: str, T_w_c: FloatArray, label: str) -> EdgePrior:
@@ -232,11 +248,17 @@ def fixed_joint_prior(joint: RigJoint, camera: str, T_w_c: FloatArray, label: st
 
 def merge_priors(first: EdgePrior, second: EdgePrior) -> EdgePrior:
     """Both priors of one joint; where both give the same part, ``first``'s."""
+    if first.units != second.units and (second.position_in or second.line_in):
+        raise InputError(
+            "two priors of one joint in different units (a fixed-joint recording and the "
+            "config's joints section): give one of them"
+        )
     return EdgePrior(
         position_in={**second.position_in, **first.position_in},
         covariance_in={**second.covariance_in, **first.covariance_in},
         line_in={**second.line_in, **first.line_in},
         axis_in={**second.axis_in, **first.axis_in},
+        units=first.units,
     )
 
 
@@ -287,6 +309,10 @@ class CameraEstimate:
     #: ``(n,)`` bool: the instants whose ``poses_in_reference_world`` are in the reference
     #: world (a pose there, in a world tied to the reference's); empty: wherever it has one
     in_reference_world: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: the camera's own trajectory units per metre, where a metric prior let them be
+    #: estimated (a rig of unknown scale), with its std; None elsewhere
+    units_per_metre: float | None = None
+    units_per_metre_std: float | None = None
 
     @property
     def rotation_std_deg(self) -> FloatArray:
@@ -315,6 +341,9 @@ class EdgeEstimate:
     #: the raw constraint residuals over the inlier frames, by kind (``pos``, ``rot``,
     #: ``trans``: ``(m, 3)`` each, see ``_edge_blocks``)
     residual_blocks: dict[str, FloatArray] = field(default_factory=dict)
+    #: ``position_in`` and ``position_cov_in`` in each camera's own trajectory units (they
+    #: differ from the reference's under unknown scale): camera -> (position, covariance)
+    position_own_in: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -353,6 +382,7 @@ class _Layout:
         unknown_scale: np.ndarray,
         ref_world: int,
         with_delta: list[str],
+        metre: bool = False,
     ):
         ref_unknown = bool(unknown_scale[ref_world])
         k = 0
@@ -374,6 +404,13 @@ class _Layout:
                     shared = k
                     k += 1
                 self.logs[w] = shared
+        # the reference's units per metre, for a metric prior when the reference has none
+        self.metre: int | None = None
+        if metre and ref_unknown:
+            if shared is None:
+                shared = k
+                k += 1
+            self.metre = shared
         # ball: o_p, o_q (3 + 3). hinge: o_p in the plane across its axis (2), o_q (3), and
         # each axis as a 2-dof step from its starting direction (2 + 2). rigid: T_q_p (3 + 3).
         self.edge: dict[str, slice] = {}
@@ -428,8 +465,9 @@ class _State:
     w_rot: dict[str, float]  # per edge: 1 / sigma of axis or rigid-rotation rows
     w_trans: dict[str, float]  # per edge: 1 / sigma of rigid-translation rows
     w_delta: dict[str, FloatArray]  # per camera: (6,) 1 / sigma of reference-pose priors
-    # prior rows W (g[at:at+3] - value) on a joint's geometry g = (o_p, o_q, u_p, u_q)
-    priors: list[tuple[str, int, FloatArray, FloatArray]]  # (joint, at, value, W (k, 3))
+    # prior rows W (g[at:at+3] / f - value) on a joint's geometry g = (o_p, o_q, u_p, u_q),
+    # f = exp(x[col]) converting reference units to the prior's (1 where col is None)
+    priors: list[tuple[str, int, FloatArray, FloatArray, int | None]]  # (joint, at, value, W, col)
     length: float = 1.0  # the rig's length scale (reference units), for noise floors
 
     def frames_of(self, c: str) -> np.ndarray:
@@ -599,11 +637,12 @@ def _residuals(st: _State, x: FloatArray) -> FloatArray:
             parts.append((b["trans"] * st.w_trans[j.name] * m).ravel())
     for c in st.L.delta:
         parts.append(x[st.L.delta[c]] * st.w_delta[c])
-    for name, at, value, W in st.priors:
+    for name, at, value, W, col in st.priors:
         g = joint_geometry(st, x, st.topo.joint(name))[at // 3]
         if g is None:  # estimate_rig refuses such priors; this guards other callers
             raise InputError(f"joints.{name}: a prior on an axis the joint does not have")
-        parts.append(W @ (g - value))
+        f = 1.0 if col is None else float(np.exp(x[col]))
+        parts.append(W @ (g / f - value))
     return np.concatenate(parts)
 
 
@@ -783,13 +822,18 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown
         put(D.reshape(2, 3, 6), list(range(L.delta[c].start, L.delta[c].stop)), row0)
         row0 += 6
-    for name, g_at, _value, Wp in st.priors:
+    for name, g_at, _value, Wp, col in st.priors:
         j = st.topo.joint(name)
         Dg = _geometry_jacobian(st, x, j)
-        block = Wp @ Dg[g_at : g_at + 3]
+        fp = 1.0 if col is None else float(np.exp(x[col]))
+        block = Wp @ Dg[g_at : g_at + 3] / fp
+        cols = L.edge_columns(name)
+        if col is not None:  # d(g / f) / d log f = -g / f
+            g = joint_geometry(st, x, j)[g_at // 3]
+            block = np.concatenate([block, (Wp @ (-np.asarray(g) / fp))[:, None]], axis=1)
+            cols = [*cols, col]
         rows = block.shape[0]
         r = row0 + np.arange(rows)
-        cols = L.edge_columns(name)
         rows_i.append(np.repeat(r, len(cols)))
         cols_i.append(np.tile(np.asarray(cols), rows))
         vals.append(block.reshape(-1))
@@ -913,19 +957,16 @@ def _initial(
 def _edge_start(
     Gs: FloatArray, Tt: FloatArray, joint_type: str
 ) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
-    """One edge's starting similarity and joint: for a ball, the pairwise refined
-    self-calibration (:func:`acs_cli.core.relpose.estimate_relpose`), which converges from
-    the linear lifted solution where the rig solve may not (a short, narrow motion leaves
-    the linear solution far off); otherwise, or when that refuses, the linear solution."""
+    """One edge's starting similarity and joint: for a ball, the pairwise fit of
+    :func:`acs_cli.core.rig_start.ball_similarity`, which converges from the linear lifted
+    solution where the rig solve may not (a short, narrow motion leaves the linear solution
+    far off); otherwise the linear solution."""
     if joint_type == "ball":
         try:
-            e = estimate_relpose(Gs, Tt, unknown_scale=True, reject_outliers=False)
+            return ball_similarity(Gs, Tt)
         except DegenerateMotionError:
             pass
-        else:
-            X = e.T_wb_wa
-            return X[:3, :3], X[:3, 3], float(e.phi_ba), e.position_in_a, e.position_in_b
-    return _initial_lifted(Gs, Tt, None)
+    return similarity_from_lifted(Gs, Tt, None)
 
 
 # --------------------------------------------------------------------------- weights
@@ -947,8 +988,9 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
     for j in st.topo.joints:
         p, q = j.between
         f = st.frames[j.name]
-        # the reference instant's rows fit by construction: not evidence of the noise
-        m = st.mask[j.name] & (f != st.ref_frame)
+        # every frame alike (the reference instant's corrections are held at zero while the
+        # noise is fitted: its rows are evidence like any other's)
+        m = st.mask[j.name]
         b = _edge_blocks(st, x, j, G)
         d: dict[str, float] = {}
         if "pos" in b:
@@ -1038,6 +1080,30 @@ def _leave_out(
     return np.asarray(suspects[stat > thr])
 
 
+def _masking_group(
+    T: FloatArray, testable: np.ndarray, S: float, nu: float, dim: int, n: int, room: int
+) -> np.ndarray:
+    """Two outliers that hide each other from both one-frame tests: the worst
+    ``MASKING_GROUP`` frames tested jointly (as :func:`acs_cli.core.estimation.solve` does),
+    ``(T_G / (g d)) / ((S - T_G) / (nu - g d))`` against ``F(g d, nu - g d)`` with the budget
+    shared among the groups (:func:`~acs_cli.core.estimation.outlier_threshold`'s
+    ``group``; cross terms of the hat matrix neglected). Returns the group, or none."""
+    g = estimation.MASKING_GROUP
+    cand = np.flatnonzero(testable)
+    if room < g or cand.size < 2 * g:
+        return np.zeros(0, int)
+    worst = cand[np.argsort(T[cand])[::-1][:g]]
+    TG = float(T[worst].sum())
+    rest = nu - g * dim
+    if rest < estimation.MIN_TEST_DOF or not S - TG > 0:
+        return np.zeros(0, int)
+    stat = TG / (g * dim) / ((S - TG) / rest)
+    thr = estimation.outlier_threshold(
+        n, rest, dim, shape=estimation.tail_shape(T[testable], dim), group=g
+    )
+    return np.asarray(worst) if stat > thr else np.zeros(0, int)
+
+
 def _reject(st: _State, x: FloatArray) -> int:
     """Drop the frames whose externally studentised residual is beyond the threshold of
     :func:`acs_cli.core.estimation.outlier_threshold` (the test of the two-camera
@@ -1086,6 +1152,8 @@ def _reject(st: _State, x: FloatArray) -> int:
         bad = np.flatnonzero(testable & (stat > thr))
         if bad.size == 0:
             bad = _leave_out(T, testable, m, S, nu, dim)
+        if bad.size == 0:
+            bad = _masking_group(T, testable, S, nu, dim, n, room)
         if bad.size:
             bad = bad[np.argsort(stat[bad])[::-1][:room]]
             m[bad] = False
@@ -1286,12 +1354,15 @@ def estimate_rig(
         f = f[~still]
         # in a shared world the joint is Algorithm I's (eq. (13)): a few frames determine it
         one_world = int(np.sum(np.asarray(recs.shared_world)[recs.of_frame[f]]))
-        if f.size < MIN_EDGE_FRAMES and one_world < MIN_SHARED_WORLD_FRAMES:
+        has_prior = j.name in priors and bool(priors[j.name].position_in)
+        need = MIN_PRIOR_EDGE_FRAMES if has_prior else MIN_EDGE_FRAMES
+        if f.size < need and one_world < MIN_SHARED_WORLD_FRAMES:
             raise DegenerateMotionError(
                 f"joint {j.name} ({p}-{q}): the two cameras have poses at {f.size} common "
-                f"instants; the rig needs at least {MIN_EDGE_FRAMES} of general motion (or "
-                f"{MIN_SHARED_WORLD_FRAMES} in a shared world). Record more frames where both "
-                "cameras track.",
+                f"instants; the rig needs at least {need} of general motion "
+                + ("with the joint given" if has_prior else "to calibrate the joint too")
+                + f" (or {MIN_SHARED_WORLD_FRAMES} in a shared world). Record more frames "
+                "where both cameras track.",
                 details={"joint": j.name, "frames": int(f.size)},
             )
         frames[j.name] = f
@@ -1306,7 +1377,22 @@ def estimate_rig(
             "(its joints' other bodies are not in that recording, or the recording holds "
             "them still): choose a recording where it moves with a neighbour"
         )
-    L = _Layout(topology, wg.root.size, wg.root, wg.unknown_scale, wg.ref_world, with_delta)
+    for name, pr in priors.items():
+        if pr.units not in ("reference", "own", "metre"):
+            raise InputError(f"joints.{name}: unknown prior units {pr.units!r}")
+    metre = any(pr.units == "metre" for pr in priors.values())
+    L = _Layout(topology, wg.root.size, wg.root, wg.unknown_scale, wg.ref_world, with_delta, metre)
+
+    def unit_column(pr: EdgePrior, c: str) -> int | None:
+        """The log-scale column converting reference units to the prior's (None: same)."""
+        if pr.units == "metre":
+            return L.metre
+        if pr.units == "own":
+            ok = np.flatnonzero(tracks[c].valid)
+            w = int(wg.widx[c][k] if tracks[c].valid[k] else wg.widx[c][ok[0]])
+            return L.logs.get(w)
+        return None
+
     x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L, wg.widx, wg.root)
     Rm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, :3]) for c in topology.cameras}
     tm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, 3]) for c in topology.cameras}
@@ -1315,7 +1401,22 @@ def estimate_rig(
     here = tracks[topology.reference].valid & (recs.of_frame == recs.of_frame[k])
     t_ref = tm[topology.reference][here]
     travel = float(np.sqrt(np.mean(np.sum((t_ref - t_ref.mean(0)) ** 2, 1))))
-    prior_rows: list[tuple[str, int, FloatArray, FloatArray]] = []
+    if L.metre is not None:
+        # the reference's units per metre from the starting joints against the metric ones
+        num = den = 0.0
+        for name, pr in priors.items():
+            j = topology.joint(name)
+            if pr.units != "metre" or j.type != "ball":
+                continue
+            for c, pos in pr.position_in.items():
+                side = j.between.index(c) if c in j.between else None
+                if side is not None:
+                    o = x0[L.edge[name]][3 * side : 3 * side + 3]
+                    num += float(o @ np.asarray(pos, float))
+                    den += float(np.asarray(pos, float) @ np.asarray(pos, float))
+        if L.metre not in L.logs.values():  # else a metric world's scale already starts it
+            x0[L.metre] = np.log(max(num / den, 1e-6)) if den > 0 and num > 0 else 0.0
+    prior_rows: list[tuple[str, int, FloatArray, FloatArray, int | None]] = []
     for name, pr in priors.items():
         j = topology.joint(name)
         if j.type == "rigid":
@@ -1328,11 +1429,13 @@ def estimate_rig(
         for c, (point, direction, std) in pr.line_in.items():
             B = tangent_basis(_unit(np.asarray(direction, float)))
             side = j.between.index(c)
-            prior_rows.append((name, 3 * side, np.asarray(point, float), B.T / std))
+            prior_rows.append(
+                (name, 3 * side, np.asarray(point, float), B.T / std, unit_column(pr, c))
+            )
         for c, (direction, std_rad) in pr.axis_in.items():
             given = _unit(np.asarray(direction, float))
             side = j.between.index(c)
-            prior_rows.append((name, 6 + 3 * side, given, tangent_basis(given).T / std_rad))
+            prior_rows.append((name, 6 + 3 * side, given, tangent_basis(given).T / std_rad, None))
         for c, pos in pr.position_in.items():
             if c not in j.between:
                 raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
@@ -1346,9 +1449,11 @@ def estimate_rig(
                     f"joints.{name}: the covariance given for {c} is not positive definite"
                 ) from None
             side = j.between.index(c)
-            prior_rows.append((name, 3 * side, np.asarray(pos, float), Wh))
+            col = unit_column(pr, c)
+            prior_rows.append((name, 3 * side, np.asarray(pos, float), Wh, col))
             if j.type == "ball":
-                x0[L.edge[name]][3 * side : 3 * side + 3] = pos
+                f0 = 1.0 if col is None else float(np.exp(x0[col]))
+                x0[L.edge[name]][3 * side : 3 * side + 3] = f0 * np.asarray(pos, float)
     st = _State(
         topo=topology,
         L=L,
@@ -1379,52 +1484,98 @@ def estimate_rig(
     def jac(x: FloatArray) -> csr_matrix:
         return _jacobian(st, x)
 
-    def run(x: FloatArray) -> tuple[FloatArray, int, Any]:
-        sol = lsq.solve(
-            fun, x, jac=jac, method="trf", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=200
-        )
-        return sol.x, int(sol.nfev), sol
+    # the reference instant's pose corrections: held at zero while the rig is estimated from
+    # every frame alike, then solved alone with the rest held (which instant is the reference
+    # only picks where T_cam_ref is reported: it does not move the rig's estimate)
+    delta_cols = np.zeros(L.size, bool)
+    for c in L.delta:
+        delta_cols[L.delta[c]] = True
 
-    x = x0
+    def run(x: FloatArray, free: np.ndarray | None = None) -> tuple[FloatArray, int, Any]:
+        free = ~delta_cols if free is None else free
+        x = x.copy()
+
+        def f_sub(z: FloatArray) -> FloatArray:
+            x[free] = z
+            return fun(x)
+
+        def j_sub(z: FloatArray) -> csr_matrix:
+            x[free] = z
+            return jac(x)[:, np.flatnonzero(free)]
+
+        sol = lsq.solve(
+            f_sub,
+            x[free],
+            jac=j_sub,
+            method="trf",
+            ftol=1e-10,
+            xtol=1e-10,
+            gtol=1e-10,
+            max_nfev=200,
+        )
+        x[free] = sol.x
+        return x, int(sol.nfev), sol
+
     nfev = 0
-    noise: dict[str, dict[str, float]] = {}
-    for _ in range(REWEIGHT_ROUNDS):
-        before = noise
-        noise = _refit_weights(st, x, L.size)
-        if before and _settled(before, noise):
-            break
-        x, nf, sol = run(x)
-        nfev += nf
+
+    def settle(x: FloatArray) -> tuple[FloatArray, dict[str, dict[str, float]]]:
+        """Solve and refit the noise levels until they settle (their fixed point)."""
+        nonlocal nfev
+        noise: dict[str, dict[str, float]] = {}
+        for _ in range(REWEIGHT_ROUNDS):
+            before = noise
+            noise = _refit_weights(st, x, L.size)
+            if before and _settled(before, noise):
+                break
+            x, nf, _sol = run(x)
+            nfev += nf
+        return x, noise
+
+    x, noise = settle(x0)
     if reject_outliers:
-        for _ in range(4):
+        for _ in range(REJECTION_ROUNDS):
             if _reject(st, x) == 0:
                 break
-            noise = _refit_weights(st, x, L.size)
-            x, nf, sol = run(x)
-            nfev += nf
-    noise = _refit_weights(st, x, L.size)
+            x, noise = settle(x)
     # last, from the converged point: the reference instant's constraints made (nearly) hard,
     # so that its poses are corrected to fit them; the rest of the solution barely moves
     # (started there at once, the trust region can stall on the stiff rows)
     for j in topology.joints:
         st.gain[j.name] = np.where(frames[j.name] == k, REFERENCE_GAIN, 1.0)
-    x, nf, sol = run(x)
+    x, nf, sol = run(x, delta_cols)
     nfev += nf
-    J = sol.jac
-    H = np.asarray((J.T @ J).toarray() if hasattr(J, "toarray") else J.T @ J)
+    # the covariance of everything together, the reference instant's constraints hard
+    J = _jacobian(st, x)
+    JtJ = J.T @ J
+    H = np.asarray(JtJ.toarray() if hasattr(JtJ, "toarray") else JtJ)
     cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev, wg, recs)
     est.warnings.extend(check_joint_types(st, x))
-    _check_determined(st, x, H, cov, est, travel, accept_weak)
+    # the information from the measurements alone (the priors' rows are the last ones):
+    # what the null test normalises by, so that a tight prior on one combination of unknowns
+    # (a joint given in a camera's own units: its position and that camera's scale) does
+    # not make the combination the data determine look null
+    n_prior = sum(int(row[3].shape[0]) for row in st.priors)
+    Jm = J[: J.shape[0] - n_prior]
+    H_data = np.asarray((Jm.T @ Jm).toarray()) if n_prior else H
+    _check_determined(st, x, H, cov, est, travel, accept_weak, H_data)
     return est
 
 
+def _own_world(st: _State, c: str) -> int:
+    """Camera ``c``'s world at the reference instant (else at its first pose): the one whose
+    scale converts its own units (one recording: its only world)."""
+    k = st.ref_frame
+    on = st.frames_of(c)
+    return int(st.widx[c][k] if on[k] else st.widx[c][int(np.argmax(on))])
+
+
 def _settled(a: dict[str, dict[str, float]], b: dict[str, dict[str, float]]) -> bool:
-    """Whether refitted noise levels moved by less than 2% (then the weights are final)."""
+    """Whether refitted noise levels moved by less than :data:`SETTLED_NOISE` (relative)."""
     for name, d in b.items():
         for key, v in d.items():
             old = a.get(name, {}).get(key)
-            if old is None or abs(v - old) > 0.02 * max(abs(old), 1e-300):
+            if old is None or abs(v - old) > SETTLED_NOISE * max(abs(old), 1e-300):
                 return False
     return True
 
@@ -1472,6 +1623,14 @@ def _assemble(
         elif c == ref:
             T0 = np.eye(4)
         scale, scale_std = scale_of(wc)
+        upm = upm_std = None
+        if L.metre is not None:  # own units per metre = (reference's per metre) / scale
+            grad = np.zeros(L.size)
+            grad[L.metre] += 1.0
+            if wc in L.logs:
+                grad[L.logs[wc]] -= 1.0
+            upm = float(np.exp(grad @ x))
+            upm_std = float(upm * np.sqrt(max(float(grad @ cov @ grad), 0.0)))
         cams[c] = CameraEstimate(
             T0,
             C6,
@@ -1480,6 +1639,8 @@ def _assemble(
             se3.transforms_from_rt(R, t),
             se3.transforms_from_rt(W.R[wc], W.t[wc]),
             tied,
+            upm,
+            upm_std,
         )
     worlds: list[WorldEstimate] = []
     for w in range(wg.root.size):
@@ -1514,6 +1675,7 @@ def _assemble(
         pcov: dict[str, FloatArray] = {}
         axis: dict[str, FloatArray] = {}
         astd: dict[str, float] = {}
+        own_in: dict[str, tuple[FloatArray, FloatArray]] = {}
         if j.type in ("ball", "hinge"):
             cols = L.edge_columns(j.name)
 
@@ -1524,6 +1686,18 @@ def _assemble(
             for side, c in enumerate((p, q)):
                 sl = slice(3 * side, 3 * side + 3)
                 pos[c], pcov[c] = g[sl], Cg[sl, sl]
+                wc = _own_world(st, c)
+                if wc in L.logs:  # own units: divided by the camera's scale
+
+                    def own(
+                        xx: FloatArray, sl: slice = sl, wc: int = wc, j: RigJoint = j
+                    ) -> FloatArray:
+                        return np.asarray(geometry(xx, j)[sl]) / float(np.exp(xx[L.logs[wc]]))
+
+                    oc = sorted({*cols, L.logs[wc]})
+                    own_in[c] = lsq.propagate(own, x, oc, cov[np.ix_(oc, oc)])
+                else:
+                    own_in[c] = (pos[c], pcov[c])
                 if j.type == "hinge":
                     sl = slice(6 + 3 * side, 9 + 3 * side)
                     axis[c] = g[sl]
@@ -1556,6 +1730,7 @@ def _assemble(
             inliers=np.asarray(st.frames[j.name][m]),
             noise=noise.get(j.name, {}),
             residual_blocks={kind: v[m] for kind, v in b.items()},
+            position_own_in=own_in,
         )
     return RigEstimate(topo, k, cams, edges, cost, nfev, recordings=recs, worlds=worlds)
 
@@ -1687,18 +1862,27 @@ def _check_determined(
     est: RigEstimate,
     travel: float,
     accept_weak: bool = False,
+    H_data: FloatArray | None = None,
 ) -> None:
     """Name each edge whose part of the rig the motion leaves undetermined (exit 3).
+
+    The information ``H`` is normalised by the diagonal of the measurements' own
+    (``H_data``, without the priors' rows; ``H``'s where a column has none) before its null
+    directions are sought, below :data:`NULL_EIGENVALUE` of the largest eigenvalue of the
+    measurements' normalised information.
 
     A joint whose only fault is a std past :data:`UNDETERMINED_STD_FRACTION` is let through
     with ``accept_weak`` (the stage marks the result weak); a null direction or planar
     motion is refused whatever the flag: there is no answer to write."""
     topo, L = st.topo, st.L
     with_prior = {name for name, *_ in st.priors}
-    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
-    Hn = H / np.outer(d, d)
-    w, V = np.linalg.eigh(Hn)
-    null = V[:, w < NULL_EIGENVALUE * max(float(w[-1]), 1e-300)]
+    full = np.diag(H)
+    H_data = H if H_data is None else H_data
+    dd = np.where(np.diag(H_data) > 1e-12 * full, np.diag(H_data), full)
+    d = np.sqrt(np.maximum(dd, 1e-300))
+    w, V = np.linalg.eigh(H / np.outer(d, d))
+    top = float(np.linalg.eigvalsh(H_data / np.outer(d, d))[-1])
+    null = V[:, w < NULL_EIGENVALUE * max(top, 1e-300)]
     parents = topo.parents()
     G = _all_poses(st, x)
     problems: list[str] = []

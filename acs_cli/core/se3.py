@@ -248,6 +248,29 @@ def matrix_from_rpy_deg(rpy: ArrayLike) -> FloatArray:
     )
 
 
+def rpy_right_jacobian(rpy_rad: ArrayLike) -> FloatArray:
+    """``E`` ``(3, 3)`` with ``R(rpy + d) = R(rpy) Exp(E d + O(d^2))``.
+
+    ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`matrix_from_rpy_deg`, here in radians): a
+    change of roll turns ``R`` about its own x axis, of pitch about ``Rx^T e_y``, of yaw about
+    ``(Ry Rx)^T e_z`` (body frame). Singular at pitch = +-90 deg (gimbal lock).
+
+    Parameters
+    ----------
+    rpy_rad : ndarray, shape (3,)
+        Roll, pitch, yaw (radians).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Columns: the body-frame rotation axes of roll, pitch and yaw.
+    """
+    roll, pitch, _yaw = np.asarray(rpy_rad, dtype=float)
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    # Rx^T e_y = (0, cr, -sr); (Ry Rx)^T e_z = Rx^T (-sp, 0, cp) = (-sp, sr cp, cr cp)
+    return np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+
+
 def project_to_rotation(M: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Nearest rotation (Frobenius) to 3x3 matrices ``M`` and their singular values.
 

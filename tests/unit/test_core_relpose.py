@@ -10,7 +10,7 @@ from hypothesis import Phase, given, settings
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 
-from acs_cli.core import estimation, relpose, se3
+from acs_cli.core import estimation, relpose, rig_solve, se3
 from acs_cli.core.joint import estimate_joint_fixed
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
 from acs_cli.errors import DegenerateMotionError, InputError
@@ -374,7 +374,9 @@ def test_refined_world_frame_invariance(seed: int, self_calibrate: bool) -> None
     prior = None if self_calibrate else _loose_prior(case.rig)
     r0 = estimate_relpose(case.T_wa_a, case.T_wb_b, prior)
     r1 = estimate_relpose(Ga @ case.T_wa_a, Gb @ case.T_wb_b, prior)
-    _assert_same(r0, r1)
+    # the rig engine stops reweighting when the noise levels settle to 1e-5 (relative):
+    # the same fixed point to ~2e-6, a thousandth of the stds
+    _assert_same(r0, r1, tol=1e-5)
 
 
 def _consistent_with_poses(r: RelposeEstimate, Ta: np.ndarray, Tb: np.ndarray, k: int) -> None:
@@ -642,23 +644,27 @@ def test_self_calibration_converges(trials: list[_Trial], monkeypatch: pytest.Mo
     """Self-calibration ends where the same solve started from the truth ends."""
     for i, t in enumerate(trials):
         X = t.seq.T_wb_wa
+        # the two-body rig's start runs from B's world (the reference) to A's:
+        # j_a = (1 / phi) R_X^T (j_b - mu_b t_X), in A's and B's units
         start = (
-            X[:3, :3],
-            t.mu_b * X[:3, 3],
-            t.phi,
-            t.mu_a * t.rig.o_a,
+            X[:3, :3].T,
+            -X[:3, :3].T @ (t.mu_b * X[:3, 3]) / t.phi,
+            1.0 / t.phi,
             t.mu_b * t.rig.o_b,
+            t.mu_a * t.rig.o_a,
         )
         with monkeypatch.context() as m:
-            m.setattr(relpose, "_initial_lifted", lambda Ta, Tb, o_a, start=start: start)
-            # the helper solve's covariance is not compared: skip it (half the run time)
-            m.setattr(relpose, "_relpose_covariance", lambda *args: np.zeros((6, 6)))
+            m.setattr(rig_solve, "ball_similarity", lambda Ts, Tt, start=start: start)
             ref = estimate_relpose(t.Tas, t.Tbs, unknown_scale=True)
         got = t.self_cal
-        assert np.abs(got.T_b_a - ref.T_b_a).max() < 1e-6, f"trial {i}"
-        assert np.abs(got.position_in_a - ref.position_in_a).max() < 1e-6, f"trial {i}"
-        assert np.abs(got.position_in_b - ref.position_in_b).max() < 1e-6, f"trial {i}"
-        assert got.phi_ba == pytest.approx(ref.phi_ba, rel=1e-6), f"trial {i}"
+        # to the engine's settling of the noise levels (~2e-6; the stds are ~1e-2)
+        for a, b in (
+            (got.T_b_a, ref.T_b_a),
+            (got.position_in_a, ref.position_in_a),
+            (got.position_in_b, ref.position_in_b),
+        ):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5, err_msg=f"trial {i}")
+        assert got.phi_ba == pytest.approx(ref.phi_ba, rel=1e-5), f"trial {i}"
 
 
 def test_ten_percent_gross_outliers_leave_the_relative_pose_as_good() -> None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from acs_cli.core import lsq, relpose, se3
+from acs_cli.core import lsq, paper, relpose, rig_start, se3
 from sample_data_gen import acs_sim as sim
 
 
@@ -48,7 +48,7 @@ def _rotation_problem(rng: np.random.Generator, n: int = 40):
         out[:3] = se3.rotvec_from_matrix(unpack(x)[0] @ se3.matrix_from_rotvec(d[:3]))
         return out
 
-    R0, t0, _ = relpose.similarity_from_points(P, Q, False)
+    R0, t0, _ = rig_start.similarity_from_points(P, Q, False)
     return fun, jac, retract, P, Q, R0, t0
 
 
@@ -117,65 +117,27 @@ def test_rpy_right_jacobian(rng: np.random.Generator) -> None:
         rpy = rng.uniform(-1.4, 1.4, size=3)
         R = se3.matrix_from_rpy_deg(np.degrees(rpy))
         num = _central(lambda p, R=R: _log_diff(R, se3.matrix_from_rpy_deg(np.degrees(p))), rpy)
-        np.testing.assert_allclose(relpose.rpy_right_jacobian(rpy), num, atol=1e-8)
-
-
-def _reference_inputs(rng: np.random.Generator) -> dict:
-    Ta, Tb = _pose(rng), _pose(rng)
-    R_X = _rotations(rng, 1)[0]
-    o_a, o_b = rng.normal(size=3), rng.normal(size=3)
-    phi = 1.7
-    # a consistent pair, then noise: the constraint residual is small but not zero
-    t_X = Tb[:3, :3] @ o_b + Tb[:3, 3] - phi * R_X @ (Ta[:3, :3] @ o_a + Ta[:3, 3])
-    t_X += 0.05 * rng.normal(size=3)
-    return dict(Ta_ref=Ta, Tb_ref=Tb, R_X=R_X, t_X=t_X, phi=phi, o_a=o_a, o_b=o_b,
-                theta_t=0.05**2, theta_r=np.radians(1.0) ** 2)  # fmt: skip
+        np.testing.assert_allclose(se3.rpy_right_jacobian(rpy), num, atol=1e-8)
 
 
 def _pose_diff(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
     return np.concatenate([_log_diff(T0[:3, :3], T1[:3, :3]), T1[:3, 3] - T0[:3, 3]])
 
 
-def test_reference_pose_jacobian_in_delta(rng: np.random.Generator) -> None:
-    kw = _reference_inputs(rng)
-    ref = relpose._ReferenceCorrection(**kw)
-    T0 = ref.T_b_a
-    Ra, ta, Rb, tb = (
-        kw["Ta_ref"][:3, :3],
-        kw["Ta_ref"][:3, 3],
-        kw["Tb_ref"][:3, :3],
-        kw["Tb_ref"][:3, 3],
-    )
+def test_inverse_pose_covariance_matches_finite_differences(rng: np.random.Generator) -> None:
+    """The two-body rig reports ``T_a_b``; the pair's ``T_b_a`` is its inverse, with the
+    covariance carried over (both as right rotation perturbation, translation)."""
+    T = _pose(rng)
+    T0 = se3.invert_transforms(T)
 
-    def compose(d: np.ndarray) -> np.ndarray:
-        Ra_ = Ra @ se3.matrix_from_rotvec(d[0:3])
-        Rb_ = Rb @ se3.matrix_from_rotvec(d[6:9])
-        t = Rb_.T @ (kw["phi"] * kw["R_X"] @ (ta + d[3:6]) + kw["t_X"] - (tb + d[9:12]))
-        return se3.transforms_from_rt(Rb_.T @ kw["R_X"] @ Ra_, t)
+    def inverse(d: np.ndarray) -> np.ndarray:
+        Td = se3.transforms_from_rt(T[:3, :3] @ se3.matrix_from_rotvec(d[:3]), T[:3, 3] + d[3:])
+        return _pose_diff(T0, se3.invert_transforms(Td))
 
-    np.testing.assert_allclose(compose(ref.delta), T0, atol=1e-12)
-    num = _central(lambda d: _pose_diff(T0, compose(d)), ref.delta)
-    np.testing.assert_allclose(ref.jacobian_delta(), num, atol=1e-7)
-    T, Jd, P_post = relpose._reference_pose(**kw)
-    np.testing.assert_allclose(T, T0)
-    np.testing.assert_allclose(Jd, ref.jacobian_delta())
-    assert np.allclose(P_post, P_post.T, atol=1e-15)
-
-
-def test_reference_pose_jacobian_in_parameters(rng: np.random.Generator) -> None:
-    kw = _reference_inputs(rng)
-    T0 = relpose._reference_pose(**kw, jacobian=False)[0]
-
-    def tba(x: np.ndarray) -> np.ndarray:
-        k = dict(kw)
-        k["R_X"] = kw["R_X"] @ se3.matrix_from_rotvec(x[0:3])
-        k["t_X"], k["o_a"], k["o_b"] = kw["t_X"] + x[3:6], kw["o_a"] + x[6:9], kw["o_b"] + x[9:12]
-        k["phi"] = kw["phi"] * np.exp(x[12])
-        return _pose_diff(T0, relpose._reference_pose(**k, jacobian=False)[0])
-
-    num = _central(tba, np.zeros(13))
-    G = relpose._ReferenceCorrection(**kw).jacobian_params()
-    np.testing.assert_allclose(G, num, atol=1e-7)
+    G = _central(inverse, np.zeros(6))
+    C = rng.normal(size=(6, 6)) * 1e-3
+    C = C @ C.T
+    np.testing.assert_allclose(relpose._inverse_covariance(T, C), G @ C @ G.T, atol=1e-10)
 
 
 def test_paper_pose_std_matches_finite_differences(rng: np.random.Generator) -> None:
@@ -210,7 +172,7 @@ def test_paper_refinement_jacobian(rng: np.random.Generator, monkeypatch) -> Non
     Tb = se3.transforms_from_rt(_rotations(rng, n), rng.normal(size=(n, 3)))
     for unknown_scale in (False, True):
         seen.clear()
-        relpose._paper(Ta, Tb, rng.normal(size=3), 0, unknown_scale)
+        paper.relative_pose_paper(Ta, Tb, rng.normal(size=3), 0, unknown_scale)
         fun, jac, x0 = seen[0]
         x = x0 + 0.1 * rng.normal(size=x0.size)
         np.testing.assert_allclose(jac(x), _central(fun, x), atol=1e-6)
