@@ -307,13 +307,14 @@ class JointModel(ABC):
 
     def bundle_start(
         self,
-        position_in: tuple[FloatArray, FloatArray],
+        position_in: list[FloatArray],
         axis_p: FloatArray | None,
         T_q_p: FloatArray,
         T_p_q: FloatArray,
         k: int,
     ) -> tuple[FloatArray | None, dict[str, FloatArray], FloatArray, FloatArray]:
-        """The rig bundle's start from the pose-based estimate: ``R0`` (a fixed rotation or
+        """The rig bundle's start from the pose-based estimate (its points ``position_in``
+        in ``p`` and ``q``, none for a type without, and axis in ``p``): ``R0`` (a fixed rotation or
         ``(n, 3, 3)`` of them, or None), the fixed ``geom0``, the fixed unknowns
         ``(bundle_params,)`` and the articulation ``(n, articulation_dof)``; ``T_p_q``
         ``(n, 4, 4)`` at the bundle's frames, ``k`` the reference instant's row."""

@@ -156,7 +156,7 @@ class Rigid(JointModel):
 
     def bundle_start(
         self,
-        position_in: tuple[FloatArray, FloatArray],
+        position_in: list[FloatArray],
         axis_p: FloatArray | None,
         T_q_p: FloatArray,
         T_p_q: FloatArray,
