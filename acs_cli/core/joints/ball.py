@@ -9,12 +9,13 @@ about the child body's x, y and z axes through the centre.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from acs_cli.core import se3
 from acs_cli.core.joints.base import (
+    Edge,
     Geometry,
     JointModel,
     UrdfJoint,
@@ -24,11 +25,7 @@ from acs_cli.core.joints.base import (
     point_start,
     single_axis,
 )
-from acs_cli.core.relpose import SINGLE_AXIS_RATIO
 from acs_cli.core.se3 import FloatArray
-
-if TYPE_CHECKING:
-    from acs_cli.core.rig import RigJoint
 
 
 class Ball(JointModel):
@@ -81,7 +78,7 @@ class Ball(JointModel):
         e[3 * side : 3 * side + 3] = position
 
     def fixed_joint_prior(
-        self, joint: RigJoint, camera: str, T_w_c: FloatArray, label: str
+        self, joint: Edge, camera: str, T_w_c: FloatArray, label: str
     ) -> dict[str, dict[str, Any]]:
         """The centre by pivot calibration (:func:`~acs_cli.core.joint.estimate_pivot`)."""
         from acs_cli.core.joint import estimate_pivot
@@ -94,7 +91,7 @@ class Ball(JointModel):
 
     def planar_offset(
         self,
-        joint: RigJoint,
+        joint: Edge,
         Rp: FloatArray,
         Rq: FloatArray,
         geometry: Any,
@@ -112,24 +109,27 @@ class Ball(JointModel):
             f"and joint {joint.name} bends about that axis only (planar motion)"
         )
 
-    def motion_advice(self, joint: RigJoint, Rst: FloatArray) -> list[str]:
+    def motion_advice(self, joint: Edge, Rst: FloatArray) -> list[str]:
+        from acs_cli.core.relpose import SINGLE_AXIS_RATIO  # here: the registry imports little
+
         s = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), compute_uv=False)
         if s[2] < SINGLE_AXIS_RATIO * s[0]:
             return [f"joint {joint.name} bends about one axis only: declare it type: hinge"]
         return []
 
-    def position_hint_camera(self, joint: RigJoint) -> str | None:
+    def position_hint_camera(self, joint: Edge) -> str | None:
         # a ball seen from a camera turning about one axis: that camera's
         return joint.between[0]
 
     def urdf(
         self,
-        name: str,
+        joint: Edge,
         parent: str,
         child: str,
         T_parent_child: FloatArray,
         axis: FloatArray | None,
     ) -> tuple[list[str], list[UrdfJoint], str]:
+        name, (p, q) = joint.name, joint.between
         eye = np.eye(4)
         links = [f"{name}_x_link", f"{name}_y_link"]
         joints = [
@@ -138,7 +138,8 @@ class Ball(JointModel):
             UrdfJoint(f"{name}_z", "revolute", links[1], child, eye, np.eye(3)[2]),
         ]
         comment = (
-            f"three revolute joints about the x, y and z axes of {child} through its centre, "
+            f"ball joint {name} ({p}-{q}) as three revolute joints about the x, y and z axes of "
+            f"{child} through its centre, "
             f"joined by the massless links {links[0]} and {links[1]} (a floating joint would "
             "also translate)"
         )

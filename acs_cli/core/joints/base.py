@@ -30,17 +30,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.relpose import SINGLE_AXIS_RATIO
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
-
-if TYPE_CHECKING:
-    from acs_cli.core.rig import RigJoint
 
 #: ``(o_p, o_q, u_p, u_q)``: a joint's point in ``p`` and ``q`` ``(3,)`` each, and its unit
 #: axes ``(3,)`` (None for a type without an axis).
@@ -62,6 +58,8 @@ def tangent_basis(u: FloatArray) -> FloatArray:
 def single_axis(R: FloatArray) -> FloatArray | None:
     """The world axis ``(3,)`` of rotations ``(n, 3, 3)`` that turn about one axis only, or
     None. (The axis ``v`` in the body with ``R_i v`` constant; ``mean(R_i) v`` in the world.)"""
+    from acs_cli.core.relpose import SINGLE_AXIS_RATIO  # here: the registry imports little
+
     _, s, Vt = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), full_matrices=False)
     if s[0] <= 0 or s[2] >= SINGLE_AXIS_RATIO * s[0]:
         return None
@@ -81,6 +79,17 @@ def point_start(Rp: FloatArray, tp: FloatArray, Rq: FloatArray, tq: FloatArray) 
     ``(m, 3)`` in one world: eq. (13), ``R_p o_p - R_q o_q = t_q - t_p``, linear."""
     A = np.concatenate([Rp, -Rq], axis=2).reshape(-1, 6)
     return np.asarray(np.linalg.lstsq(A, (tq - tp).reshape(-1), rcond=None)[0])
+
+
+class Edge(Protocol):
+    """A rig's edge as the models see it (:class:`acs_cli.core.rig.RigJoint` is one)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def between(self) -> tuple[str, str]: ...
+    @property
+    def type(self) -> str: ...
 
 
 class EdgeJacobian(Protocol):
@@ -247,7 +256,7 @@ class JointModel(ABC):
         return None
 
     def fixed_joint_prior(
-        self, joint: RigJoint, camera: str, T_w_c: FloatArray, label: str
+        self, joint: Edge, camera: str, T_w_c: FloatArray, label: str
     ) -> dict[str, dict[str, Any]]:
         """The parts of an :class:`~acs_cli.core.rig_solve.EdgePrior` (``position_in``,
         ``covariance_in``, ``line_in``, ``axis_in``) from a motion of ``camera`` about the
@@ -257,7 +266,7 @@ class JointModel(ABC):
     # ------------------------------------------------------------------ degeneracy
 
     def misfit(
-        self, joint: RigJoint, blocks: dict[str, FloatArray], mask: np.ndarray
+        self, joint: Edge, blocks: dict[str, FloatArray], mask: np.ndarray
     ) -> tuple[float, str] | None:
         """``(rms_deg, text)`` when the motion could contradict the type (its ``rot`` rows
         over the inlier ``mask``), or None: a type with no such check."""
@@ -265,7 +274,7 @@ class JointModel(ABC):
 
     def planar_offset(
         self,
-        joint: RigJoint,
+        joint: Edge,
         Rp: FloatArray,
         Rq: FloatArray,
         geometry: Callable[[], Geometry],
@@ -277,12 +286,12 @@ class JointModel(ABC):
         ``axis`` only; ``cos`` is the cosine within which two axes are the same."""
         return ""
 
-    def motion_advice(self, joint: RigJoint, Rst: FloatArray) -> list[str]:
+    def motion_advice(self, joint: Edge, Rst: FloatArray) -> list[str]:
         """Words on the joint's relative rotations ``R_p^T R_q`` ``(m, 3, 3)`` when its part
         of the rig is not determined (e.g. a ball that bends about one axis only)."""
         return []
 
-    def position_hint_camera(self, joint: RigJoint) -> str | None:
+    def position_hint_camera(self, joint: Edge) -> str | None:
         """The camera whose ``position_in`` to give in the config when the motion does not
         determine the joint, or None (a type without a point)."""
         return None
@@ -291,13 +300,13 @@ class JointModel(ABC):
 
     def urdf(
         self,
-        name: str,
+        joint: Edge,
         parent: str,
         child: str,
         T_parent_child: FloatArray,
         axis: FloatArray | None,
     ) -> tuple[list[str], list[UrdfJoint], str]:
-        """The URDF of an articulation from body ``parent`` to body ``child`` (links),
+        """The URDF of ``joint``'s articulation from body ``parent`` to body ``child`` (links),
         whose frame is ``T_parent_child`` ``(4, 4)`` (its origin at the joint's point) and
         ``axis`` ``(3,)`` the joint's axis in ``child`` (for a type with one): the extra
         links it needs, its joints, and a comment."""

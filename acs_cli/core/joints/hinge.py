@@ -14,12 +14,13 @@ third column ``u_p``) and ``B`` (``u_q = B^T e_z``). URDF: one revolute joint.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from acs_cli.core import se3
 from acs_cli.core.joints.base import (
+    Edge,
     Geometry,
     JointModel,
     UrdfJoint,
@@ -31,9 +32,6 @@ from acs_cli.core.joints.base import (
     unit,
 )
 from acs_cli.core.se3 import FloatArray
-
-if TYPE_CHECKING:
-    from acs_cli.core.rig import RigJoint
 
 
 def _rz(theta: FloatArray) -> FloatArray:
@@ -148,7 +146,7 @@ class Hinge(JointModel):
         jc.next_block()
 
     def fixed_joint_prior(
-        self, joint: RigJoint, camera: str, T_w_c: FloatArray, label: str
+        self, joint: Edge, camera: str, T_w_c: FloatArray, label: str
     ) -> dict[str, dict[str, Any]]:
         """The axis and its line (:func:`~acs_cli.core.joint.estimate_hinge_fixed`); the
         point itself when ``camera`` is the edge's first, whose nearest axis point the rig
@@ -168,7 +166,7 @@ class Hinge(JointModel):
         return {"line_in": {camera: (h.point_in_cam, h.axis_in_cam, std)}, "axis_in": axis}
 
     def misfit(
-        self, joint: RigJoint, blocks: dict[str, FloatArray], mask: np.ndarray
+        self, joint: Edge, blocks: dict[str, FloatArray], mask: np.ndarray
     ) -> tuple[float, str] | None:
         """The axis must stay one line in both bodies."""
         rms = float(np.degrees(np.sqrt(np.mean(np.sum(blocks["rot"][mask] ** 2, axis=1)))))
@@ -181,7 +179,7 @@ class Hinge(JointModel):
 
     def planar_offset(
         self,
-        joint: RigJoint,
+        joint: Edge,
         Rp: FloatArray,
         Rq: FloatArray,
         geometry: Any,
@@ -197,22 +195,23 @@ class Hinge(JointModel):
             "only (planar motion with the axis along the plane's normal)"
         )
 
-    def position_hint_camera(self, joint: RigJoint) -> str | None:
+    def position_hint_camera(self, joint: Edge) -> str | None:
         # the point is the one nearest p's centre: q's offset along the axis is the unknown
         return joint.between[1]
 
     def urdf(
         self,
-        name: str,
+        joint: Edge,
         parent: str,
         child: str,
         T_parent_child: FloatArray,
         axis: FloatArray | None,
     ) -> tuple[list[str], list[UrdfJoint], str]:
+        p, q = joint.between
         return (
             [],
-            [UrdfJoint(name, "revolute", parent, child, T_parent_child, axis)],
-            f"origin at the hinge point, axis in {child}'s frame",
+            [UrdfJoint(joint.name, "revolute", parent, child, T_parent_child, axis)],
+            f"hinge {joint.name} ({p}-{q}): origin at the hinge point, axis in {child}'s frame",
         )
 
     def frames(self, e: FloatArray, geom0: dict[str, FloatArray]) -> dict[str, FloatArray]:

@@ -9,17 +9,13 @@ are one body (a fixed joint).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.bundle import right_jacobians
-from acs_cli.core.joints.base import Geometry, JointModel
+from acs_cli.core.joints.base import Edge, Geometry, JointModel
 from acs_cli.core.se3 import FloatArray
-
-if TYPE_CHECKING:
-    from acs_cli.core.rig import RigJoint
 
 
 class Rigid(JointModel):
@@ -74,6 +70,8 @@ class Rigid(JointModel):
         return out
 
     def jacobian(self, jc: Any) -> None:
+        from acs_cli.core.bundle import right_jacobians  # here: the registry imports little
+
         e, p, q, m, W, L = jc.e, jc.p, jc.q, jc.m, jc.W, jc.L
         Rp, Rq, RGp, RGq, mask = jc.Rp, jc.Rq, jc.RGp, jc.RGq, jc.mask
         Rqp = jc.anchor @ se3.matrix_from_rotvec(e[:3])
@@ -129,7 +127,7 @@ class Rigid(JointModel):
         jc.next_block()
 
     def misfit(
-        self, joint: RigJoint, blocks: dict[str, FloatArray], mask: np.ndarray
+        self, joint: Edge, blocks: dict[str, FloatArray], mask: np.ndarray
     ) -> tuple[float, str] | None:
         """The cameras must not turn relative to each other (``R_p^T R_q`` constant)."""
         rms = float(np.degrees(np.sqrt(np.mean(np.sum(blocks["rot"][mask] ** 2, axis=1)))))
@@ -141,7 +139,7 @@ class Rigid(JointModel):
 
     def planar_offset(
         self,
-        joint: RigJoint,
+        joint: Edge,
         Rp: FloatArray,
         Rq: FloatArray,
         geometry: Any,
