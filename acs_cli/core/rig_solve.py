@@ -502,14 +502,6 @@ def residual_geometry(
     return joint_model(j.type).residual_geometry(x[st.L.edge[j.name]], st.anchor[j.name])
 
 
-def hinge_axes(st: _State, x: FloatArray, j: RigJoint) -> tuple[FloatArray, FloatArray]:
-    """A hinge's unit axes ``u_p, u_q`` (see :func:`joint_geometry`)."""
-    _, _, u_p, u_q = joint_geometry(st, x, j)
-    if u_p is None or u_q is None:
-        raise ValueError(f"joint {j.name} is a {j.type}, not a hinge: it has no axis")
-    return u_p, u_q
-
-
 def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, FloatArray]:
     """Raw (unwhitened) residuals of one edge over its frames by kind, ``(m, 3)`` each:
     ``pos`` (a point), ``rot`` (an axis or a rigid rotation), ``trans`` (a rigid
@@ -1482,9 +1474,6 @@ def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
     return ""
 
 
-_single_axis = single_axis
-
-
 #: Two axes are "the same" within this angle (degrees) for the planar-motion rule.
 PARALLEL_AXES_DEG = 10.0
 
@@ -1501,7 +1490,7 @@ def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
     p, q = j.between
     f = st.frames[j.name]
     Rp = _poses(st, x, p)[0][f]
-    a = _single_axis(Rp)
+    a = single_axis(Rp)
     if a is None:
         return ""
     cos = np.cos(np.radians(PARALLEL_AXES_DEG))
