@@ -29,11 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from acs_cli.core import se3
+from acs_cli.core.joints import JOINT_MODELS, joint_types
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 
-#: The joint types an edge can have.
-JOINT_TYPES = ("ball", "hinge", "rigid")
+#: The joint types an edge can have: the registry's (:mod:`acs_cli.core.joints`).
+JOINT_TYPES = joint_types()
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,9 @@ class RigJoint:
     between : tuple of str
         ``(p, q)``: the two cameras it joins. Quantities of the edge are expressed in
         ``p``'s and ``q``'s frames; its transform is ``T_q_p``.
-    type : {"ball", "hinge", "rigid"}
+    type : str
+        A registered joint type (:data:`acs_cli.core.joints.JOINT_MODELS`: ball, hinge,
+        rigid).
     """
 
     name: str
@@ -199,10 +202,10 @@ def rig_topology(
         name = str(name)
         b = tuple(str(c) for c in between)
         where = f"{key}.{name}"
-        if jtype not in JOINT_TYPES:
+        if jtype not in JOINT_MODELS:
             raise InputError(
                 f"{where}.type: {jtype!r} is not a joint type; choose one of "
-                + ", ".join(JOINT_TYPES)
+                + ", ".join(JOINT_MODELS)
             )
         if len(b) != 2:
             raise InputError(f"{where}.between: needs two cameras, got {len(b)}")

@@ -59,13 +59,13 @@ import scipy.sparse
 from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import check_frame_corners, information, observed
 from acs_cli.core.camera_models import camera_model
+from acs_cli.core.joints import JointModel, joint_model
 from acs_cli.core.rig import RigJoint, RigTopology
 from acs_cli.core.rig_solve import (
     CameraEstimate,
     CameraTrack,
     EdgeEstimate,
     RigEstimate,
-    tangent_basis,
 )
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
@@ -82,10 +82,6 @@ __all__ = [
 
 #: Fewest frames (every camera seeing its board) a rig's bundle adjustment takes.
 MIN_RIG_BUNDLE_FRAMES = 6
-#: Unknowns per frame of each joint type's articulation.
-ARTICULATION_DOF = {"ball": 3, "hinge": 1, "rigid": 0}
-#: Unknowns of each joint type's fixed geometry.
-GEOMETRY_DOF = {"ball": 6, "hinge": 9, "rigid": 6}
 #: Noise-level refits (each followed by a solve) with pose-only bodies, at most.
 NOISE_ROUNDS = 30
 #: The refit noise levels are final when none moves by more than this share (in its log).
@@ -226,14 +222,16 @@ class _Layout:
                 k += 6
         self.geom = {}
         for j in topo.joints:
-            self.geom[j.name] = slice(k, k + GEOMETRY_DOF[j.type])
-            k += GEOMETRY_DOF[j.type]
+            size = joint_model(j.type).bundle_params  # the joint's fixed geometry
+            self.geom[j.name] = slice(k, k + size)
+            k += size
         self.n_shared = k
         f = 6  # the reference camera's pose G[i]
         self.art = {}
         for j in topo.joints:
-            self.art[j.name] = slice(f, f + ARTICULATION_DOF[j.type])
-            f += ARTICULATION_DOF[j.type]
+            dof = joint_model(j.type).articulation_dof  # its articulation at each frame
+            self.art[j.name] = slice(f, f + dof)
+            f += dof
         self.block = f
         self.n = n
         self.size = k + f * n
@@ -243,23 +241,9 @@ class _Layout:
         return list(range(start + sl.start, start + sl.stop))
 
 
-def _rz(theta: FloatArray) -> FloatArray:
-    """``(n, 3, 3)`` rotations about z by ``theta`` ``(n,)`` radians."""
-    c, s = np.cos(theta), np.sin(theta)
-    R = np.zeros((theta.size, 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
-    R[:, 2, 2] = 1.0
-    return R
-
-
 def _apply(R: FloatArray, v: FloatArray) -> FloatArray:
     """``R_i v_i`` for stacks ``(n, 3, 3)`` and ``(n, 3)``."""
     return np.einsum("nij,nj->ni", R, v)
-
-
-def _across(v: FloatArray) -> FloatArray:
-    """``(3,)`` rotation vector ``(v0, v1, 0)``: a turn across the local z axis."""
-    return np.array([v[0], v[1], 0.0])
 
 
 @dataclass
@@ -272,8 +256,10 @@ class _Model:
     frames: np.ndarray  # timeline indices adjusted
     G0: FloatArray  # (n, 4, 4) reference camera in its board's frame
     W0: dict[str, FloatArray]  # (4, 4) per non-reference camera
-    R0: dict[str, FloatArray]  # per ball (n, 3, 3) articulations; per rigid (3, 3)
-    geom0: dict[str, dict[str, FloatArray]]  # per joint: starting geometry
+    # per joint: its model's fixed rotation (a ball's (n, 3, 3) articulations, a rigid
+    # joint's (3, 3)) and starting geometry (JointModel.bundle_start)
+    R0: dict[str, FloatArray | None]
+    geom0: dict[str, dict[str, FloatArray]]
     obs: dict[str, tuple[np.ndarray, np.ndarray, FloatArray]]  # frame, corner, pixels
     # pose-only bodies: their measured poses at every adjusted frame (rotations, translations)
     meas: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
@@ -298,31 +284,10 @@ class _Model:
         out[self.L.free[c]] = x[self.L.intr[c]]
         return out
 
-    def hinge(self, x: FloatArray, name: str) -> dict[str, FloatArray]:
-        """A hinge's ``A``, ``B``, ``o_p``, ``o_q`` at ``x``."""
-        g0, e = self.geom0[name], x[self.L.geom[name]]
-        A = g0["A"] @ se3.matrix_from_rotvec(_across(e[0:2]))
-        B = se3.matrix_from_rotvec(_across(e[4:6])) @ g0["B"]
-        return {"A": A, "B": B, "o_p": g0["o_p"] + g0["A"][:, :2] @ e[2:4],
-                "o_q": g0["o_q"] + e[6:9]}  # fmt: skip
-
     def edge(self, x: FloatArray, j: RigJoint, blocks: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``T_p_q`` of every frame: rotations ``(n, 3, 3)``, translations ``(n, 3)``."""
         e, a = x[self.L.geom[j.name]], blocks[:, self.L.art[j.name]]
-        n = blocks.shape[0]
-        if j.type == "rigid":
-            R1 = self.R0[j.name] @ se3.matrix_from_rotvec(e[:3])
-            return np.broadcast_to(R1, (n, 3, 3)), np.broadcast_to(
-                self.geom0[j.name]["t"] + e[3:], (n, 3)
-            )
-        if j.type == "ball":
-            R = np.matmul(self.R0[j.name], se3.matrix_from_rotvec(a))
-            o_p, o_q = e[:3], e[3:6]
-        else:
-            h = self.hinge(x, j.name)
-            R = np.matmul(np.matmul(h["A"], _rz(a[:, 0])), h["B"])
-            o_p, o_q = h["o_p"], h["o_q"]
-        return R, o_p - se3.rotate(R, o_q)  # eq. (2): O_p = T_p_q O_q
+        return joint_model(j.type).bundle_edge(e, a, self.R0[j.name], self.geom0[j.name])
 
     def chain(self, x: FloatArray) -> dict[str, tuple[FloatArray, FloatArray]]:
         """``T_ref_c`` of every camera and frame along the tree."""
@@ -488,30 +453,22 @@ def _initial(
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
     x = np.zeros(L.size)
     blocks = np.zeros((frames.size, L.block))
-    R0: dict[str, FloatArray] = {}
+    R0: dict[str, FloatArray | None] = {}
     geom0: dict[str, dict[str, FloatArray]] = {}
+    k = int(np.flatnonzero(frames == est.reference_frame)[0])
     for j in topo.joints:
         p, q = j.between
         e = est.edges[j.name]
         T_p_q = np.matmul(se3.invert_transforms(G[p]), G[q])
-        if j.type == "rigid":
-            T = se3.invert_transforms(e.T_q_p)
-            R0[j.name], geom0[j.name] = T[:3, :3], {"t": T[:3, 3]}
-        elif j.type == "ball":
-            R0[j.name] = T_p_q[:, :3, :3]
-            x[L.geom[j.name]] = np.concatenate([e.position_in[p], e.position_in[q]])
-        else:
-            u_p = e.axis_in[p] / np.linalg.norm(e.axis_in[p])
-            A = np.column_stack([tangent_basis(u_p), u_p])
-            if np.linalg.det(A) < 0:
-                A[:, 0] *= -1.0
-            k = int(np.flatnonzero(frames == est.reference_frame)[0])
-            B = A.T @ T_p_q[k, :3, :3]
-            M = np.matmul(np.matmul(A.T, T_p_q[:, :3, :3]), B.T)  # about Rz(theta)
-            blocks[:, L.art[j.name]] = np.arctan2(M[:, 1, 0] - M[:, 0, 1], M[:, 0, 0] + M[:, 1, 1])[
-                :, None
-            ]
-            geom0[j.name] = {"A": A, "B": B, "o_p": e.position_in[p], "o_q": e.position_in[q]}
+        R0[j.name], geom0[j.name], x[L.geom[j.name]], blocks[:, L.art[j.name]] = joint_model(
+            j.type
+        ).bundle_start(
+            [e.position_in[c] for c in (p, q) if c in e.position_in],
+            e.axis_in.get(p),
+            e.T_q_p,
+            T_p_q,
+            k,
+        )
     intr = np.zeros(L.n_shared)
     for c in views:
         intr[L.intr[c]] = np.asarray(views[c].intrinsics, float)[L.free[c]]
@@ -899,12 +856,14 @@ def _assemble(
         e0 = initial.edges[j.name]
         cols = list(range(L.n_shared))[L.geom[j.name]]
         T_q_p = _relative(cams[q].T_cam_ref, cams[p].T_cam_ref)
-        if j.type == "rigid":
+        jm = joint_model(j.type)
+        if jm.constant_transform:
 
-            def T_q_p_of(xx: FloatArray, j: RigJoint = j) -> FloatArray:
-                e = xx[L.geom[j.name]]
-                R = model.R0[j.name] @ se3.matrix_from_rotvec(e[:3])
-                return se3.transforms_from_rt(R.T, -R.T @ (model.geom0[j.name]["t"] + e[3:]))
+            def T_q_p_of(xx: FloatArray, j: RigJoint = j, jm: JointModel = jm) -> FloatArray:
+                R, t = jm.bundle_edge(
+                    xx[L.geom[j.name]], np.zeros((1, 0)), model.R0[j.name], model.geom0[j.name]
+                )
+                return se3.transforms_from_rt(R[0].T, -R[0].T @ t[0])
 
             T_rig = T_q_p_of(x)
 
@@ -919,20 +878,15 @@ def _assemble(
             )
             continue
 
-        def geometry(xx: FloatArray, j: RigJoint = j) -> FloatArray:
-            if j.type == "ball":
-                return xx[L.geom[j.name]].copy()
-            h = model.hinge(xx, j.name)
-            u_p, u_q = h["A"][:, 2], h["B"][2, :]
-            shift = float(h["o_p"] @ u_p)  # the point nearest p's centre
-            return np.concatenate([h["o_p"] - shift * u_p, h["o_q"] - shift * u_q, u_p, u_q])
+        def geometry(xx: FloatArray, j: RigJoint = j, jm: JointModel = jm) -> FloatArray:
+            return jm.bundle_geometry(xx[L.geom[j.name]], model.R0[j.name], model.geom0[j.name])
 
         g, Cg = lsq.propagate(geometry, x, cols, sub(cols))
         pos = {p: g[:3], q: g[3:6]}
         pcov = {p: Cg[:3, :3], q: Cg[3:6, 3:6]}
         axis: dict[str, FloatArray] = {}
         astd: dict[str, float] = {}
-        if j.type == "hinge":
+        if jm.has_axis:
             # one convention for the axis's sign (as the pose-based solve): its largest
             # component in p is positive
             sign = 1.0 if g[6 + int(np.argmax(np.abs(g[6:9])))] >= 0 else -1.0

@@ -7,7 +7,8 @@ reference camera's world and units, so every camera's pose in one frame is
     G_c[i] = [R_Xc R_c[i],  s_c R_Xc t_c[i] + t_Xc]                 (ref world, ref units)
 
 (``X_ref`` is the identity). Each edge ``between: [p, q]`` adds its constraint at every
-frame where both cameras have a pose (the paper's eq. (24) generalised from a pair to a tree):
+frame where both cameras have a pose (the paper's eq. (24) generalised from a pair to a tree),
+given by its joint type's model (:mod:`acs_cli.core.joints`):
 
 - ``ball``: ``G_p o_p = G_q o_q``: the joint is one point (eq. (24)).
 - ``hinge``: the same for a point on the axis, and ``R_Gp u_p = R_Gq u_q``: one axis
@@ -53,6 +54,14 @@ from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
+from acs_cli.core.joints import joint_model
+from acs_cli.core.joints.base import (
+    SINGLE_AXIS_RATIO,
+    geometry_jacobian,
+    single_axis,
+    tangent_basis,
+)
+from acs_cli.core.joints.base import unit as _unit
 from acs_cli.core.quality import JOINT_STD, OVERRIDE_HINT
 from acs_cli.core.rig import RigJoint, RigTopology
 from acs_cli.core.rig_start import ball_similarity, similarity_from_lifted
@@ -63,10 +72,6 @@ from acs_cli.errors import DegenerateMotionError, InputError
 MIN_EDGE_FRAMES = 14
 #: ... or, for a joint whose position is given (a prior): the relative pose alone.
 MIN_PRIOR_EDGE_FRAMES = 5
-#: A camera "turns about one axis only" when the weakest singular value of its stacked,
-#: centred rotations is below this fraction of the strongest (about 3 degrees of wobble per
-#: 60 degrees of turning).
-SINGLE_AXIS_RATIO = 0.05
 #: A joint is "not determined" when its largest standard deviation exceeds this fraction of
 #: its distance from the camera (seen in simulation: about 5% for general motion, 14-30% for
 #: a rigid or hinged joint whatever the noise level).
@@ -220,30 +225,17 @@ def fixed_joint_prior(joint: RigJoint, camera: str, T_w_c: FloatArray, label: st
     Raises
     ------
     InputError
-        A rigid joint (nothing to hold still).
+        A joint type without a point (rigid: nothing to hold still).
     DegenerateMotionError
         Too little rotation about the joint.
     """
-    from acs_cli.core.joint import estimate_hinge_fixed, estimate_pivot
-
-    if joint.type == "ball":
-        pv = estimate_pivot(T_w_c, "refined", label)
-        return EdgePrior(
-            position_in={camera: pv.position_in_cam}, covariance_in={camera: pv.covariance}
-        )
-    if joint.type != "hinge":
-        raise InputError(f"{label}: joint {joint.name} is rigid: nothing to hold still")
-    h = estimate_hinge_fixed(T_w_c, label)
-    axis = {camera: (h.axis_in_cam, max(float(np.radians(h.axis_std_deg)), 1e-6))}
-    if camera == joint.between[0]:  # the rig's hinge point is the one nearest this camera
-        return EdgePrior(
-            position_in={camera: h.point_in_cam},
-            covariance_in={camera: h.covariance_point + np.eye(3) * 1e-12},
-            axis_in=axis,
-        )
-    # only the line: the rig's point is nearest the other camera
-    std = float(np.sqrt(max(np.linalg.eigvalsh(h.covariance_point)[-1], 1e-18)))
-    return EdgePrior(line_in={camera: (h.point_in_cam, h.axis_in_cam, std)}, axis_in=axis)
+    parts = joint_model(joint.type).fixed_joint_prior(joint, camera, T_w_c, label)
+    return EdgePrior(
+        position_in=parts.get("position_in", {}),
+        covariance_in=parts.get("covariance_in", {}),
+        line_in=parts.get("line_in", {}),
+        axis_in=parts.get("axis_in", {}),
+    )
 
 
 def merge_priors(first: EdgePrior, second: EdgePrior) -> EdgePrior:
@@ -411,11 +403,10 @@ class _Layout:
                 shared = k
                 k += 1
             self.metre = shared
-        # ball: o_p, o_q (3 + 3). hinge: o_p in the plane across its axis (2), o_q (3), and
-        # each axis as a 2-dof step from its starting direction (2 + 2). rigid: T_q_p (3 + 3).
+        # each joint's unknowns, as its type's model lays them out (JointModel.geometry)
         self.edge: dict[str, slice] = {}
         for j in topo.joints:
-            size = {"ball": 6, "hinge": 9, "rigid": 6}[j.type]
+            size = joint_model(j.type).n_params
             self.edge[j.name] = slice(k, k + size)
             k += size
         # the reference instant's poses, of the cameras that have one there
@@ -455,8 +446,7 @@ class _State:
     t: dict[str, FloatArray]
     widx: dict[str, np.ndarray]  # per camera: (n,) its world at each instant
     R0X: FloatArray  # (W, 3, 3) starting rotation of each world's similarity
-    R0rig: dict[str, FloatArray]
-    u0: dict[str, tuple[FloatArray, FloatArray]]  # per hinge: starting axes in p and q
+    anchor: dict[str, Any]  # per edge: its model's fixed data (JointModel.start)
     ref_frame: int
     frames: dict[str, np.ndarray]  # per edge: frame indices where both cameras are valid
     mask: dict[str, np.ndarray]  # per edge: inlier mask over its frames
@@ -539,87 +529,35 @@ def _all_poses(st: _State, x: FloatArray) -> dict[str, tuple[FloatArray, FloatAr
     return {c: _poses(st, x, c, W) for c in st.topo.cameras}
 
 
-def _unit(v: FloatArray) -> FloatArray:
-    return v / max(float(np.linalg.norm(v)), 1e-300)
-
-
-def tangent_basis(u: FloatArray) -> FloatArray:
-    """``(3, 2)``: two unit vectors across the unit vector ``u`` (and across each other)."""
-    a = np.eye(3)[int(np.argmin(np.abs(u)))]
-    b1 = _unit(np.cross(u, a))
-    return np.stack([b1, np.cross(u, b1)], axis=1)
-
-
 def joint_geometry(
     st: _State, x: FloatArray, j: RigJoint
 ) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
-    """``o_p, o_q`` (reference units) and, for a hinge, the unit axes ``u_p, u_q``.
-
-    A hinge's axes are steps ``u = unit(u0 + B a)`` from their starting directions ``u0``
-    (``B`` across ``u0``); its point in ``p`` lies in the plane across ``u_p`` through ``p``'s
-    centre (the axis point nearest the camera), 2 unknowns.
-    """
-    e = x[st.L.edge[j.name]]
-    if j.type == "ball":
-        return e[:3], e[3:6], None, None
-    u0p, u0q = st.u0[j.name]
-    Bp, Bq = tangent_basis(u0p), tangent_basis(u0q)
-    up = _unit(u0p + Bp @ e[5:7])
-    uq = _unit(u0q + Bq @ e[7:9])
-    o_p = Bp @ e[:2]
-    o_p = o_p - (o_p @ up) * up
-    return o_p, e[2:5], up, uq
+    """``o_p, o_q`` (reference units) and, for a type with an axis, the unit axes
+    ``u_p, u_q``: :meth:`~acs_cli.core.joints.base.JointModel.geometry` of the joint's
+    type at ``x``."""
+    return joint_model(j.type).geometry(x[st.L.edge[j.name]], st.anchor[j.name])
 
 
 def residual_geometry(
     st: _State, x: FloatArray, j: RigJoint
 ) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
-    """:func:`joint_geometry` as the constraints use it: a hinge's point moved along its axis
-    to the one nearest both cameras' centres together (least ``|o_p|^2 + |o_q|^2``).
-
-    Any point of the axis satisfies the constraint, but the pose noise reaches the residual
-    through the lever arms, so the point used must not depend on which camera is named
-    first: this one is symmetric in ``p`` and ``q`` (swapping ``between`` changes no
-    estimate), and the least-noisy point of the line. Priors and results keep the reported
-    point (nearest ``p``'s centre)."""
-    o_p, o_q, u_p, u_q = joint_geometry(st, x, j)
-    if u_p is None or u_q is None:
-        return o_p, o_q, u_p, u_q
-    s = -0.5 * float(o_p @ u_p + o_q @ u_q)
-    return o_p + s * u_p, o_q + s * u_q, u_p, u_q
-
-
-def hinge_axes(st: _State, x: FloatArray, j: RigJoint) -> tuple[FloatArray, FloatArray]:
-    """A hinge's unit axes ``u_p, u_q`` (see :func:`joint_geometry`)."""
-    _, _, u_p, u_q = joint_geometry(st, x, j)
-    if u_p is None or u_q is None:
-        raise ValueError(f"joint {j.name} is a {j.type}, not a hinge: it has no axis")
-    return u_p, u_q
+    """:func:`joint_geometry` as the constraints use it
+    (:meth:`~acs_cli.core.joints.base.JointModel.residual_geometry`: a hinge's point moved
+    along its axis to the one nearest both cameras' centres together)."""
+    return joint_model(j.type).residual_geometry(x[st.L.edge[j.name]], st.anchor[j.name])
 
 
 def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, FloatArray]:
-    """Raw (unwhitened) residuals of one edge over its frames: ``pos`` ``(m, 3)``, and
-    ``rot`` ``(m, 3)`` (axis or rigid rotation) and ``trans`` ``(m, 3)`` where they apply."""
+    """Raw (unwhitened) residuals of one edge over its frames by kind, ``(m, 3)`` each:
+    ``pos`` (a point), ``rot`` (an axis or a rigid rotation), ``trans`` (a rigid
+    translation), as its type's model gives them
+    (:meth:`~acs_cli.core.joints.base.JointModel.residual_blocks`)."""
     p, q = j.between
     f = st.frames[j.name]
     Rp, tp = G[p][0][f], G[p][1][f]
     Rq, tq = G[q][0][f], G[q][1][f]
-    out: dict[str, FloatArray] = {}
-    if j.type in ("ball", "hinge"):
-        o_p, o_q, u_p, u_q = residual_geometry(st, x, j)
-        out["pos"] = (se3.rotate(Rp, o_p) + tp) - (se3.rotate(Rq, o_q) + tq)  # eq. (24)
-        if u_p is not None and u_q is not None:
-            out["rot"] = se3.rotate(Rp, u_p) - se3.rotate(Rq, u_q)  # one axis
-    if j.type == "rigid":
-        e = x[st.L.edge[j.name]]
-        Rqp = st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3])
-        # G_p = G_q T_q_p
-        out["rot"] = se3.rotvec_from_matrix(np.einsum("nji,njk,kl->nil", Rp, Rq, Rqp))
-        # G_p = G_q T_q_p, at the midpoint between the two cameras (symmetric in p and q:
-        # swapping the edge's ends changes only the residual's sign)
-        v = Rqp.T @ e[3:6]  # = -t_p_q
-        out["trans"] = 0.5 * (se3.rotate(Rq, e[3:6]) + se3.rotate(Rp, v)) + tq - tp
-    return out
+    model = joint_model(j.type)
+    return model.residual_blocks(x[st.L.edge[j.name]], st.anchor[j.name], Rp, tp, Rq, tq)
 
 
 def _residuals(st: _State, x: FloatArray) -> FloatArray:
@@ -653,51 +591,72 @@ def _geometry_jacobian(
 
     Central differences of :func:`joint_geometry` (a few vector operations, no frames).
     """
-    sl = st.L.edge[j.name]
-    size = sl.stop - sl.start
-    h = 1e-7
-    E = np.eye(size) * h
-
-    def g(dx: FloatArray) -> FloatArray:
-        xx = x.copy()
-        xx[sl] += dx
-        parts = (residual_geometry if for_residuals else joint_geometry)(st, xx, j)
-        return np.concatenate([v if v is not None else np.zeros(3) for v in parts])
-
-    return np.stack([(g(E[i]) - g(-E[i])) / (2 * h) for i in range(size)], axis=1)
+    e = x[st.L.edge[j.name]]
+    return geometry_jacobian(joint_model(j.type), e, st.anchor[j.name], for_residuals)
 
 
-def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
-    """The Jacobian of :func:`_residuals` (analytic; rotations perturbed on the right)."""
-    L, k = st.L, st.ref_frame
-    W = _worlds(st, x)
-    meas = {c: _measured(st, x, c) for c in st.topo.cameras}
-    Jd = {c: right_jacobians(x[L.delta[c]][None, :3])[0] for c in L.delta}
-    rows_i: list[np.ndarray] = []
-    cols_i: list[np.ndarray] = []
-    vals: list[np.ndarray] = []
-    row0 = 0
+class _EdgeJacobian:
+    """One edge's part of :func:`_jacobian`, handed to its joint type's model
+    (:class:`~acs_cli.core.joints.base.EdgeJacobian`): the edge's poses and weights, and
+    where its rows go (3 a frame per residual kind, from ``row0``)."""
+
+    def __init__(
+        self,
+        st: _State,
+        x: FloatArray,
+        j: RigJoint,
+        W: _Worlds,
+        meas: dict[str, tuple[FloatArray, FloatArray]],
+        Jd: dict[str, FloatArray],
+        wk: dict[str, int],
+        out: tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]],
+        row0: int,
+    ) -> None:
+        L, k = st.L, st.ref_frame
+        self.st, self.L, self.W, self.meas, self.Jd, self.wk, self.k = st, L, W, meas, Jd, wk, k
+        self.rows_i, self.cols_i, self.vals = out
+        self.row0 = row0
+        p, q = self.p, self.q = j.between
+        f = self.f = st.frames[j.name]
+        self.m = f.size
+        self.e = x[L.edge[j.name]]
+        self.anchor = st.anchor[j.name]
+        self.mask = (st.mask[j.name] * st.gain[j.name])[:, None, None]
+        self.kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any
+        self.ecols = L.edge_columns(j.name)
+        self.Rp, self.Rq = meas[p][0][f], meas[q][0][f]
+        self.RGp = np.matmul(W.R[st.widx[p][f]], self.Rp)
+        self.RGq = np.matmul(W.R[st.widx[q][f]], self.Rq)
+        self.sp_tp = W.s[st.widx[p][f], None] * meas[p][1][f]
+        self.sq_tq = W.s[st.widx[q][f], None] * meas[q][1][f]
+        self.whiten_pos = st.whiten_pos[j.name]
+        self.w_rot = st.w_rot[j.name]
+        self.w_trans = st.w_trans[j.name]
 
     def put(
-        block: FloatArray, cols: list[int], first_row: int, at: np.ndarray | None = None
+        self, block: FloatArray, cols: list[int] | None = None, at: np.ndarray | None = None
     ) -> None:
-        # block (m, 3, len(cols)) for rows first_row + 3 at[i] + a (at: 0..m-1 by default)
+        # block (m, 3, len(cols)) for rows row0 + 3 at[i] + a (at: 0..m-1 by default)
+        cols = self.ecols if cols is None else cols
         m = block.shape[0]
         at = np.arange(m) if at is None else at
-        r = (first_row + 3 * at[:, None] + np.arange(3)).reshape(-1)
-        rows_i.append(np.repeat(r, len(cols)))
-        cols_i.append(np.tile(np.asarray(cols), 3 * m))
-        vals.append(block.reshape(-1))
+        r = (self.row0 + 3 * at[:, None] + np.arange(3)).reshape(-1)
+        self.rows_i.append(np.repeat(r, len(cols)))
+        self.cols_i.append(np.tile(np.asarray(cols), 3 * m))
+        self.vals.append(block.reshape(-1))
 
-    def by_world(c: str) -> list[tuple[np.ndarray, int]]:
-        """The current edge's frames of camera ``c`` grouped by world: (positions, world)."""
-        wi = st.widx[c][f]
+    def by_world(self, c: str) -> list[tuple[np.ndarray, int]]:
+        """The edge's frames of camera ``c`` grouped by world: (positions, world)."""
+        wi = self.st.widx[c][self.f]
         return [(np.flatnonzero(wi == w), int(w)) for w in np.unique(wi)]
 
-    def cam_block(c: str, y: FloatArray, sign: float, with_t: bool, weight: FloatArray) -> None:
+    def cam_block(
+        self, c: str, y: FloatArray, sign: float, with_t: bool, weight: FloatArray
+    ) -> None:
         """Put the derivatives of ``sign * (R_X y + [s R_X t + t_X])`` by the similarity of
         ``c``'s world at each frame, whitened by ``weight`` ``(m, 3, 3)`` or ``(m, 1, 1)``."""
-        for at, w in by_world(c):
+        L, W = self.L, self.W
+        for at, w in self.by_world(c):
             RX = W.R[w]
             blocks, cols = [], []
             if w in L.rot:
@@ -708,116 +667,49 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
                     blocks.append(sign * np.broadcast_to(np.eye(3), (at.size, 3, 3)))
                     cols += list(range(L.trans[w].start, L.trans[w].stop))
             if w in L.logs and with_t:
-                tf = meas[c][1][f[at]]
+                tf = self.meas[c][1][self.f[at]]
                 blocks.append(sign * (W.s[w] * tf @ RX.T)[:, :, None])
                 cols.append(L.logs[w])
             if blocks:
-                put(np.matmul(weight[at], np.concatenate(blocks, axis=2)), cols, row0, at)
+                self.put(np.matmul(weight[at], np.concatenate(blocks, axis=2)), cols, at)
 
-    def delta_block(c: str, i: int, D: FloatArray, first: int, last: int) -> None:
+    def delta_block(self, c: str, i: int, D: FloatArray, first: int, last: int) -> None:
         """Put ``D`` ``(3, last - first)`` for the reference instant's row ``i`` of ``c``."""
-        if c in L.delta:
-            cols = list(range(L.delta[c].start + first, L.delta[c].start + last))
-            put(D[None], cols, row0, np.array([i]))
+        if c in self.L.delta:
+            cols = list(range(self.L.delta[c].start + first, self.L.delta[c].start + last))
+            self.put(D[None], cols, np.array([i]))
+
+    def next_block(self) -> None:
+        self.row0 += 3 * self.m
+
+
+def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
+    """The Jacobian of :func:`_residuals` (analytic; rotations perturbed on the right).
+
+    Each edge's rows come from its joint type's model
+    (:meth:`~acs_cli.core.joints.base.JointModel.jacobian`)."""
+    L, k = st.L, st.ref_frame
+    W = _worlds(st, x)
+    meas = {c: _measured(st, x, c) for c in st.topo.cameras}
+    Jd = {c: right_jacobians(x[L.delta[c]][None, :3])[0] for c in L.delta}
+    rows_i: list[np.ndarray] = []
+    cols_i: list[np.ndarray] = []
+    vals: list[np.ndarray] = []
+    row0 = 0
+
+    def put(block: FloatArray, cols: list[int], first_row: int) -> None:
+        # block (m, 3, len(cols)) for rows first_row + 3 i + a
+        m = block.shape[0]
+        r = (first_row + 3 * np.arange(m)[:, None] + np.arange(3)).reshape(-1)
+        rows_i.append(np.repeat(r, len(cols)))
+        cols_i.append(np.tile(np.asarray(cols), 3 * m))
+        vals.append(block.reshape(-1))
 
     wk = {c: int(st.widx[c][k]) for c in st.topo.cameras}
     for j in st.topo.joints:
-        p, q = j.between
-        f = st.frames[j.name]
-        m = f.size
-        mask = (st.mask[j.name] * st.gain[j.name])[:, None, None]
-        kk = np.flatnonzero(f == k)  # the reference instant's row in this edge, if any
-        ecols = L.edge_columns(j.name)
-        Rp, Rq = meas[p][0][f], meas[q][0][f]
-        RGp = np.matmul(W.R[st.widx[p][f]], Rp)
-        RGq = np.matmul(W.R[st.widx[q][f]], Rq)
-        if j.type in ("ball", "hinge"):
-            o_p, o_q, u_p, u_q = residual_geometry(st, x, j)
-            Dg = _geometry_jacobian(st, x, j, for_residuals=True)
-            Wp = st.whiten_pos[j.name] * mask
-            yp = se3.rotate(Rp, o_p) + W.s[st.widx[p][f], None] * meas[p][1][f]
-            yq = se3.rotate(Rq, o_q) + W.s[st.widx[q][f], None] * meas[q][1][f]
-            cam_block(p, yp, 1.0, True, Wp)
-            cam_block(q, yq, -1.0, True, Wp)
-            # joint unknowns: R_Gp do_p - R_Gq do_q
-            Be = np.matmul(RGp, Dg[0:3]) - np.matmul(RGq, Dg[3:6])
-            put(np.matmul(Wp, Be), ecols, row0)
-            if kk.size:
-                i = int(kk[0])
-                for c, o, sign in ((p, o_p, 1.0), (q, o_q, -1.0)):
-                    RX, sc = W.R[wk[c]], W.s[wk[c]]
-                    Dr = -sign * RX @ meas[c][0][k] @ se3.skew(o) @ Jd[c] if c in Jd else None
-                    if Dr is not None:
-                        delta_block(c, i, Wp[i] @ np.concatenate([Dr, sign * sc * RX], 1), 0, 6)
-            row0 += 3 * m
-            if j.type == "hinge":
-                if u_p is None or u_q is None:
-                    raise ValueError(f"hinge {j.name} without axes")
-                w = st.w_rot[j.name] * mask
-                wb = np.broadcast_to(w, (m, 3, 3)) * np.eye(3)
-                cam_block(p, se3.rotate(Rp, u_p), 1.0, False, wb)
-                cam_block(q, se3.rotate(Rq, u_q), -1.0, False, wb)
-                Be = np.matmul(RGp, Dg[6:9]) - np.matmul(RGq, Dg[9:12])
-                put(w * Be, ecols, row0)
-                if kk.size:
-                    i = int(kk[0])
-                    for c, u, sign in ((p, u_p, 1.0), (q, u_q, -1.0)):
-                        if c in Jd:
-                            Dr = -sign * W.R[wk[c]] @ meas[c][0][k] @ se3.skew(u) @ Jd[c]
-                            delta_block(c, i, w[i] * Dr, 0, 3)
-                row0 += 3 * m
-        else:
-            e = x[L.edge[j.name]]
-            Rqp = st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3])
-            E = np.einsum("nji,njk,kl->nil", RGp, RGq, Rqp)
-            rho = se3.rotvec_from_matrix(E)
-            Ji = se3.right_jacobians_inv(rho) * st.w_rot[j.name] * mask
-            Et = np.swapaxes(E, 1, 2)
-            # q's similarity: E Exp((R_q R_qp)^T dw); p's: E Exp(-E^T R_p^T dw)
-            for at, w_ in by_world(q):
-                if w_ in L.rot:
-                    A = np.swapaxes(np.matmul(Rq[at], Rqp), 1, 2)
-                    cols = list(range(L.rot[w_].start, L.rot[w_].stop))
-                    put(np.matmul(Ji[at], A @ W.Jw[w_]), cols, row0, at)
-            for at, w_ in by_world(p):
-                if w_ in L.rot:
-                    A = -np.matmul(Et[at], np.swapaxes(Rp[at], 1, 2))
-                    cols = list(range(L.rot[w_].start, L.rot[w_].stop))
-                    put(np.matmul(Ji[at], A @ W.Jw[w_]), cols, row0, at)
-            Jre = right_jacobians(e[None, :3])[0]
-            blk = np.concatenate([np.matmul(Ji, Jre), np.zeros((m, 3, 3))], axis=2)
-            put(blk, ecols, row0)
-            if kk.size:
-                i = int(kk[0])
-                if q in Jd:
-                    delta_block(q, i, Ji[i] @ Rqp.T @ Jd[q], 0, 3)
-                if p in Jd:
-                    delta_block(p, i, -Ji[i] @ Et[i] @ Jd[p], 0, 3)
-            row0 += 3 * m
-            # translation at the midpoint: (R_Gq t_qp + R_Gp v) / 2 + t_Gq - t_Gp, v = R_qp^T t_qp
-            tqp = e[3:6]
-            v = Rqp.T @ tqp
-            wt = st.w_trans[j.name] * mask
-            wtb = np.broadcast_to(wt, (m, 3, 3)) * np.eye(3)
-            yq = 0.5 * se3.rotate(Rq, tqp) + W.s[st.widx[q][f], None] * meas[q][1][f]
-            cam_block(q, yq, 1.0, True, wtb)
-            yp = W.s[st.widx[p][f], None] * meas[p][1][f] - 0.5 * se3.rotate(Rp, v)
-            cam_block(p, yp, -1.0, True, wtb)
-            # d(R_qp^T t) = [R_qp^T t]x Jr dw; d/dt_qp = (R_Gq + R_Gp R_qp^T) / 2
-            d_rot = 0.5 * np.matmul(RGp, se3.skew(v) @ Jre)
-            d_t = 0.5 * (RGq + np.matmul(RGp, Rqp.T))
-            put(wt * np.concatenate([d_rot, d_t], axis=2), ecols, row0)
-            if kk.size:
-                i = int(kk[0])
-                if q in Jd:
-                    RX, sc = W.R[wk[q]], W.s[wk[q]]
-                    Dr = -0.5 * RX @ meas[q][0][k] @ se3.skew(tqp) @ Jd[q]
-                    delta_block(q, i, wt[i] * np.concatenate([Dr, sc * RX], axis=1), 0, 6)
-                if p in Jd:
-                    RX, sc = W.R[wk[p]], W.s[wk[p]]
-                    Dr = -0.5 * RX @ meas[p][0][k] @ se3.skew(v) @ Jd[p]
-                    delta_block(p, i, wt[i] * np.concatenate([Dr, -sc * RX], axis=1), 0, 6)
-            row0 += 3 * m
+        jc = _EdgeJacobian(st, x, j, W, meas, Jd, wk, (rows_i, cols_i, vals), row0)
+        joint_model(j.type).jacobian(jc)
+        row0 = jc.row0
     for c in L.delta:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown
         put(D.reshape(2, 3, 6), list(range(L.delta[c].start, L.delta[c].stop)), row0)
@@ -854,27 +746,23 @@ def _initial(
     L: _Layout,
     widx: dict[str, np.ndarray],
     root: np.ndarray,
-) -> tuple[
-    FloatArray,
-    FloatArray,
-    dict[str, FloatArray],
-    dict[str, tuple[FloatArray, FloatArray]],
-]:
+) -> tuple[FloatArray, FloatArray, dict[str, Any]]:
     """Starting point, in the reference world and units.
 
     First every world's similarity, outward from the worlds that are their group's frame:
     a world is reached through an edge whose other camera's world is known at the same
     instants, by the pairwise self-calibration (:func:`_edge_start`). Then each edge's
-    geometry from every frame: a joint's point by the paper's Algorithm I (eq. (13): the
-    worlds now agree), a hinge's axis, a rigid edge's transform."""
+    geometry from every frame, by its type's model (a joint's point by the paper's Algorithm
+    I, eq. (13): the worlds now agree; a hinge's axis; a rigid edge's transform); returns
+    ``x``, the worlds' starting rotations and each edge's anchor
+    (:meth:`~acs_cli.core.joints.base.JointModel.start`)."""
     x = np.zeros(L.size)
     n_worlds = root.size
     X: dict[int, tuple[FloatArray, FloatArray, float]] = {
         int(w): (np.eye(3), np.zeros(3), 1.0) for w in range(n_worlds) if root[w] == w
     }
     R0X = np.broadcast_to(np.eye(3), (n_worlds, 3, 3)).copy()
-    R0rig: dict[str, FloatArray] = {}
-    u0: dict[str, tuple[FloatArray, FloatArray]] = {}
+    anchor: dict[str, Any] = {}
     o_start: dict[str, dict[str, FloatArray]] = {}
 
     def in_reference(c: str, f: np.ndarray) -> FloatArray:
@@ -910,7 +798,7 @@ def _initial(
                     phi = max(phi, 1e-9)
                     sc = 1.0 / phi if wt in L.logs else 1.0
                     X[wt] = (R.T, -R.T @ tt / phi, sc)
-                    if j.type == "ball" and j.name not in o_start:
+                    if joint_model(j.type).pair_start and j.name not in o_start:
                         o_start[j.name] = {s_cam: o_s, t_cam: o_t * sc}
                     progress = True
     for w in range(n_worlds):
@@ -925,43 +813,20 @@ def _initial(
         f = frames[j.name]
         Gp, Gq = in_reference(p, f), in_reference(q, f)
         Rp, tp, Rq, tq = Gp[:, :3, :3], Gp[:, :3, 3], Gq[:, :3, :3], Gq[:, :3, 3]
-        e = L.edge[j.name]
-        if j.type in ("ball", "hinge"):
-            o = o_start.get(j.name)
-            if o is None:
-                # eq. (13): R_p o_p - R_q o_q = t_q - t_p, linear in (o_p, o_q)
-                A = np.concatenate([Rp, -Rq], axis=2).reshape(-1, 6)
-                sol = np.linalg.lstsq(A, (tq - tp).reshape(-1), rcond=None)[0]
-                o = {p: sol[:3], q: sol[3:]}
-            if j.type == "ball":
-                x[e] = np.concatenate([o[p], o[q]])
-                continue
-            # relative rotations R_p_q[i] = Rot(u_p, theta_i) R0: u_q with R_p_q u_q constant
-            Rpq = np.einsum("nji,njk->nik", Rp, Rq)
-            _, _, Vt = np.linalg.svd((Rpq - Rpq.mean(axis=0)).reshape(-1, 3), full_matrices=False)
-            u = {q: Vt[2], p: _unit(Rpq.mean(axis=0) @ Vt[2])}
-            # slide the point along the axis to the one nearest p's centre
-            lam = -float(o[p] @ u[p])
-            o = {c: o[c] + lam * u[c] for c in (p, q)}
-            u0[j.name] = (u[p], u[q])
-            x[e] = np.concatenate([tangent_basis(u[p]).T @ o[p], o[q], np.zeros(4)])
-        else:
-            # G_p = G_q T_q_p: T_q_p from the frames' average
-            Rqp, _ = se3.project_to_rotation(np.einsum("nji,njk->ik", Rq, Rp))
-            tqp = np.mean(np.einsum("nji,nj->ni", Rq, tp - tq), axis=0)
-            R0rig[j.name] = Rqp
-            x[e] = np.concatenate([np.zeros(3), tqp])
-    return x, R0X, R0rig, u0
+        o = o_start.get(j.name)
+        point = None if o is None else (o[p], o[q])
+        x[L.edge[j.name]], anchor[j.name] = joint_model(j.type).start(Rp, tp, Rq, tq, point)
+    return x, R0X, anchor
 
 
 def _edge_start(
     Gs: FloatArray, Tt: FloatArray, joint_type: str
 ) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
-    """One edge's starting similarity and joint: for a ball, the pairwise fit of
-    :func:`acs_cli.core.rig_start.ball_similarity`, which converges from the linear lifted
-    solution where the rig solve may not (a short, narrow motion leaves the linear solution
-    far off); otherwise the linear solution."""
-    if joint_type == "ball":
+    """One edge's starting similarity and joint: for a joint whose model asks for it (a
+    ball), the pairwise fit of :func:`acs_cli.core.rig_start.ball_similarity`, which
+    converges from the linear lifted solution where the rig solve may not (a short, narrow
+    motion leaves the linear solution far off); otherwise the linear solution."""
+    if joint_model(joint_type).pair_start:
         try:
             return ball_similarity(Gs, Tt)
         except DegenerateMotionError:
@@ -991,6 +856,7 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
         # every frame alike (the reference instant's corrections are held at zero while the
         # noise is fitted: its rows are evidence like any other's)
         m = st.mask[j.name]
+        model = joint_model(j.type)
         b = _edge_blocks(st, x, j, G)
         d: dict[str, float] = {}
         if "pos" in b:
@@ -1005,11 +871,11 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
             d["sigma_trans"] = float(np.sqrt(th[0] / 2.0))
             d["sigma_rot_deg"] = float(np.degrees(np.sqrt(th[1])))
             for c in (p, q):
-                if j.type == "ball":  # a hinge's axis rows tell the rotation noise better
+                if model.point_tells_rotation_noise:  # a hinge's axis rows tell it better
                     cam_rot[c].append(th[1])
                 cam_trans[c].append(th[0] / 2.0)
         if "rot" in b:
-            dof = 2.0 if j.type == "hinge" else 3.0
+            dof = model.rotation_dof
             v = max(float(np.mean(np.sum(b["rot"][m] ** 2, axis=1))) / dof, NOISE_FLOOR_ROT**2)
             st.w_rot[j.name] = 1.0 / np.sqrt(v)
             d["sigma_rot_deg"] = float(np.degrees(np.sqrt(v / 2.0)))
@@ -1037,13 +903,13 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
 
 def _edge_rows(st: _State) -> dict[str, np.ndarray]:
     """Per edge, ``(m, d)``: the rows of :func:`_residuals` (and of its Jacobian) of each of
-    its frames: the point's 3 (ball, hinge), then the axis's 3 (hinge), or the rotation's and
-    the translation's 3 each (rigid)."""
+    its frames: 3 for each of its type's residual kinds, in order (the point's, then the
+    axis's, for a hinge; the rotation's and the translation's for a rigid edge)."""
     out: dict[str, np.ndarray] = {}
     row0 = 0
     for j in st.topo.joints:
         m = st.frames[j.name].size
-        kinds = {"ball": 1, "hinge": 2, "rigid": 2}[j.type]
+        kinds = len(joint_model(j.type).residual_kinds)
         blocks = [row0 + 3 * m * b + 3 * np.arange(m)[:, None] + np.arange(3) for b in range(kinds)]
         out[j.name] = np.concatenate(blocks, axis=1)
         row0 += 3 * m * kinds
@@ -1137,8 +1003,8 @@ def _reject(st: _State, x: FloatArray) -> int:
         Hii = np.matmul(G @ Hinv, np.swapaxes(G, 1, 2))
         M = np.eye(d_rows) - Hii + 1e-9 * np.eye(d_rows)
         T = np.einsum("ni,ni->n", e, np.linalg.solve(M, e[:, :, None])[:, :, 0])
-        dim = {"ball": 3, "hinge": 5, "rigid": 6}[j.type]
-        n_noise = {"ball": 2, "hinge": 3, "rigid": 2}[j.type]
+        dim = joint_model(j.type).outlier_dim
+        n_noise = joint_model(j.type).noise_levels
         k = int(m.sum())
         p_eff = float(np.trace(Hii[m], axis1=1, axis2=2).sum())
         nu = dim * k - p_eff - (n_noise - 1)
@@ -1393,7 +1259,7 @@ def estimate_rig(
             return L.logs.get(w)
         return None
 
-    x0, R0X, R0rig, u0 = _initial(topology, tracks, frames, L, wg.widx, wg.root)
+    x0, R0X, anchor = _initial(topology, tracks, frames, L, wg.widx, wg.root)
     Rm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, :3]) for c in topology.cameras}
     tm = {c: np.ascontiguousarray(tracks[c].T_w_c[:, :3, 3]) for c in topology.cameras}
     # the rig's length scale: for noise floors and for judging what is determined
@@ -1406,12 +1272,14 @@ def estimate_rig(
         num = den = 0.0
         for name, pr in priors.items():
             j = topology.joint(name)
-            if pr.units != "metre" or j.type != "ball":
+            model = joint_model(j.type)
+            if pr.units != "metre" or not model.has_point:
                 continue
+            start = model.geometry(x0[L.edge[name]], anchor[name])
             for c, pos in pr.position_in.items():
                 side = j.between.index(c) if c in j.between else None
                 if side is not None:
-                    o = x0[L.edge[name]][3 * side : 3 * side + 3]
+                    o = np.asarray(start[side])
                     num += float(o @ np.asarray(pos, float))
                     den += float(np.asarray(pos, float) @ np.asarray(pos, float))
         if L.metre not in L.logs.values():  # else a metric world's scale already starts it
@@ -1419,9 +1287,10 @@ def estimate_rig(
     prior_rows: list[tuple[str, int, FloatArray, FloatArray, int | None]] = []
     for name, pr in priors.items():
         j = topology.joint(name)
-        if j.type == "rigid":
-            raise InputError(f"joints.{name}: a rigid joint has no position to give")
-        if (pr.line_in or pr.axis_in) and j.type != "hinge":
+        model = joint_model(j.type)
+        if not model.has_point:
+            raise InputError(f"joints.{name}: a {j.type} joint has no position to give")
+        if (pr.line_in or pr.axis_in) and not model.has_axis:
             raise InputError(f"joints.{name}: an axis is given but the joint is a {j.type}")
         for c in [*pr.line_in, *pr.axis_in]:
             if c not in j.between:
@@ -1451,9 +1320,8 @@ def estimate_rig(
             side = j.between.index(c)
             col = unit_column(pr, c)
             prior_rows.append((name, 3 * side, np.asarray(pos, float), Wh, col))
-            if j.type == "ball":
-                f0 = 1.0 if col is None else float(np.exp(x0[col]))
-                x0[L.edge[name]][3 * side : 3 * side + 3] = f0 * np.asarray(pos, float)
+            f0 = 1.0 if col is None else float(np.exp(x0[col]))
+            model.seed_point(x0[L.edge[name]], side, f0 * np.asarray(pos, float))
     st = _State(
         topo=topology,
         L=L,
@@ -1461,8 +1329,7 @@ def estimate_rig(
         t=tm,
         widx=wg.widx,
         R0X=R0X,
-        R0rig=R0rig,
-        u0=u0,
+        anchor=anchor,
         ref_frame=k,
         frames=frames,
         mask={j.name: np.ones(frames[j.name].size, bool) for j in topology.joints},
@@ -1676,7 +1543,8 @@ def _assemble(
         axis: dict[str, FloatArray] = {}
         astd: dict[str, float] = {}
         own_in: dict[str, tuple[FloatArray, FloatArray]] = {}
-        if j.type in ("ball", "hinge"):
+        model = joint_model(j.type)
+        if model.has_point:
             cols = L.edge_columns(j.name)
 
             def geometry(xx: FloatArray, j: RigJoint = j) -> FloatArray:
@@ -1698,7 +1566,7 @@ def _assemble(
                     own_in[c] = lsq.propagate(own, x, oc, cov[np.ix_(oc, oc)])
                 else:
                     own_in[c] = (pos[c], pcov[c])
-                if j.type == "hinge":
+                if model.has_axis:
                     sl = slice(6 + 3 * side, 9 + 3 * side)
                     axis[c] = g[sl]
                     astd[c] = float(np.degrees(np.sqrt(max(np.trace(Cg[sl, sl]), 0.0))))
@@ -1706,9 +1574,9 @@ def _assemble(
             # one convention for the axis's sign: its largest component (in p) is positive
             axis = {c: -u for c, u in axis.items()}
         Tq, Tp = cams[q].T_cam_ref, cams[p].T_cam_ref
-        if j.type == "rigid":  # constant: the edge's own unknowns
-            e = x[L.edge[j.name]]
-            T_q_p = se3.transforms_from_rt(st.R0rig[j.name] @ se3.matrix_from_rotvec(e[:3]), e[3:6])
+        T_const = model.transform(x[L.edge[j.name]], st.anchor[j.name])
+        if T_const is not None:  # constant: the edge's own unknowns
+            T_q_p = T_const
         elif Tq is not None and Tp is not None:
             T_q_p = Tq @ se3.invert_transforms(Tp)
         else:  # no instant where both are posed: the articulation is not defined
@@ -1748,9 +1616,11 @@ MODEL_WARN_DEG = 2.0
 def check_joint_types(st: _State, x: FloatArray) -> list[str]:
     """Warnings for joints that fit their declared type poorly; raises for gross misfits.
 
-    A rigid edge's cameras must not turn relative to each other (``R_p^T R_q`` constant); a
-    hinge's axis must stay one line in both bodies. The RMS of those rotation residuals over
-    the frames used is compared with :data:`MODEL_WARN_DEG` and :data:`MODEL_REFUSE_DEG`.
+    Each type's model says what its motion must do
+    (:meth:`~acs_cli.core.joints.base.JointModel.misfit`): a rigid edge's cameras must not
+    turn relative to each other (``R_p^T R_q`` constant); a hinge's axis must stay one line
+    in both bodies. The RMS of those rotation residuals over the frames used is compared
+    with :data:`MODEL_WARN_DEG` and :data:`MODEL_REFUSE_DEG`.
 
     Raises
     ------
@@ -1761,23 +1631,10 @@ def check_joint_types(st: _State, x: FloatArray) -> list[str]:
     warnings: list[str] = []
     refused: list[str] = []
     for j in st.topo.joints:
-        if j.type not in ("rigid", "hinge"):
+        fit = joint_model(j.type).misfit(j, _edge_blocks(st, x, j, G), st.mask[j.name])
+        if fit is None:
             continue
-        b = _edge_blocks(st, x, j, G)
-        m = st.mask[j.name]
-        rms = float(np.degrees(np.sqrt(np.mean(np.sum(b["rot"][m] ** 2, axis=1)))))
-        p, q = j.between
-        if j.type == "rigid":
-            text = (
-                f"joint {j.name} ({p}-{q}) is declared rigid, but the two cameras turn "
-                f"relative to each other by {rms:.2f} deg RMS: a ball or a hinge?"
-            )
-        else:
-            text = (
-                f"joint {j.name} ({p}-{q}) is declared a hinge, but its axis moves by "
-                f"{rms:.2f} deg RMS between the bodies: it bends about more than one axis "
-                "(declare it type: ball)"
-            )
+        rms, text = fit
         if rms > MODEL_REFUSE_DEG:
             refused.append(text)
         elif rms > MODEL_WARN_DEG:
@@ -1801,15 +1658,6 @@ def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
     return ""
 
 
-def _single_axis(R: FloatArray) -> FloatArray | None:
-    """The world axis ``(3,)`` of rotations ``(n, 3, 3)`` that turn about one axis only, or
-    None. (The axis ``v`` in the body with ``R_i v`` constant; ``mean(R_i) v`` in the world.)"""
-    _, s, Vt = np.linalg.svd((R - R.mean(axis=0)).reshape(-1, 3), full_matrices=False)
-    if s[0] <= 0 or s[2] >= SINGLE_AXIS_RATIO * s[0]:
-        return None
-    return _unit(R.mean(axis=0) @ Vt[2])
-
-
 #: Two axes are "the same" within this angle (degrees) for the planar-motion rule.
 PARALLEL_AXES_DEG = 10.0
 
@@ -1820,38 +1668,18 @@ def planar_offset(st: _State, x: FloatArray, j: RigJoint) -> str:
     When camera ``p`` turns about one world axis only and the joint turns about that same
     axis (a hinge along it, a ball bending about it only, or a rigid edge), nothing in the
     motion tells how far apart along that axis the two cameras' parts of the joint are: a
-    truck and its trailer on flat ground.
+    truck and its trailer on flat ground. The words are the type's model's
+    (:meth:`~acs_cli.core.joints.base.JointModel.planar_offset`).
     """
     p, q = j.between
     f = st.frames[j.name]
     Rp = _poses(st, x, p)[0][f]
-    a = _single_axis(Rp)
+    a = single_axis(Rp)
     if a is None:
         return ""
     cos = np.cos(np.radians(PARALLEL_AXES_DEG))
-    if j.type == "hinge":
-        u_p = hinge_axes(st, x, j)[0]
-        if abs(float(np.mean(se3.rotate(Rp, u_p), axis=0) @ a)) < cos:
-            return ""
-        return (
-            f"the offset between {p} and {q} along the hinge axis: both turn about that axis "
-            "only (planar motion with the axis along the plane's normal)"
-        )
-    if j.type == "ball":
-        Rq = _poses(st, x, q)[0][f]
-        b = _single_axis(np.einsum("nji,njk->nik", Rp, Rq))
-        if b is None:
-            return ""
-        if abs(float(np.mean(se3.rotate(Rp, b), axis=0) @ a)) < cos:
-            return ""
-        return (
-            f"the offset between {p} and {q} along the vertical of the motion: the rig turns "
-            f"and joint {j.name} bends about that axis only (planar motion)"
-        )
-    return (
-        f"the offset between {p} and {q} along the axis {p} turns about (a rigid pair that "
-        "turns about one axis only, planar motion)"
-    )
+    Rq = _poses(st, x, q)[0][f]
+    return joint_model(j.type).planar_offset(j, Rp, Rq, lambda: joint_geometry(st, x, j), a, cos)
 
 
 def _check_determined(
@@ -1906,7 +1734,8 @@ def _check_determined(
         scale_len = max(travel, 1e-12)
         worst = 0.0
         what = ""
-        if j.type in ("ball", "hinge"):
+        model = joint_model(j.type)
+        if model.has_point:
             for c in (p, q):
                 C = est.edges[j.name].position_cov_in[c]
                 ev, evec = np.linalg.eigh(C)
@@ -1915,7 +1744,7 @@ def _check_determined(
                 rel = std / max(float(np.linalg.norm(o)), 0.1 * scale_len, 1e-12)
                 if rel > worst:
                     worst, what = rel, f"the joint's position in {c}"
-                    if j.type == "hinge":
+                    if model.has_axis:
                         u = est.edges[j.name].axis_in[c]
                         if abs(float(evec[:, -1] @ u)) > 0.9:
                             what = (
@@ -1933,24 +1762,21 @@ def _check_determined(
         f = st.frames[j.name]
         Rst = np.einsum("nji,njk->nik", G[p][0][f], G[q][0][f])
         bends = (
-            _motion_words(Rst, f"joint {j.name}", j.type == "hinge") if j.type != "rigid" else ""
+            _motion_words(Rst, f"joint {j.name}", model.single_axis_ok)
+            if not model.constant_transform
+            else ""
         )
         if "hardly turns" in bends:
             bends += f"; if {p} and {q} are on one body, declare it type: rigid"
         why = [_motion_words(G[p][0][f], f"camera {p}", False), bends]
-        if j.type == "ball":
-            s = np.linalg.svd((Rst - Rst.mean(axis=0)).reshape(-1, 3), compute_uv=False)
-            if s[2] < SINGLE_AXIS_RATIO * s[0]:
-                why.append(f"joint {j.name} bends about one axis only: declare it type: hinge")
+        why += model.motion_advice(j, Rst)
         because = "; ".join(w for w in why if w) or "the motion is too narrow for the noise"
         advice = (
             f"record the rig turning about several axes (tilting, not only turning on flat "
             f"ground) while joint {j.name} moves"
         )
-        if j.type in ("ball", "hinge"):
-            # a hinge's point is the one nearest p's centre: q's offset along the axis is the
-            # unknown; a ball seen from a camera turning about one axis: that camera's
-            cam = q if j.type == "hinge" else p
+        cam = model.position_hint_camera(j)
+        if cam is not None:
             advice += (
                 f", or give the joint in the config (joints.{j.name}.position_in.{cam}: "
                 f"[x, y, z] in metres, measured on the rig)"

@@ -47,6 +47,7 @@ from pydantic_core import ErrorDetails, PydanticCustomError
 
 from acs_cli.core.checkerboard import MAX_BOARD_CORNERS
 from acs_cli.core.intrinsics import MODELS
+from acs_cli.core.joints import joint_model
 from acs_cli.core.pairing import PAIR_BY
 from acs_cli.core.rig import JOINT_TYPES, RigTopology, rig_topology
 from acs_cli.errors import InputError
@@ -956,12 +957,12 @@ def _joint_spec(name: str, j: Joint, path: Path) -> RigJointSpec:
     if j.position_in is not None:
         _unknown_keys(j.position_in, between, f"{key}.position_in", path)
         pos = {c: np.asarray(v, dtype=float) for c, v in j.position_in.items()}
-    if j.type == "rigid" and pos:
-        raise _fail(path, f"{key}.position_in", "a rigid joint has no position")
+    if not joint_model(j.type).has_point and pos:
+        raise _fail(path, f"{key}.position_in", f"a {j.type} joint has no position")
     fixed: dict[str, Path] = {}
     if j.fixed_joint is not None:
-        if j.type == "rigid":
-            raise _fail(path, f"{key}.fixed_joint", "a rigid joint has no fixed-joint session")
+        if not joint_model(j.type).has_point:
+            raise _fail(path, f"{key}.fixed_joint", f"a {j.type} joint has no fixed-joint session")
         _unknown_keys(j.fixed_joint, between, f"{key}.fixed_joint", path)
         fixed = {n: _resolve(v, path) for n, v in j.fixed_joint.items()}
     return RigJointSpec(name, between, j.type, pos, j.position_std, fixed)
@@ -1001,8 +1002,8 @@ def _check_recordings(
         for h in rec.fixed_joints:
             if h not in joints:
                 raise _fail(path, key, f"{h!r} is not a joint")
-            if joints[h].type == "rigid":
-                raise _fail(path, key, f"{h} is rigid: it cannot be held still")
+            if not joint_model(joints[h].type).has_point:
+                raise _fail(path, key, f"{h} is {joints[h].type}: it cannot be held still")
             if not any(b in rec.cameras for b in joints[h].between):
                 raise _fail(path, key, f"the recording sees neither body of {h}")
         for jn, j in joints.items():

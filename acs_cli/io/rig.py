@@ -68,7 +68,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.rig import JOINT_TYPES
+from acs_cli.core.joints import JOINT_MODELS, JointModel, joint_model
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
@@ -239,6 +239,11 @@ class RigJointResult:
     T_q_p: FloatArray | None = None
     T_q_p_std: tuple[FloatArray, FloatArray] | None = None
 
+    @property
+    def model(self) -> JointModel:
+        """Its type's model (:mod:`acs_cli.core.joints`): which fields it has."""
+        return joint_model(self.type)
+
 
 @dataclass(frozen=True)
 class RigArtifact(YamlArtifact):
@@ -332,10 +337,10 @@ class RigArtifact(YamlArtifact):
             lines.append(s)
         for j in self.joints.values():
             s = f"  {j.name} ({j.type}, {j.between[0]}-{j.between[1]})"
-            if j.type != "rigid":
+            if j.model.has_point:
                 p = j.position_in[j.between[0]]
                 s += f": point in {j.between[0]} [" + " ".join(f"{v:+.4f}" for v in p) + f"] {u}"
-            if j.type == "hinge":
+            if j.model.has_axis:
                 a = j.axis_in[j.between[0]]
                 s += ", axis [" + " ".join(f"{v:+.3f}" for v in a) + "]"
             if j.T_q_p is not None:
@@ -402,13 +407,13 @@ class RigArtifact(YamlArtifact):
         joints = {}
         for j in self.joints.values():
             d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
-            if j.type != "rigid":
+            if j.model.has_point:
                 d["position_in"] = dict(j.position_in)
                 d["position_std_in"] = dict(j.position_std_in)
-            if j.type == "hinge":
+            if j.model.has_axis:
                 d["axis_in"] = dict(j.axis_in)
                 d["axis_std_deg_in"] = dict(j.axis_std_deg_in)
-            if j.type == "rigid" and j.T_q_p is not None:
+            if j.model.constant_transform and j.T_q_p is not None:
                 d["T_q_p"] = j.T_q_p
                 if j.T_q_p_std is not None:
                     d["T_q_p_std"] = _std_plain(j.T_q_p_std)
@@ -540,8 +545,9 @@ class RigArtifact(YamlArtifact):
             k = f"joints.{name}"
             j = as_mapping(j, k, p)
             jtype = j.get("type")
-            if jtype not in JOINT_TYPES:
-                raise InputError(f"'{k}.type' must be one of {', '.join(JOINT_TYPES)}", path=p)
+            if jtype not in JOINT_MODELS:
+                raise InputError(f"'{k}.type' must be one of {', '.join(JOINT_MODELS)}", path=p)
+            jm = joint_model(str(jtype))
             between = j.get("between")
             if (
                 not isinstance(between, list)
@@ -555,11 +561,11 @@ class RigArtifact(YamlArtifact):
                 d = as_mapping(j.get(key, {}), f"{k}.{key}", p)
                 return {c: as_vector(d[c], f"{k}.{key}.{c}", p) for c in b if c in d}
 
-            pos = per_cam("position_in") if jtype != "rigid" else {}
-            if jtype != "rigid" and len(pos) != 2:
+            pos = per_cam("position_in") if jm.has_point else {}
+            if jm.has_point and len(pos) != 2:
                 raise InputError(f"'{k}.position_in' needs both {b[0]} and {b[1]}", path=p)
-            axis = per_cam("axis_in") if jtype == "hinge" else {}
-            if jtype == "hinge" and len(axis) != 2:
+            axis = per_cam("axis_in") if jm.has_axis else {}
+            if jm.has_axis and len(axis) != 2:
                 raise InputError(f"'{k}.axis_in' needs both {b[0]} and {b[1]}", path=p)
             ax_std = as_mapping(j.get("axis_std_deg_in", {}), f"{k}.axis_std_deg_in", p)
             joints[str(name)] = RigJointResult(
@@ -567,7 +573,7 @@ class RigArtifact(YamlArtifact):
                 type=str(jtype),
                 between=b,
                 position_in=pos,
-                position_std_in=per_cam("position_std_in") if jtype != "rigid" else {},
+                position_std_in=per_cam("position_std_in") if jm.has_point else {},
                 axis_in=axis,
                 axis_std_deg_in={
                     str(c): as_number(v, f"{k}.axis_std_deg_in.{c}", p) for c, v in ax_std.items()
@@ -578,10 +584,10 @@ class RigArtifact(YamlArtifact):
                     j.get("frames_rejected", 0), f"{k}.frames_rejected", p, minimum=0
                 ),
                 T_q_p=None
-                if jtype != "rigid" or j.get("T_q_p") is None
+                if not jm.constant_transform or j.get("T_q_p") is None
                 else as_matrix(j["T_q_p"], (4, 4), f"{k}.T_q_p", p),
                 T_q_p_std=None
-                if jtype != "rigid" or j.get("T_q_p_std") is None
+                if not jm.constant_transform or j.get("T_q_p_std") is None
                 else _std_parse(j["T_q_p_std"], f"{k}.T_q_p_std", p),
             )
         warnings = doc.get("warnings") or []

@@ -56,6 +56,8 @@ import yaml
 from numpy.typing import ArrayLike
 
 from acs_cli.core import se3
+from acs_cli.core.joints import joint_model
+from acs_cli.core.joints.base import UrdfJoint
 from acs_cli.core.rig import RigTopology, rig_topology
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
@@ -217,7 +219,7 @@ def _bodies(
     # the cameras of each body: connected components of the rigid edges
     group: dict[str, list[str]] = {c: [c] for c in order}
     for j in rig.joints.values():
-        if j.type == "rigid":
+        if j.model.constant_transform:
             a, b = group[j.between[0]], group[j.between[1]]
             if a is not b:
                 a.extend(b)
@@ -231,11 +233,11 @@ def _bodies(
     T_ref_body: dict[str, FloatArray] = {body_of[ref]: _T_ref_cam(rig, members[ref][0])}
     entries = {body_of[ref]: ref}
     for step in topo.tree_order():
-        if step.joint.type == "rigid":
+        if joint_model(step.joint.type).constant_transform:
             continue
         j = rig.joints[step.joint.name]
         parent, child = step.source, step.target
-        for key in ("position_in", "axis_in") if j.type == "hinge" else ("position_in",):
+        for key in ("position_in", "axis_in") if j.model.has_axis else ("position_in",):
             if any(c not in getattr(j, key) for c in j.between):
                 raise InputError(
                     f"joints.{j.name}.{key}: needs both {j.between[0]} and {j.between[1]}"
@@ -406,16 +408,28 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
         u.link(body.name)
     for cam in rig.cameras:
         u.link(cam)
-    ball_joints = [a for a in articulations if rig.joints[a[0]].type == "ball"]
-    for name, _parent, _child in ball_joints:
-        u.comment(f"massless intermediate links of the ball joint {name}")
-        u.link(f"{name}_x_link")
-        u.link(f"{name}_y_link")
+    # each articulation as its type's model maps it (JointModel.urdf)
+    urdf: dict[str, tuple[list[str], list[UrdfJoint], str]] = {}
+    for name, parent, child in articulations:
+        j = rig.joints[name]
+        P, C = bodies[body_of[parent]], bodies[body_of[child]]
+        T_P_C = se3.invert_transforms(P.T_ref_body) @ C.T_ref_body
+        axis = (
+            _hinge_axis_in_body(rig, name, parent, child, C.T_ref_body)
+            if j.model.has_axis
+            else None
+        )
+        urdf[name] = j.model.urdf(topo.joint(name), P.name, C.name, T_P_C, axis)
+    for name, (links, _, _) in urdf.items():
+        if links:
+            u.comment(f"massless intermediate links of the {rig.joints[name].type} joint {name}")
+        for link in links:
+            u.link(link)
 
     # cameras fixed to their bodies; the fixed joint is named after the rigid edge
     rigid_to: dict[str, str] = {}
     for step in topo.tree_order():
-        if step.joint.type == "rigid":
+        if joint_model(step.joint.type).constant_transform:
             rigid_to[step.target] = step.joint.name
     for body in bodies.values():
         for cam in body.cameras:
@@ -438,28 +452,10 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
                 u.joint(f"{body.name}_to_{cam}", "fixed", body.name, cam, T_body_cam)
 
     # articulations, parents before children
-    for name, parent, child in articulations:
-        j = rig.joints[name]
-        P, C = bodies[body_of[parent]], bodies[body_of[child]]
-        T_P_C = se3.invert_transforms(P.T_ref_body) @ C.T_ref_body
-        if j.type == "hinge":
-            axis = _hinge_axis_in_body(rig, name, parent, child, C.T_ref_body)
-            u.comment(
-                f"hinge {name} ({j.between[0]}-{j.between[1]}): origin at the hinge point, "
-                f"axis in {C.name}'s frame"
-            )
-            u.joint(name, "revolute", P.name, C.name, T_P_C, axis)
-        else:
-            u.comment(
-                f"ball joint {name} ({j.between[0]}-{j.between[1]}) as three revolute joints "
-                f"about the x, y and z axes of {C.name} through its centre, joined by the "
-                f"massless links {name}_x_link and {name}_y_link (a floating joint would "
-                "also translate)"
-            )
-            eye = np.eye(4)
-            u.joint(f"{name}_x", "revolute", P.name, f"{name}_x_link", T_P_C, np.eye(3)[0])
-            u.joint(f"{name}_y", "revolute", f"{name}_x_link", f"{name}_y_link", eye, np.eye(3)[1])
-            u.joint(f"{name}_z", "revolute", f"{name}_y_link", C.name, eye, np.eye(3)[2])
+    for _links, joints, comment in urdf.values():
+        u.comment(comment)
+        for uj in joints:
+            u.joint(uj.name, uj.type, uj.parent, uj.child, uj.origin, uj.axis)
 
     ET.indent(u.robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(u.robot, encoding="unicode") + "\n"
@@ -679,7 +675,7 @@ def kalibr_camchain_from_rig(
     ]
     if rig.length_unit != "m":
         header.append(f"WARNING: Kalibr expects metres; these lengths are in {rig.length_unit}")
-    articulated = [j for j in rig.joints.values() if j.type != "rigid"]
+    articulated = [j for j in rig.joints.values() if not j.model.constant_transform]
     if articulated:
         header += [
             "The rig is articulated ("
@@ -694,7 +690,11 @@ def kalibr_camchain_from_rig(
         comment = f"cam{i}: {cam}"
         if i > 0:
             prev = cams[i - 1]
-            moving = [s.joint for s in topo.path(prev, cam) if s.joint.type != "rigid"]
+            moving = [
+                s.joint
+                for s in topo.path(prev, cam)
+                if not joint_model(s.joint.type).constant_transform
+            ]
             if moving:
                 comment += (
                     f"; T_cn_cnm1 from {prev} across "

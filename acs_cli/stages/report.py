@@ -237,7 +237,7 @@ def _rig_view(found: _Found, rig: RigArtifact) -> RigOfManyView:
         p = j.between[0]
         if any(b not in T_ref_cam for b in j.between):
             continue  # a body seen only in another recording: not drawn at that instant
-        point = None if j.type == "rigid" else se3.transform_points(T_ref_cam[p], j.position_in[p])
+        point = se3.transform_points(T_ref_cam[p], j.position_in[p]) if j.model.has_point else None
         joints.append((name, j.type, j.between[0], j.between[1], point))
     paths: dict[str, np.ndarray] = {}
     folder = found.run_dir / "trajectories"

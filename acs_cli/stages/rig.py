@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from acs_cli.core import se3
+from acs_cli.core.joints import joint_model
 from acs_cli.core.pairing import common_timeline
 from acs_cli.core.quality import (
     JOINT_STD,
@@ -310,7 +311,7 @@ def rig_artifact(
             residual_rms=e.residual_rms,
             frames_used=e.frames_used,
             frames_rejected=e.frames_rejected,
-            T_q_p=e.T_q_p if e.joint.type == "rigid" else None,
+            T_q_p=e.T_q_p if joint_model(e.joint.type).constant_transform else None,
             T_q_p_std=T_q_p_std,
         )
     return RigArtifact(
@@ -371,7 +372,7 @@ def rig_verdict_measures(est: RigEstimate, reference: CameraTrack) -> list[Measu
         total = e.frames_used + e.frames_rejected
         if total:
             out.append(Measure(REJECTED, e.frames_rejected / total, f"joint {name}"))
-        if e.joint.type == "rigid":
+        if not joint_model(e.joint.type).has_point:
             continue
         for c, o in e.position_in.items():
             std = largest_std(e.position_cov_in[c])
@@ -1061,7 +1062,7 @@ def trajectories_from_rig(
         T[:, :3, 3] *= cam.scale
         out[c] = (t.timestamps, cam.T_ref_world @ T)
     for name, j in rig.joints.items():
-        if j.type == "rigid" or j.between[0] not in out:
+        if not j.model.has_point or j.between[0] not in out:
             continue
         p = j.between[0]
         times, T = out[p]

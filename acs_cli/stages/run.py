@@ -493,6 +493,7 @@ def _sfm_stage(
 
 def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
+    from acs_cli.core.joints import joint_model
     from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, label, run_rig
 
     stages: list[_Stage] = []
@@ -525,7 +526,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     traj_files += [
         traj / f"{n}.tum"
         for n, j in config.joints.items()
-        if j.type != "rigid" and all(b in seen for b in j.between)
+        if joint_model(j.type).has_point and all(b in seen for b in j.between)
     ]
 
     stages.append(
