@@ -42,7 +42,7 @@ Covariances come from the final whitened Jacobian.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,6 +53,7 @@ from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
+from acs_cli.core.paper import algorithm_1_solve
 from acs_cli.core.quality import OVERRIDE_HINT
 from acs_cli.core.relpose import (
     SINGLE_AXIS_RATIO,
@@ -885,9 +886,8 @@ def _initial(
         if j.type in ("ball", "hinge"):
             o = o_start.get(j.name)
             if o is None:
-                # eq. (13): R_p o_p - R_q o_q = t_q - t_p, linear in (o_p, o_q)
-                A = np.concatenate([Rp, -Rq], axis=2).reshape(-1, 6)
-                sol = np.linalg.lstsq(A, (tq - tp).reshape(-1), rcond=None)[0]
+                # Algorithm I, eq. (9) (the paper's eq. (13)): R_p o_p - R_q o_q = t_q - t_p
+                sol = algorithm_1_solve(Gp, Gq)[0]
                 o = {p: sol[:3], q: sol[3:]}
             if j.type == "ball":
                 x[e] = np.concatenate([o[p], o[q]])
@@ -1091,6 +1091,131 @@ def _reject(st: _State, x: FloatArray) -> int:
             m[bad] = False
             dropped += bad.size
     return dropped
+
+
+#: Per joint type: the dimension of a frame's residual and the noise levels fitted to it.
+_TEST_DIM = {"ball": (3, 2), "hinge": (5, 3), "rigid": (6, 2)}
+
+
+def _fit_without(
+    st: _State,
+    x: FloatArray,
+    left: dict[str, np.ndarray],
+    solve: Callable[[FloatArray], FloatArray],
+) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray, FloatArray, float, float]]]:
+    """The rig solved without the frames ``left`` (per edge; noise levels refitted), and per
+    edge of ``left``: the whitened residuals ``e`` ``(n, d)`` of every frame at that fit,
+    their Jacobian rows ``G`` ``(n, d, p)``, the inverse information of the kept rows, the
+    kept frames' residual power ``S`` and its degrees of freedom ``nu``. The frames stay
+    out of the masks."""
+    for name, f in left.items():
+        st.mask[name][f] = False
+    x_loo = x
+    for _ in range(REWEIGHT_ROUNDS):
+        _refit_weights(st, x_loo, st.L.size)
+        x_loo = solve(x_loo)
+    rows = _edge_rows(st)
+    for name, f in left.items():  # their residuals (a masked row is zero)
+        st.mask[name][f] = True
+    r, J = _residuals(st, x_loo), _jacobian(st, x_loo)
+    keep_rows = np.ones(r.size)
+    for name, f in left.items():
+        st.mask[name][f] = False
+        keep_rows[rows[name][f].ravel()] = 0.0
+    Jk = J.multiply(keep_rows[:, None]).tocsr()
+    Hinv = np.linalg.pinv(np.asarray((Jk.T @ Jk).toarray()), rcond=1e-14, hermitian=True)
+    out = {}
+    for name in left:
+        m, idx = st.mask[name], rows[name]
+        e = r[idx]
+        G = J[idx.ravel()].toarray().reshape(m.size, idx.shape[1], -1)
+        dim, n_noise = _TEST_DIM[st.topo.joint(name).type]
+        p_eff = float(np.einsum("nij,jk,nik->", G[m], Hinv, G[m]))
+        out[name] = (
+            e,
+            G,
+            Hinv,
+            float(np.sum(e[m] ** 2)),
+            dim * int(m.sum()) - p_eff - (n_noise - 1),
+        )
+    return x_loo, out
+
+
+def _reject_left_out(
+    st: _State, x: FloatArray, solve: Callable[[FloatArray], FloatArray]
+) -> tuple[int, FloatArray]:
+    """The leave-out and masking tests of :func:`acs_cli.core.estimation.solve`, with
+    refits: outliers inflate the fitted noise levels and hide each other. Per edge, the
+    worst ``LEAVE_OUT_SHARE`` of the kept frames (by whitened residual power) are left out,
+    the rig solved without them (noise levels refitted), and each tested as a frame that
+    fit predicts, ``T_i = e_i^T (I + H_ii)^-1 e_i`` against ``F(d, nu)`` with the threshold
+    of a trimmed noise level. Where none is beyond, the worst ``MASKING_GROUP`` are tested
+    jointly against a fit without just them. Returns how many were dropped and the
+    solution: the fit without them, or ``x`` (weights as they were) when none was."""
+    r = _residuals(st, x)
+    rows = _edge_rows(st)
+    suspects: dict[str, np.ndarray] = {}
+    rooms: dict[str, int] = {}
+    for j in st.topo.joints:
+        m = st.mask[j.name]
+        rooms[j.name] = int(np.floor(MAX_OUTLIER_FRACTION * m.size)) - int((~m).sum())
+        testable = m & (st.frames[j.name] != st.ref_frame)
+        k = min(rooms[j.name], int(np.ceil(estimation.LEAVE_OUT_SHARE * m.sum())))
+        if min(k, int(testable.sum())) >= estimation.MASKING_GROUP:
+            power = np.sum(r[rows[j.name]] ** 2, axis=1)
+            cand = np.flatnonzero(testable)
+            suspects[j.name] = cand[np.argsort(power[cand])[::-1][:k]]
+    if not suspects:
+        return 0, x
+    x_loo, fits = _fit_without(st, x, suspects, solve)
+    dropped = 0
+    for name, f in suspects.items():
+        e, G, Hinv, S, nu = fits[name]
+        m = st.mask[name]
+        dim = _TEST_DIM[st.topo.joint(name).type][0]
+        if nu < estimation.MIN_TEST_DOF or not S > 0:
+            m[f] = True
+            continue
+        Gs = G[f]
+        M = np.eye(e.shape[1]) * (1 + 1e-9) + np.matmul(Gs @ Hinv, np.swapaxes(Gs, 1, 2))
+        T = np.einsum("ni,ni->n", e[f], np.linalg.solve(M, e[f][:, :, None])[:, :, 0])
+        Tk = np.sum(e[m] ** 2, axis=1)
+        shape = estimation.tail_shape(Tk, dim)
+        thr = estimation.outlier_threshold(m.size, nu, dim, (f.size - 1) / m.size, shape)
+        out = f[T / dim / (S / nu) > thr]
+        m[np.setdiff1d(f, out)] = True
+        dropped += out.size
+    if dropped:
+        _refit_weights(st, x_loo, st.L.size)
+        return dropped, x_loo
+    groups = {
+        name: f[: estimation.MASKING_GROUP]
+        for name, f in suspects.items()
+        if rooms[name] >= estimation.MASKING_GROUP
+    }
+    if groups:
+        x_g, fits = _fit_without(st, x, groups, solve)
+        for name, g in groups.items():
+            e, G, Hinv, S, nu = fits[name]
+            m = st.mask[name]
+            dim = _TEST_DIM[st.topo.joint(name).type][0]
+            Gg = G[g].reshape(-1, G.shape[2])
+            eg = e[g].reshape(-1)
+            A = np.eye(eg.size) * (1.0 + 1e-9) + Gg @ Hinv @ Gg.T
+            stat = float(eg @ np.linalg.solve(A, eg)) / (g.size * dim) / (S / nu) if S > 0 else 0.0
+            shape = estimation.tail_shape(np.sum(e[m] ** 2, axis=1), dim)
+            limit = estimation.outlier_threshold(
+                m.size, nu, dim, shape=shape, group=g.size, share=estimation.MASKING_SHARE
+            )
+            if nu >= estimation.MIN_TEST_DOF and stat > limit:
+                dropped += g.size
+            else:
+                m[g] = True
+        if dropped:
+            _refit_weights(st, x_g, st.L.size)
+            return dropped, x_g
+    _refit_weights(st, x, st.L.size)
+    return 0, x
 
 
 # --------------------------------------------------------------------------- solve
@@ -1396,9 +1521,11 @@ def estimate_rig(
         x, nf, sol = run(x)
         nfev += nf
     if reject_outliers:
-        for _ in range(4):
+        for _ in range(8):
             if _reject(st, x) == 0:
-                break
+                dropped, x = _reject_left_out(st, x, lambda x0: run(x0)[0])
+                if dropped == 0:
+                    break
             noise = _refit_weights(st, x, L.size)
             x, nf, sol = run(x)
             nfev += nf
