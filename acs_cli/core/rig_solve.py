@@ -36,7 +36,9 @@ noise levels fitted per edge; axis and rigid residuals have one fitted variance 
 solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`: scipy's
 ``least_squares``, trust-region steps on the analytic sparse Jacobian) with
 refitting the noise levels, and rejects per edge the frames whose externally studentised
-residual is beyond the threshold the two-camera estimators use (:func:`_reject`).
+residual is beyond the threshold the two-camera estimators use (:func:`_reject`), then, as
+they do, the worst frames left out and predicted by a refit without them, alone or in
+pairs (:func:`_reject_left_out`: outliers that hide each other).
 Covariances come from the final whitened Jacobian.
 """
 
@@ -1008,36 +1010,6 @@ def _edge_rows(st: _State) -> dict[str, np.ndarray]:
     return out
 
 
-def _leave_out(
-    T: FloatArray, testable: np.ndarray, kept: np.ndarray, S: float, nu: float, dim: int
-) -> np.ndarray:
-    """Outliers that hide each other: the worst ``LEAVE_OUT_SHARE`` of an edge's kept
-    frames, each tested against the noise level of the others (the leave-out test of
-    :func:`acs_cli.core.estimation.solve`, its noise level taken without refitting: the
-    others' power ``S - sum T``, trimmed as the threshold allows for). Returns the frames
-    beyond it."""
-    k = min(int(np.ceil(estimation.LEAVE_OUT_SHARE * kept.sum())), int(testable.sum()))
-    if k < 2:
-        return np.zeros(0, int)
-    cand = np.flatnonzero(testable)
-    suspects = cand[np.argsort(T[cand])[::-1][:k]]
-    rest_power = S - float(T[suspects].sum())
-    rest_dof = nu - dim * k
-    if rest_dof < estimation.MIN_TEST_DOF or not rest_power > 0:
-        return np.zeros(0, int)
-    stat = T[suspects] / dim / (rest_power / rest_dof)
-    others = kept.copy()
-    others[suspects] = False
-    thr = estimation.outlier_threshold(
-        kept.size,
-        rest_dof,
-        dim,
-        (k - 1) / max(int(kept.sum()), 1),
-        estimation.tail_shape(T[others], dim),
-    )
-    return np.asarray(suspects[stat > thr])
-
-
 def _reject(st: _State, x: FloatArray) -> int:
     """Drop the frames whose externally studentised residual is beyond the threshold of
     :func:`acs_cli.core.estimation.outlier_threshold` (the test of the two-camera
@@ -1084,8 +1056,6 @@ def _reject(st: _State, x: FloatArray) -> int:
         # the reference instant is never dropped: its poses are corrected to fit
         testable = m & (st.frames[j.name] != st.ref_frame)
         bad = np.flatnonzero(testable & (stat > thr))
-        if bad.size == 0:
-            bad = _leave_out(T, testable, m, S, nu, dim)
         if bad.size:
             bad = bad[np.argsort(stat[bad])[::-1][:room]]
             m[bad] = False
