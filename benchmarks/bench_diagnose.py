@@ -63,7 +63,8 @@ from acs_cli.core.diagnose import (
     reordered_quaternions,
     scaled_prior,
 )
-from acs_cli.core.joint import estimate_joint_fixed, estimate_joint_overlap, estimate_pivot
+from acs_cli.core.joint import estimate_joint_fixed, estimate_pivot
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.quality import length_scale
 from acs_cli.core.relpose import JointPrior, estimate_relpose
 from acs_cli.errors import DegenerateMotionError

@@ -35,7 +35,9 @@ from pathlib import Path
 import numpy as np
 import scipy
 
-from acs_cli.core.joint import estimate_joint_fixed, estimate_joint_overlap
+from acs_cli.core.joint import estimate_joint_fixed
+from acs_cli.core.overlap import estimate_joint_overlap
+from acs_cli.core.paper import algorithm_2_fixed_joint
 from acs_cli.core.relpose import JointPrior, estimate_relpose
 from sample_data_gen.acs_sim import (
     add_pose_noise,
@@ -98,7 +100,8 @@ def make_cases(n: int, seed: int) -> list[Case]:
         return run
 
     def fix(method):
-        return lambda: estimate_joint_fixed(fa, method=method).position_in_a
+        fit = algorithm_2_fixed_joint if method == "paper" else estimate_joint_fixed
+        return lambda: fit(fa).position_in_a
 
     def ovl(method):
         return lambda: estimate_joint_overlap(va, vb, method=method).position_in_a

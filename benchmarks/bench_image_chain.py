@@ -37,6 +37,7 @@ from acs_cli.core.bundle import bundle_adjust_fixed_joint, intrinsics_vector
 from acs_cli.core.checkerboard import detect_checkerboard
 from acs_cli.core.intrinsics import board_points, calibrate
 from acs_cli.core.joint import estimate_pivot
+from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.core.pnp import board_pose, camera_in_board
 from acs_cli.errors import DegenerateMotionError
 from sample_data_gen.render import render_scenario
@@ -110,7 +111,7 @@ def _camera(folder: Path, truth: dict[str, Any], cam: str, rng: np.random.Genera
     cal_p = calibrate(objs, plain, size)
     T = _poses(obj, plain, cal_p.camera_matrix, cal_p.distortion)
     try:
-        res["plain"] = pct(estimate_pivot(T, "paper", cam).position_in_cam)
+        res["plain"] = pct(algorithm_2_pivot(T, cam).position_in_cam)
     except DegenerateMotionError:  # the paper's method sees a hinge in noisy poses
         res["plain"] = float("nan")
     # acscal

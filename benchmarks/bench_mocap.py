@@ -51,7 +51,7 @@ from typing import Any, TypeVar
 import numpy as np
 from scipy.stats import chi2
 
-from acs_cli.core.joint import estimate_joint_overlap
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.rig import rig_topology
 from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
 from acs_cli.errors import AcsError

@@ -15,7 +15,8 @@ import numpy as np
 
 import sample_data_gen.acs_sim as sim
 from acs_cli.core import se3
-from acs_cli.core.joint import estimate_joint_fixed, estimate_joint_overlap
+from acs_cli.core.joint import estimate_joint_fixed
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.relpose import JointPrior, estimate_relpose
 from acs_cli.errors import DegenerateMotionError
 

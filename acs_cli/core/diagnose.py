@@ -39,7 +39,9 @@ from functools import partial
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.joint import estimate_joint_overlap, estimate_pivot
+from acs_cli.core.joint import estimate_pivot
+from acs_cli.core.overlap import estimate_joint_overlap
+from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.core.quality import RESIDUAL, length_scale
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
 from acs_cli.core.se3 import FloatArray
@@ -544,6 +546,8 @@ def diagnose_fixed_joint(
     what = _NAMES[camera]
 
     def fit(method: str) -> Callable[[FloatArray], float]:
+        if method == "paper":
+            return lambda T2: algorithm_2_pivot(T2, what).residual_rms
         return lambda T2: estimate_pivot(T2, method, what).residual_rms
 
     candidates = _pose_candidates((T,), (quaternion_source,))

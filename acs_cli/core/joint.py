@@ -14,12 +14,15 @@ Algorithm I (overlap, section 2). With both cameras in one world,
 
     R_wa_i o_a + t_wa_i = R_wb_i o_b + t_wb_i                     (eq. (8))
 
-Both are linear in the unknowns; the refined estimators are weighted least squares whose
-weights (pose noise levels) are estimated from the data (:mod:`acs_cli.core.estimation`).
+Both are linear in the unknowns. The refined fixed-joint estimator is a weighted least
+squares whose weights (pose noise levels) are estimated from the data
+(:mod:`acs_cli.core.estimation`); the overlap is a two-body rig in one world, solved by the
+rig engine (:mod:`acs_cli.core.overlap`), and :func:`overlap_motion` checks its motion.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -551,6 +554,54 @@ def pivot_bias_correction(
     return float(theta[1]) * s, np.outer(v, v)
 
 
+def pivot_motion(
+    T_w_c: FloatArray, what: str = "camera"
+) -> tuple[FloatArray, RotationSpread, Callable[[], DegenerateMotionError]]:
+    """Check that a fixed-joint motion can locate the joint (Algorithm II).
+
+    Parameters
+    ----------
+    T_w_c : ndarray, shape (n, 4, 4)
+        Poses ``T_world_cam``.
+    what : str
+        Name used in messages.
+
+    Returns
+    -------
+    T : ndarray, shape (n, 4, 4)
+        The poses, checked.
+    spread : RotationSpread
+        Of the rotations (:func:`rotation_spread`).
+    hinge : callable
+        The error for a motion about one axis (the axis and a point on it), for a fit that
+        finds a hinge (:func:`hinge_explains`).
+
+    Raises
+    ------
+    DegenerateMotionError
+        Fewer than 3 poses, too little rotation, or rotation about exactly one axis.
+    """
+    T = se3.check_transforms(T_w_c, name=f"{what} poses")
+    n = T.shape[0]
+    if n < 3:
+        raise DegenerateMotionError(
+            f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
+        )
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    spread = rotation_spread(R, what)
+
+    def hinge() -> DegenerateMotionError:
+        # any point on the axis fits: the truncated least-squares point (p_w eliminated)
+        D = (R - R.mean(axis=0)).reshape(-1, 3)
+        point, *_ = np.linalg.lstsq(D, -(t - t.mean(axis=0)).reshape(-1), rcond=HINGE_RATIO)
+        cam = what.split()[-1].lower() if what.startswith("camera ") else "a"
+        return _hinge_error(what, {cam: spread.axis}, {cam: point})
+
+    if spread.ratio < HINGE_RATIO_EXACT:
+        raise hinge()
+    return T, spread, hinge
+
+
 def estimate_pivot(
     T_w_c: FloatArray, method: str = "refined", what: str = "camera"
 ) -> PivotEstimate:
@@ -560,11 +611,11 @@ def estimate_pivot(
     ----------
     T_w_c : ndarray, shape (n, 4, 4)
         Poses ``T_world_cam`` (any world; one that is fixed during the motion).
-    method : {"refined", "paper"}
-        ``"paper"``: eq. (12) relative to the first frame, by linear least squares.
-        ``"refined"``: the world joint ``p_w`` as an unknown, frames weighted by their
-        estimated noise, gross outliers rejected, the errors-in-variables bias of noisy
-        rotations removed when the data determine it (:func:`pivot_bias_correction`).
+    method : {"refined"}
+        The world joint ``p_w`` as an unknown, frames weighted by their estimated noise,
+        gross outliers rejected, the errors-in-variables bias of noisy rotations removed
+        when the data determine it (:func:`pivot_bias_correction`). The paper's form (eq.
+        (12) relative to the first frame) is :func:`acs_cli.core.paper.algorithm_2_pivot`.
     what : str
         Name used in messages.
 
@@ -577,42 +628,16 @@ def estimate_pivot(
     DegenerateMotionError
         Too few frames, too little rotation, or rotation about a single axis.
     """
-    _check_method(method)
-    T = se3.check_transforms(T_w_c, name=f"{what} poses")
-    n = T.shape[0]
-    if n < 3:
-        raise DegenerateMotionError(
-            f"{what}: {n} poses; a fixed-joint calibration needs at least 3"
+    if method != "refined":
+        _check_method(method)
+        raise InputError(
+            "the paper's Algorithm II is acs_cli.core.paper.algorithm_2_pivot; "
+            "estimate_pivot is the refined estimator"
         )
+    T, spread, hinge = pivot_motion(T_w_c, what)
+    n = T.shape[0]
     R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
-    spread = rotation_spread(R, what)
-
-    def hinge() -> DegenerateMotionError:
-        # any point on the axis fits: the truncated least-squares point (p_w eliminated)
-        D = (R - R.mean(axis=0)).reshape(-1, 3)
-        point, *_ = np.linalg.lstsq(D, -(t - t.mean(axis=0)).reshape(-1), rcond=HINGE_RATIO)
-        cam = what.split()[-1].lower() if what.startswith("camera ") else "a"
-        return _hinge_error(what, {cam: spread.axis}, {cam: point})
-
-    if spread.ratio < HINGE_RATIO_EXACT:
-        raise hinge()
-    if method == "paper":
-        # eq. (11)-(12): H^i = inv(T_0) T_i, (R^i - I) O = -T^i, i = 1..n-1
-        H = se3.invert_transforms(T[0]) @ T[1:]
-        M = (H[:, :3, :3] - np.eye(3)).reshape(-1, 3)
-        rhs = -H[:, :3, 3].reshape(-1)
-        o, *_ = np.linalg.lstsq(M, rhs, rcond=None)
-        res = (M @ o - rhs).reshape(-1, 3)
-        dof = max(res.size - 3, 1)
-        s2 = float(np.sum(res**2) / dof)
-        cov = s2 * np.linalg.inv(M.T @ M)
-        p_w = se3.transform_points(T[0], o)
-        rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-        if hinge_explains(spread, cov, o, None):
-            raise hinge()
-        inl = np.ones(n, dtype=bool)
-        return PivotEstimate(o, cov, p_w, rms, inl, {}, motion_summary(spread))
-    # refined: unknowns x = (o, p_w); residual r_i = R_i o + t_i - p_w, linear in x
+    # unknowns x = (o, p_w); residual r_i = R_i o + t_i - p_w, linear in x
     J = np.concatenate([R, np.broadcast_to(-np.eye(3), (n, 3, 3))], axis=2)
 
     def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
@@ -643,7 +668,9 @@ def estimate_pivot(
 def estimate_joint_fixed(
     T_wa_a: FloatArray, T_wb_b: FloatArray | None = None, method: str = "refined"
 ) -> JointEstimate:
-    """Algorithm II for one or two cameras, each trajectory in its own world.
+    """Algorithm II for one or two cameras, each trajectory in its own world
+    (:func:`estimate_pivot` each; the paper's form is
+    :func:`acs_cli.core.paper.algorithm_2_fixed_joint`).
 
     Parameters
     ----------
@@ -651,10 +678,15 @@ def estimate_joint_fixed(
         Camera A's poses ``T_world_a`` during a fixed-joint motion.
     T_wb_b : ndarray, shape (m, 4, 4), optional
         Camera B's poses in its own world (need not be paired with A's).
-    method : {"refined", "paper"}
+    method : {"refined"}
     """
     a = estimate_pivot(T_wa_a, method, "camera A")
     b = None if T_wb_b is None else estimate_pivot(T_wb_b, method, "camera B")
+    return joint_of_pivots(a, b, method)
+
+
+def joint_of_pivots(a: PivotEstimate, b: PivotEstimate | None, method: str) -> JointEstimate:
+    """The fixed-joint :class:`JointEstimate` of camera A's and (optionally) B's pivots."""
     rms = {"a": a.residual_rms}
     inl = {"a": a.inliers}
     noise = {"a": a.noise} if a.noise else {}
@@ -681,34 +713,63 @@ def estimate_joint_fixed(
     )
 
 
-def estimate_joint_overlap(
-    T_w_a: FloatArray, T_w_b: FloatArray, method: str = "refined"
-) -> JointEstimate:
-    """Algorithm I: the joint from paired poses of two cameras in one world.
+@dataclass(frozen=True)
+class OverlapMotion:
+    """Paired poses of two cameras in one world that can locate their joint (Algorithm I),
+    checked by :func:`overlap_motion`.
+
+    Attributes
+    ----------
+    T_w_a, T_w_b : ndarray, shape (n, 4, 4)
+        The paired ``T_world_a``, ``T_world_b``.
+    spread : RotationSpread
+        Of the articulation ``R_a_b[i] = R_wa[i]^T R_wb[i]`` (:func:`rotation_spread`).
+    """
+
+    T_w_a: FloatArray
+    T_w_b: FloatArray
+    spread: RotationSpread
+
+    def hinge_error(self) -> DegenerateMotionError:
+        """The error for an articulation about one axis: the axis in both frames, through
+        the truncated least-squares joint of eq. (9)."""
+        Ra, Rb = self.T_w_a[:, :3, :3], self.T_w_b[:, :3, :3]
+        R_ab = np.einsum("nji,njk->nik", Ra, Rb)
+        axis_a = R_ab.mean(axis=0) @ self.spread.axis  # R_ab_i axis_b: one axis in A
+        A6 = np.concatenate([Ra, -Rb], axis=2).reshape(-1, 6)
+        rhs = (self.T_w_b[:, :3, 3] - self.T_w_a[:, :3, 3]).reshape(-1)
+        sol, *_ = np.linalg.lstsq(A6, rhs, rcond=HINGE_RATIO)
+        return _hinge_error(
+            "the joint cannot be observed",
+            {"a": axis_a, "b": self.spread.axis},
+            {"a": sol[:3], "b": sol[3:]},
+        )
+
+
+def overlap_motion(T_w_a: FloatArray, T_w_b: FloatArray) -> OverlapMotion:
+    """Check that paired poses of two cameras in one world can locate their joint.
+
+    The articulation ``R_a_b[i] = R_wa[i]^T R_wb[i]`` must vary about at least two axes:
+    a rigid pair has no joint to find, and a hinge leaves the joint anywhere on its axis
+    (a hinge judged by the fit's noise is :func:`hinge_explains`, after the fit).
 
     Parameters
     ----------
     T_w_a, T_w_b : ndarray, shape (n, 4, 4)
-        Paired poses ``T_world_a`` and ``T_world_b`` in the same world frame.
-    method : {"refined", "paper"}
-        ``"paper"``: linear least squares of eq. (9). ``"refined"``: the same constraint
-        weighted by the covariance that both cameras' pose noise induces, noise levels
-        estimated, outliers rejected.
+        Paired ``T_world_a`` and ``T_world_b`` in the same world frame.
 
     Raises
     ------
+    InputError
+        Poses that are not paired rigid transforms.
     DegenerateMotionError
-        Too few frames, or a relative rotation between the cameras that does not change
-        enough (a rigid pair: no articulation), or that changes about one axis only.
+        Fewer than 3 frames, a rigid pair, or an articulation about exactly one axis.
     """
-    _check_method(method)
     Ta, Tb = se3.check_paired_transforms(T_w_a, T_w_b, "overlap")
     n = Ta.shape[0]
     if n < 3:
         raise DegenerateMotionError(f"{n} paired poses; an overlap calibration needs at least 3")
-    Ra, ta, Rb, tb = Ta[:, :3, :3], Ta[:, :3, 3], Tb[:, :3, :3], Tb[:, :3, 3]
-    # observability: the articulation R_a_b(i) = R_wa^T R_wb must vary (about 2+ axes)
-    R_ab = np.einsum("nji,njk->nik", Ra, Rb)
+    R_ab = np.einsum("nji,njk->nik", Ta[:, :3, :3], Tb[:, :3, :3])
     try:
         spread = rotation_spread(R_ab, "relative rotation between A and B")
     except DegenerateMotionError as exc:
@@ -719,68 +780,10 @@ def estimate_joint_overlap(
             "between frames.",
             details=exc.details,
         ) from None
-
-    def hinge() -> DegenerateMotionError:
-        # R_ab_i axis_b is the same axis in A's frame for every i
-        axis_a = R_ab.mean(axis=0) @ spread.axis
-        A6 = np.concatenate([Ra, -Rb], axis=2).reshape(-1, 6)
-        sol, *_ = np.linalg.lstsq(A6, (tb - ta).reshape(-1), rcond=HINGE_RATIO)
-        return _hinge_error(
-            "the joint cannot be observed",
-            {"a": axis_a, "b": spread.axis},
-            {"a": sol[:3], "b": sol[3:]},
-        )
-
+    motion = OverlapMotion(Ta, Tb, spread)
     if spread.ratio < HINGE_RATIO_EXACT:
-        raise hinge()
-    J = np.concatenate([Ra, -Rb], axis=2)  # eq. (9): [R_wa, -R_wb] [o_a; o_b] = t_wb - t_wa
-    rhs = tb - ta
-    x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), rhs.reshape(-1), rcond=None)
-    if method == "paper":
-        res = np.einsum("nij,j->ni", J, x0) - rhs
-        dof = max(res.size - 6, 1)
-        cov = float(np.sum(res**2) / dof) * np.linalg.inv(J.reshape(-1, 6).T @ J.reshape(-1, 6))
-        rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-        if hinge_explains(spread, cov[3:, 3:], x0[3:], None):
-            raise hinge()
-        return JointEstimate(
-            x0[:3],
-            cov[:3, :3],
-            x0[3:],
-            cov[3:, 3:],
-            "overlap",
-            "paper",
-            {"ab": rms},
-            {"ab": np.ones(n, dtype=bool)},
-        )
-
-    def residuals(x: FloatArray, jac: bool) -> tuple[FloatArray, FloatArray | None]:
-        return J @ x - rhs, J
-
-    def noise_shapes(x: FloatArray) -> FloatArray:
-        return lever_shapes(Ra, x[:3]) + lever_shapes(Rb, x[3:])
-
-    sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
-    # the relative rotation carries both cameras' rotation noise
-    sigma_rel = float(np.sqrt(2.0 * sol.theta[1]))
-    if hinge_explains(spread, sol.covariance[3:, 3:], sol.x[3:], sigma_rel):
-        raise hinge()
-    inl = sol.inliers
-    rms = float(np.sqrt(np.mean(np.sum(sol.residuals[inl] ** 2, axis=1))))
-    # theta_t covers both cameras' translation noise: report one camera's share
-    theta = sol.theta.copy()
-    theta[0] /= 2.0
-    return JointEstimate(
-        position_in_a=sol.x[:3],
-        covariance_a=sol.covariance[:3, :3],
-        position_in_b=sol.x[3:],
-        covariance_b=sol.covariance[3:, 3:],
-        scenario="overlap",
-        method="refined",
-        residual_rms={"ab": rms},
-        inliers={"ab": inl},
-        noise={"ab": _noise_dict(theta)},
-    )
+        raise motion.hinge_error()
+    return motion
 
 
 # ----------------------------------------------------------------------------- hinge joints
@@ -1050,7 +1053,7 @@ def estimate_hinge_fixed(
     spread = rotation_spread(R, what)
     if spread.ratio >= HINGE_RATIO_EXACT:
         try:
-            pivot = estimate_pivot(T, method, what)
+            pivot = estimate_pivot(T, "refined", what)
         except DegenerateMotionError:
             pass  # a hinge: the point is not determined
         else:

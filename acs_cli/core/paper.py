@@ -1,16 +1,17 @@
 """Chen & Wong's four algorithms, as published: one function each (pairwise, two cameras).
 
 This is the index a reader of the paper starts from. Each function runs the paper's own
-formulation (``method="paper"``) and names the equations it solves; the code that solves
-them lives beside the refined estimators that share its inputs and checks:
+formulation (``method="paper"``) and names the equations it solves. Algorithms I and II are
+solved here (the refined estimators share their motion checks, and the rig engine starts
+from Algorithm I's linear solution); III and IV in :mod:`acs_cli.core.relpose`:
 
 ==========  =====================================  ==========================================
 Algorithm   here                                   solved in
 ==========  =====================================  ==========================================
-I           :func:`algorithm_1_overlap`            :func:`acs_cli.core.joint.estimate_joint_overlap`
-II          :func:`algorithm_2_fixed_joint`        :func:`acs_cli.core.joint.estimate_pivot`
-III         :func:`algorithm_3_relative_pose`      :func:`relative_pose_paper` (here)
-IV          :func:`algorithm_4_unknown_scale`      :func:`relative_pose_paper` (here)
+I           :func:`algorithm_1_overlap`            here (:func:`algorithm_1_solve`)
+II          :func:`algorithm_2_fixed_joint`        here (:func:`algorithm_2_pivot`)
+III         :func:`algorithm_3_relative_pose`      here (:func:`relative_pose_paper`)
+IV          :func:`algorithm_4_unknown_scale`      here (:func:`relative_pose_paper`)
 ==========  =====================================  ==========================================
 
 Rigs of more than two cameras, hinges and rigid pairs go beyond the paper: one solve over
@@ -26,18 +27,54 @@ from dataclasses import dataclass
 import numpy as np
 
 from acs_cli.core import lsq, se3
-from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
+from acs_cli.core.joint import (
+    JointEstimate,
+    PivotEstimate,
+    hinge_explains,
+    joint_of_pivots,
+    motion_summary,
+    overlap_motion,
+    pivot_motion,
+)
 from acs_cli.core.rig_start import kron_rows, lstsq_scaled
 from acs_cli.core.se3 import FloatArray
 
 __all__ = [
     "PaperRelativePose",
     "algorithm_1_overlap",
+    "algorithm_1_solve",
     "algorithm_2_fixed_joint",
+    "algorithm_2_pivot",
     "algorithm_3_relative_pose",
     "algorithm_4_unknown_scale",
     "relative_pose_paper",
 ]
+
+
+def algorithm_1_solve(T_w_a: FloatArray, T_w_b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Algorithm I's linear least squares, eq. (9), without checks.
+
+    At every instant ``i`` the joint is one world point seen from both cameras,
+    ``R_wa_i O_A + t_wa_i = R_wb_i O_B + t_wb_i`` (eq. (8)); stacked over the frames,
+
+        [R_wa_i, -R_wb_i] [O_A; O_B] = t_wb_i - t_wa_i                          (eq. (9))
+
+    Parameters
+    ----------
+    T_w_a, T_w_b : ndarray, shape (n, 4, 4)
+        Paired ``T_world_cam`` of cameras A and B in the same world.
+
+    Returns
+    -------
+    x : ndarray, shape (6,)
+        ``[O_A; O_B]`` (the minimum-norm solution when the system is rank deficient).
+    residuals : ndarray, shape (n, 3)
+        ``[R_wa_i, -R_wb_i] x - (t_wb_i - t_wa_i)``.
+    """
+    A = np.concatenate([T_w_a[:, :3, :3], -T_w_b[:, :3, :3]], axis=2)
+    rhs = T_w_b[:, :3, 3] - T_w_a[:, :3, 3]
+    x, *_ = np.linalg.lstsq(A.reshape(-1, 6), rhs.reshape(-1), rcond=None)
+    return x, np.einsum("nij,j->ni", A, x) - rhs
 
 
 def algorithm_1_overlap(T_w_a: FloatArray, T_w_b: FloatArray) -> JointEstimate:
@@ -46,31 +83,112 @@ def algorithm_1_overlap(T_w_a: FloatArray, T_w_b: FloatArray) -> JointEstimate:
     Both trajectories are in one world (a shared board). At every instant the joint is one
     point, ``R_wa_i O_A + t_wa_i = R_wb_i O_B + t_wb_i`` (eq. (8)), stacked over the frames
     into the linear system ``[R_wa_i, -R_wb_i] [O_A; O_B] = t_wb_i - t_wa_i`` (eq. (9)) and
-    solved by least squares.
+    solved by least squares (:func:`algorithm_1_solve`). The covariance is the regression's,
+    ``s^2 (A^T A)^-1`` with ``s^2`` the residuals' variance: no noise model, no outlier
+    rejection.
 
     Parameters
     ----------
     T_w_a, T_w_b : ndarray, shape (n, 4, 4)
         Paired ``T_world_cam`` of cameras A and B in the same world.
+
+    Returns
+    -------
+    JointEstimate
+        ``scenario="overlap"``, ``method="paper"``; ``residual_rms`` and ``inliers`` (every
+        frame) keyed ``"ab"``.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Fewer than 3 frames, a rigid pair, or an articulation about one axis
+        (:func:`acs_cli.core.joint.overlap_motion`, :func:`acs_cli.core.joint.hinge_explains`).
     """
-    return estimate_joint_overlap(T_w_a, T_w_b, method="paper")
+    motion = overlap_motion(T_w_a, T_w_b)
+    Ta, Tb = motion.T_w_a, motion.T_w_b
+    x, res = algorithm_1_solve(Ta, Tb)
+    A = np.concatenate([Ta[:, :3, :3], -Tb[:, :3, :3]], axis=2).reshape(-1, 6)
+    cov = float(np.sum(res**2) / max(res.size - 6, 1)) * np.linalg.inv(A.T @ A)
+    if hinge_explains(motion.spread, cov[3:, 3:], x[3:], None):
+        raise motion.hinge_error()
+    n = Ta.shape[0]
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    return JointEstimate(
+        x[:3],
+        cov[:3, :3],
+        x[3:],
+        cov[3:, 3:],
+        "overlap",
+        "paper",
+        {"ab": rms},
+        {"ab": np.ones(n, bool)},
+    )
+
+
+def algorithm_2_pivot(T_w_c: FloatArray, what: str = "camera") -> PivotEstimate:
+    """Algorithm II (section 3.1) for one camera: the joint from a fixed-joint motion.
+
+    While the joint stays at one world point, the camera's motion relative to its first
+    frame, ``H^i = inv(T_w_c[0]) T_w_c[i] = [R^i, T^i]``, keeps the joint ``O`` (camera
+    frame) where it was: ``O = H^i O`` (eq. (11)), that is
+
+        (R^i - I) O = -T^i,      i = 1 .. n-1                                 (eq. (12))
+
+    stacked and solved by linear least squares. The covariance is the regression's,
+    ``s^2 (M^T M)^-1``: it ignores that every row shares the first frame's error and is
+    optimistic. No noise model, no outlier rejection.
+
+    Parameters
+    ----------
+    T_w_c : ndarray, shape (n, 4, 4)
+        ``T_world_cam`` while the joint is fixed (any world fixed during the motion).
+    what : str
+        Name used in messages.
+
+    Returns
+    -------
+    PivotEstimate
+        ``position_in_world`` is ``T_w_c[0] O``; ``noise`` empty; every frame an inlier.
+
+    Raises
+    ------
+    DegenerateMotionError
+        Fewer than 3 poses, too little rotation, or rotation about one axis
+        (:func:`acs_cli.core.joint.pivot_motion`, :func:`acs_cli.core.joint.hinge_explains`).
+    """
+    T, spread, hinge = pivot_motion(T_w_c, what)
+    H = se3.invert_transforms(T[0]) @ T[1:]
+    M = (H[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+    rhs = -H[:, :3, 3].reshape(-1)
+    o, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    res = (M @ o - rhs).reshape(-1, 3)
+    cov = float(np.sum(res**2) / max(res.size - 3, 1)) * np.linalg.inv(M.T @ M)
+    if hinge_explains(spread, cov, o, None):
+        raise hinge()
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    p_w = se3.transform_points(T[0], o)
+    return PivotEstimate(o, cov, p_w, rms, np.ones(T.shape[0], bool), {}, motion_summary(spread))
 
 
 def algorithm_2_fixed_joint(T_wa_a: FloatArray, T_wb_b: FloatArray | None = None) -> JointEstimate:
-    """Algorithm II (section 3.1): the joint from a fixed-joint motion (pivot calibration).
-
-    While the joint stays at one world point, each camera's motion relative to its first
-    frame, ``H^i = inv(T_w_c[0]) T_w_c[i] = [R^i, T^i]``, fixes the joint:
-    ``(R^i - I) O = -T^i`` (eq. (11)-(12)), solved by least squares for each camera.
+    """Algorithm II (section 3.1): the joint from a fixed-joint motion (pivot calibration),
+    eq. (11)-(12) for each camera (:func:`algorithm_2_pivot`).
 
     Parameters
     ----------
     T_wa_a : ndarray, shape (n, 4, 4)
         Camera A's ``T_world_cam`` while the joint is fixed.
     T_wb_b : ndarray, shape (m, 4, 4), optional
-        Camera B's, in its own world.
+        Camera B's, in its own world (need not be paired with A's).
+
+    Returns
+    -------
+    JointEstimate
+        ``scenario="fixed_joint"``, ``method="paper"``.
     """
-    return estimate_joint_fixed(T_wa_a, T_wb_b, method="paper")
+    a = algorithm_2_pivot(T_wa_a, "camera A")
+    b = None if T_wb_b is None else algorithm_2_pivot(T_wb_b, "camera B")
+    return joint_of_pivots(a, b, "paper")
 
 
 def algorithm_3_relative_pose(

@@ -37,13 +37,15 @@ noise levels fitted per edge; axis and rigid residuals have one fitted variance 
 solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`: scipy's
 ``least_squares``, trust-region steps on the analytic sparse Jacobian) with
 refitting the noise levels, and rejects per edge the frames whose externally studentised
-residual is beyond the threshold the two-camera estimators use (:func:`_reject`).
+residual is beyond the threshold the two-camera estimators use (:func:`_reject`), then, as
+they do, the worst frames left out and predicted by a refit without them, alone or in
+pairs (:func:`_reject_left_out`: outliers that hide each other).
 Covariances come from the final whitened Jacobian.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -916,60 +918,6 @@ def _edge_rows(st: _State) -> dict[str, np.ndarray]:
     return out
 
 
-def _leave_out(
-    T: FloatArray, testable: np.ndarray, kept: np.ndarray, S: float, nu: float, dim: int
-) -> np.ndarray:
-    """Outliers that hide each other: the worst ``LEAVE_OUT_SHARE`` of an edge's kept
-    frames, each tested against the noise level of the others (the leave-out test of
-    :func:`acs_cli.core.estimation.solve`, its noise level taken without refitting: the
-    others' power ``S - sum T``, trimmed as the threshold allows for). Returns the frames
-    beyond it."""
-    k = min(int(np.ceil(estimation.LEAVE_OUT_SHARE * kept.sum())), int(testable.sum()))
-    if k < 2:
-        return np.zeros(0, int)
-    cand = np.flatnonzero(testable)
-    suspects = cand[np.argsort(T[cand])[::-1][:k]]
-    rest_power = S - float(T[suspects].sum())
-    rest_dof = nu - dim * k
-    if rest_dof < estimation.MIN_TEST_DOF or not rest_power > 0:
-        return np.zeros(0, int)
-    stat = T[suspects] / dim / (rest_power / rest_dof)
-    others = kept.copy()
-    others[suspects] = False
-    thr = estimation.outlier_threshold(
-        kept.size,
-        rest_dof,
-        dim,
-        (k - 1) / max(int(kept.sum()), 1),
-        estimation.tail_shape(T[others], dim),
-    )
-    return np.asarray(suspects[stat > thr])
-
-
-def _masking_group(
-    T: FloatArray, testable: np.ndarray, S: float, nu: float, dim: int, n: int, room: int
-) -> np.ndarray:
-    """Two outliers that hide each other from both one-frame tests: the worst
-    ``MASKING_GROUP`` frames tested jointly (as :func:`acs_cli.core.estimation.solve` does),
-    ``(T_G / (g d)) / ((S - T_G) / (nu - g d))`` against ``F(g d, nu - g d)`` with the budget
-    shared among the groups (:func:`~acs_cli.core.estimation.outlier_threshold`'s
-    ``group``; cross terms of the hat matrix neglected). Returns the group, or none."""
-    g = estimation.MASKING_GROUP
-    cand = np.flatnonzero(testable)
-    if room < g or cand.size < 2 * g:
-        return np.zeros(0, int)
-    worst = cand[np.argsort(T[cand])[::-1][:g]]
-    TG = float(T[worst].sum())
-    rest = nu - g * dim
-    if rest < estimation.MIN_TEST_DOF or not S - TG > 0:
-        return np.zeros(0, int)
-    stat = TG / (g * dim) / ((S - TG) / rest)
-    thr = estimation.outlier_threshold(
-        n, rest, dim, shape=estimation.tail_shape(T[testable], dim), group=g
-    )
-    return np.asarray(worst) if stat > thr else np.zeros(0, int)
-
-
 def _reject(st: _State, x: FloatArray) -> int:
     """Drop the frames whose externally studentised residual is beyond the threshold of
     :func:`acs_cli.core.estimation.outlier_threshold` (the test of the two-camera
@@ -1016,15 +964,137 @@ def _reject(st: _State, x: FloatArray) -> int:
         # the reference instant is never dropped: its poses are corrected to fit
         testable = m & (st.frames[j.name] != st.ref_frame)
         bad = np.flatnonzero(testable & (stat > thr))
-        if bad.size == 0:
-            bad = _leave_out(T, testable, m, S, nu, dim)
-        if bad.size == 0:
-            bad = _masking_group(T, testable, S, nu, dim, n, room)
         if bad.size:
             bad = bad[np.argsort(stat[bad])[::-1][:room]]
             m[bad] = False
             dropped += bad.size
     return dropped
+
+
+def _fit_without(
+    st: _State,
+    x: FloatArray,
+    left: dict[str, np.ndarray],
+    solve: Callable[[FloatArray], FloatArray],
+) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray, FloatArray, float, float]]]:
+    """The rig solved without the frames ``left`` (per edge; noise levels refitted), and per
+    edge of ``left``: the whitened residuals ``e`` ``(n, d)`` of every frame at that fit,
+    their Jacobian rows ``G`` ``(n, d, p)``, the inverse information of the kept rows, the
+    kept frames' residual power ``S`` and its degrees of freedom ``nu``. The frames stay
+    out of the masks."""
+    for name, f in left.items():
+        st.mask[name][f] = False
+    x_loo = x
+    noise: dict[str, dict[str, float]] = {}
+    for _ in range(REWEIGHT_ROUNDS):
+        before = noise
+        noise = _refit_weights(st, x_loo, st.L.size)
+        if before and _settled(before, noise):
+            break
+        x_loo = solve(x_loo)
+    rows = _edge_rows(st)
+    for name, f in left.items():  # their residuals (a masked row is zero)
+        st.mask[name][f] = True
+    r, J = _residuals(st, x_loo), _jacobian(st, x_loo)
+    keep_rows = np.ones(r.size)
+    for name, f in left.items():
+        st.mask[name][f] = False
+        keep_rows[rows[name][f].ravel()] = 0.0
+    Jk = J.multiply(keep_rows[:, None]).tocsr()
+    Hinv = np.linalg.pinv(np.asarray((Jk.T @ Jk).toarray()), rcond=1e-14, hermitian=True)
+    out = {}
+    for name in left:
+        m, idx = st.mask[name], rows[name]
+        e = r[idx]
+        G = J[idx.ravel()].toarray().reshape(m.size, idx.shape[1], -1)
+        model = joint_model(st.topo.joint(name).type)
+        dim, n_noise = model.outlier_dim, model.noise_levels
+        p_eff = float(np.einsum("nij,jk,nik->", G[m], Hinv, G[m]))
+        out[name] = (
+            e,
+            G,
+            Hinv,
+            float(np.sum(e[m] ** 2)),
+            dim * int(m.sum()) - p_eff - (n_noise - 1),
+        )
+    return x_loo, out
+
+
+def _reject_left_out(
+    st: _State, x: FloatArray, solve: Callable[[FloatArray], FloatArray]
+) -> tuple[int, FloatArray]:
+    """The leave-out and masking tests of :func:`acs_cli.core.estimation.solve`, with
+    refits: outliers inflate the fitted noise levels and hide each other. Per edge, the
+    worst ``LEAVE_OUT_SHARE`` of the kept frames (by whitened residual power) are left out,
+    the rig solved without them (noise levels refitted), and each tested as a frame that
+    fit predicts, ``T_i = e_i^T (I + H_ii)^-1 e_i`` against ``F(d, nu)`` with the threshold
+    of a trimmed noise level. Where none is beyond, the worst ``MASKING_GROUP`` are tested
+    jointly against a fit without just them. Returns how many were dropped and the
+    solution: the fit without them, or ``x`` (weights as they were) when none was."""
+    r = _residuals(st, x)
+    rows = _edge_rows(st)
+    suspects: dict[str, np.ndarray] = {}
+    rooms: dict[str, int] = {}
+    for j in st.topo.joints:
+        m = st.mask[j.name]
+        rooms[j.name] = int(np.floor(MAX_OUTLIER_FRACTION * m.size)) - int((~m).sum())
+        testable = m & (st.frames[j.name] != st.ref_frame)
+        k = min(rooms[j.name], int(np.ceil(estimation.LEAVE_OUT_SHARE * m.sum())))
+        if min(k, int(testable.sum())) >= estimation.MASKING_GROUP:
+            power = np.sum(r[rows[j.name]] ** 2, axis=1)
+            cand = np.flatnonzero(testable)
+            suspects[j.name] = cand[np.argsort(power[cand])[::-1][:k]]
+    if not suspects:
+        return 0, x
+    x_loo, fits = _fit_without(st, x, suspects, solve)
+    dropped = 0
+    for name, f in suspects.items():
+        e, G, Hinv, S, nu = fits[name]
+        m = st.mask[name]
+        dim = joint_model(st.topo.joint(name).type).outlier_dim
+        if nu < estimation.MIN_TEST_DOF or not S > 0:
+            m[f] = True
+            continue
+        Gs = G[f]
+        M = np.eye(e.shape[1]) * (1 + 1e-9) + np.matmul(Gs @ Hinv, np.swapaxes(Gs, 1, 2))
+        T = np.einsum("ni,ni->n", e[f], np.linalg.solve(M, e[f][:, :, None])[:, :, 0])
+        Tk = np.sum(e[m] ** 2, axis=1)
+        shape = estimation.tail_shape(Tk, dim)
+        thr = estimation.outlier_threshold(m.size, nu, dim, (f.size - 1) / m.size, shape)
+        out = f[T / dim / (S / nu) > thr]
+        m[np.setdiff1d(f, out)] = True
+        dropped += out.size
+    if dropped:
+        _refit_weights(st, x_loo, st.L.size)
+        return dropped, x_loo
+    groups = {
+        name: f[: estimation.MASKING_GROUP]
+        for name, f in suspects.items()
+        if rooms[name] >= estimation.MASKING_GROUP
+    }
+    if groups:
+        x_g, fits = _fit_without(st, x, groups, solve)
+        for name, g in groups.items():
+            e, G, Hinv, S, nu = fits[name]
+            m = st.mask[name]
+            dim = joint_model(st.topo.joint(name).type).outlier_dim
+            Gg = G[g].reshape(-1, G.shape[2])
+            eg = e[g].reshape(-1)
+            A = np.eye(eg.size) * (1.0 + 1e-9) + Gg @ Hinv @ Gg.T
+            stat = float(eg @ np.linalg.solve(A, eg)) / (g.size * dim) / (S / nu) if S > 0 else 0.0
+            shape = estimation.tail_shape(np.sum(e[m] ** 2, axis=1), dim)
+            limit = estimation.outlier_threshold(
+                m.size, nu, dim, shape=shape, group=g.size, share=estimation.MASKING_SHARE
+            )
+            if nu >= estimation.MIN_TEST_DOF and stat > limit:
+                dropped += g.size
+            else:
+                m[g] = True
+        if dropped:
+            _refit_weights(st, x_g, st.L.size)
+            return dropped, x_g
+    _refit_weights(st, x, st.L.size)
+    return 0, x
 
 
 # --------------------------------------------------------------------------- solve
@@ -1402,7 +1472,10 @@ def estimate_rig(
     if reject_outliers:
         for _ in range(REJECTION_ROUNDS):
             if _reject(st, x) == 0:
-                break
+                # outliers that hide each other: the leave-out and masking tests, with refits
+                dropped, x = _reject_left_out(st, x, lambda x0: run(x0)[0])
+                if dropped == 0:
+                    break
             x, noise = settle(x)
     # last, from the converged point: the reference instant's constraints made (nearly) hard,
     # so that its poses are corrected to fit them; the rest of the solution barely moves

@@ -2,8 +2,9 @@
 
 A poses NPZ written by ``acscal poses`` carries its corners, its board and the intrinsics
 file it was solved with. When both are there, the stages refine their estimate by the
-maximum-likelihood fit on the pixels (:mod:`acs_cli.core.bundle`): the fixed-joint motion
-per camera, the overlap and general motions for the two cameras together. Each function
+maximum-likelihood fit on the pixels: the fixed-joint motion per camera
+(:mod:`acs_cli.core.bundle`), the overlap's two-body rig (:mod:`acs_cli.core.rig_bundle`) and
+the general motion for the two cameras together. Each function
 returns the refined quantities, the artifact's ``bundle_adjustment`` section, and warnings;
 a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
 
@@ -35,7 +36,12 @@ from acs_cli.core.bundle import (
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.intrinsics import degenerate_distortion, outlier_views
 from acs_cli.core.joint import JointEstimate
+from acs_cli.core.overlap import JOINT, OVERLAP_RIG
 from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
+from acs_cli.core.rig import RigJoint, rig_topology
+from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
+from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
+from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.trajectory import is_npz, read_npz_header, read_npz_observations
@@ -44,6 +50,7 @@ from acs_cli.stages.common import PairedTrajectories
 __all__ = [
     "MAX_BUNDLE_FRAMES",
     "CornerViews",
+    "board_order_residuals",
     "bundle_fixed_joint",
     "bundle_general",
     "bundle_overlap",
@@ -273,6 +280,42 @@ def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:
     return F
 
 
+def board_order_residuals(
+    joint: RigJoint, first: str, tracks: dict[str, CameraTrack], F: np.ndarray
+) -> tuple[float, float]:
+    """How ``joint`` fits with its other camera's poses as labelled and turned to
+    ``first``'s labelling of a shared board by ``F`` (:func:`shared_board_flip`).
+
+    Both cameras' poses are in one world; each labelling is solved as the two-body rig of
+    the joint (:func:`acs_cli.core.rig_solve.estimate_rig`, one shared world, no outlier
+    rejection). The labelling that fits with less than half the other's residual is the
+    board's one order (the wrong one is off by the board's size, not by noise).
+
+    Returns
+    -------
+    rms_as_labelled, rms_turned : float
+        The joint's residual RMS, ``inf`` where the rig refuses.
+    """
+    second = joint.other(first)
+    sub = rig_topology([first, second], [(joint.name, [first, second], joint.type)], first)
+    tb = tracks[second]
+    flipped = CameraTrack(
+        np.where(tb.valid[:, None, None], F @ tb.T_w_c, tb.T_w_c), tb.valid, tb.unknown_scale
+    )
+    n = tb.valid.size
+    rms = []
+    for t in (tb, flipped):
+        try:
+            est = estimate_rig(
+                sub, {first: tracks[first], second: t}, reject_outliers=False,
+                recordings=Recordings.single(n, True),
+            )  # fmt: skip
+            rms.append(est.edges[joint.name].residual_rms)
+        except (DegenerateMotionError, InputError):
+            rms.append(np.inf)
+    return rms[0], rms[1]
+
+
 def _pair_views(
     poses: tuple[Path, Path], pair: PairedTrajectories, reverse_b: bool = False
 ) -> tuple[tuple[CornerViews, CornerViews] | None, list[str]]:
@@ -331,37 +374,54 @@ def _articulated(
 def bundle_overlap(
     poses: tuple[Path, Path],
     pair: PairedTrajectories,
-    est: JointEstimate,
+    est: RigEstimate,
     reverse_b: bool = False,
-) -> tuple[JointEstimate, dict[str, BundleSection] | None, list[str]]:
-    """Refine the overlap scenario's joint on both cameras' corners of the shared board.
+) -> tuple[RigEstimate, dict[str, BundleSection] | None, list[str]]:
+    """Refine the overlap's two-body rig (:data:`acs_cli.core.overlap.OVERLAP_RIG`) on both
+    cameras' corners of the shared board (:func:`acs_cli.core.rig_bundle.bundle_adjust_rig`).
 
-    ``pair`` holds the paired poses of the two files (one world: the shared board);
-    ``reverse_b``: B's poses were brought to A's labelling of the board, so its corners are
-    read in reversed order.
+    ``pair`` holds the paired poses of the two files (one world: the shared board), ``est``
+    the rig solved from them; ``reverse_b``: B's poses were brought to A's labelling of the
+    board, so its corners are read in reversed order. The frames are the joint's inliers.
     """
     views, warnings = _pair_views(poses, pair, reverse_b)
-    if views is None or est.position_in_b is None:
+    if views is None:
         return est, None, warnings
     if views[0].corners.shape[1] != views[1].corners.shape[1] or not np.allclose(
         views[0].board_points, views[1].board_points
     ):
         return est, None, [*warnings, "the two cameras saw different boards; no bundle "
                            "adjustment (the overlap scenario needs one shared board)"]  # fmt: skip
-    ba, sections, notes = _articulated(
-        views, pair, est.inliers["ab"].copy(), est.position_in_a, est.position_in_b
-    )
-    warnings += notes
-    if ba is None:
-        return est, None, warnings
-    refined = replace(
-        est,
-        position_in_a=ba.position_in_a,
-        covariance_a=ba.covariance_a,
-        position_in_b=ba.position_in_b,
-        covariance_b=ba.covariance_b,
-    )
-    return refined, sections, warnings
+    used = np.zeros(pair.a.T_world_cam.shape[0], bool)
+    used[est.edges[JOINT].inliers] = True
+    frames, thinned = bundle_frames(used, est.reference_frame)
+    warnings += [thinned] if thinned else []
+    if frames.sum() < MIN_RIG_BUNDLE_FRAMES:
+        return est, None, [*warnings, f"no bundle adjustment: {int(frames.sum())} frames "
+                           f"(at least {MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
+    cams = {
+        c: CameraViews(v.corners, np.isfinite(v.corners).all(axis=2), v.board_points,
+                       v.intrinsics, v.model)
+        for c, v in zip(("a", "b"), views, strict=True)
+    }  # fmt: skip
+    try:
+        ba = bundle_adjust_rig(OVERLAP_RIG, cams, est, np.flatnonzero(frames))
+    except DegenerateMotionError as exc:
+        return est, None, [*warnings, f"no bundle adjustment: {exc.message}; the pose-based "
+                           "estimate is kept"]  # fmt: skip
+    if not ba.success:
+        return est, None, [*warnings, "the bundle adjustment did not converge; the pose-based "
+                           "estimate is kept"]  # fmt: skip
+    n = int(frames.sum())
+    sections = {}
+    for c, v in zip(("a", "b"), views, strict=True):
+        warnings += degenerate_warning(
+            c.upper(), v.model, ba.intrinsics[c], ba.intrinsics_covariance[c]
+        )
+        sections[c] = bundle_section(
+            v, ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c], ba.sigma_px, n
+        )
+    return ba.estimate, sections, warnings
 
 
 def bundle_general(

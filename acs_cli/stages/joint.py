@@ -21,10 +21,18 @@ from acs_cli.core.diagnose import (
 from acs_cli.core.joint import (
     JointEstimate,
     estimate_joint_fixed,
-    estimate_joint_overlap,
     estimate_pivot,
     fixed_joint_warnings,
+    overlap_motion,
 )
+from acs_cli.core.overlap import (
+    OVERLAP_RIG,
+    estimate_joint_overlap,
+    estimate_overlap_rig,
+    joint_of_rig,
+    overlap_tracks,
+)
+from acs_cli.core.paper import algorithm_1_overlap, algorithm_2_fixed_joint
 from acs_cli.core.quality import Measure, joint_measures, judge, length_scale
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
@@ -43,7 +51,12 @@ from acs_cli.io.joint import (
 from acs_cli.io.relpose import RelposeArtifact, load_joint_artifact, load_joint_section
 from acs_cli.io.trajectory import Trajectory
 from acs_cli.io.verdict import VerdictSection
-from acs_cli.stages.bundle import bundle_fixed_joint, bundle_overlap, shared_board_flip
+from acs_cli.stages.bundle import (
+    board_order_residuals,
+    bundle_fixed_joint,
+    bundle_overlap,
+    shared_board_flip,
+)
 from acs_cli.stages.common import (
     PairedTrajectories,
     StageRun,
@@ -60,8 +73,8 @@ METHOD_TEXT = {
     ("fixed_joint", "refined"): "fixed joint, world joint position unknown; frames weighted by "
     "the pose noise they carry (levels estimated), outliers rejected",
     ("overlap", "paper"): "Algorithm I (Chen & Wong eq. (9)): linear least squares",
-    ("overlap", "refined"): "Algorithm I's constraint weighted by the pose noise (levels "
-    "estimated), outliers rejected",
+    ("overlap", "refined"): "Algorithm I as a two-body rig in one world (the rig engine): "
+    "the constraint weighted by the pose noise (levels estimated), outliers rejected",
 }
 
 
@@ -112,59 +125,47 @@ def joint_section(est: JointEstimate, length_unit: str) -> JointSection:
     )
 
 
-def _overlap_in_one_board_order(
-    pair: PairedTrajectories, poses: tuple[Path, Path], method: str
-) -> tuple[JointEstimate, PairedTrajectories, bool]:
-    """Algorithm I, with B's board labelling turned to A's when that is what fits.
+def _in_one_board_order(
+    pair: PairedTrajectories, F: np.ndarray | None
+) -> tuple[PairedTrajectories, bool]:
+    """The pair with B's board labelling turned to A's when that is what fits.
 
-    Two cameras of an overlap rig can label the shared board in its two orders (see
-    :func:`acs_cli.stages.bundle.shared_board_flip`); then the worlds differ by a half turn
-    and the joint constraint fits badly or looks degenerate. Both labellings are tried
-    when the poses carry their board; the turned one wins when its residual is less than
-    half the other's (the wrong one is off by the board's size, not by noise). A pair that
-    looks rigid as labelled is reported as such: turning a rigid pair's frame invents an
-    articulation (seen on OpenCV's stereo photographs: a 5 cm residual and "6 deg" of
-    rotation noise).
+    Two cameras of an overlap rig can label the shared board in its two orders (``F``:
+    :func:`acs_cli.stages.bundle.shared_board_flip`, None when the poses do not carry one
+    symmetric board); then the worlds differ by a half turn and the joint fits badly or
+    looks degenerate. The turned labelling wins when its joint fits with less than half the
+    residual (:func:`acs_cli.stages.bundle.board_order_residuals`, as ``acscal run`` does for
+    a rig). A pair that is rigid (or a hinge) as labelled is trusted as it is: turning one
+    camera's board frame of a rigid pair invents an articulation. A pair that moves rigidly
+    once turned is refused as such (seen on OpenCV's stereo photographs: a 5 cm residual and
+    "6 deg" of rotation noise as labelled).
+
+    Raises
+    ------
+    DegenerateMotionError
+        Turned to one labelling, the two cameras move rigidly together.
     """
-    est0: JointEstimate | None = None
-    error: DegenerateMotionError | None = None
+    if F is None:
+        return pair, False
+    turned = replace(pair, b=replace(pair.b, T_world_cam=F @ pair.b.T_world_cam))
     try:
-        est0 = estimate_joint_overlap(pair.a.T_world_cam, pair.b.T_world_cam, method)
+        overlap_motion(pair.a.T_world_cam, pair.b.T_world_cam)
+    except DegenerateMotionError:
+        return pair, False
+    tracks = overlap_tracks(pair.a.T_world_cam, pair.b.T_world_cam)
+    rms0, rms1 = board_order_residuals(OVERLAP_RIG.joints[0], "a", tracks, F)
+    if rms1 < 0.5 * rms0:
+        return turned, True
+    try:
+        overlap_motion(turned.a.T_world_cam, turned.b.T_world_cam)
     except DegenerateMotionError as exc:
-        error = exc
-    F = shared_board_flip(poses)
-    if F is not None:
-        turned = replace(pair, b=replace(pair.b, T_world_cam=F @ pair.b.T_world_cam))
-        try:
-            est1 = estimate_joint_overlap(turned.a.T_world_cam, turned.b.T_world_cam, method)
-        except DegenerateMotionError as exc:
-            est1 = None
-            if est0 is not None and _rigid_spread(turned) < 0.5 * est0.residual_rms["ab"]:
-                # turned, the pair is rigid (fits to noise); as labelled, its "joint" only
-                # absorbs the half turn: a rigid pair labelled in opposite orders
-                raise DegenerateMotionError(
-                    exc.message + " (the two cameras labelled the shared board in opposite "
-                    "orders; turned to one order, they move rigidly together)",
-                    details=exc.details,
-                ) from None
-        # a rigid-looking pair (est0 degenerate) is trusted as it is: turning one camera's
-        # board frame of a rigid pair makes a spurious articulation, not a better fit
-        if (
-            est0 is not None
-            and est1 is not None
-            and est1.residual_rms["ab"] < 0.5 * est0.residual_rms["ab"]
-        ):
-            return est1, turned, True
-    if est0 is None:
-        raise error if error is not None else DegenerateMotionError("the joint cannot be observed")
-    return est0, pair, False
-
-
-def _rigid_spread(pair: PairedTrajectories) -> float:
-    """RMS spread of B's position in A's frame over the frames (0 for a rigid pair)."""
-    T_a_b = np.matmul(np.linalg.inv(pair.a.T_world_cam), pair.b.T_world_cam)
-    t = T_a_b[:, :3, 3]
-    return float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
+        if "rotation_spread_deg" in exc.details:  # turned, a rigid pair
+            raise DegenerateMotionError(
+                exc.message + " (the two cameras labelled the shared board in opposite "
+                "orders; turned to one order, they move rigidly together)",
+                details=exc.details,
+            ) from None
+    return pair, False
 
 
 def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
@@ -195,16 +196,22 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
         )
         warnings += pair.warnings
-        est, pair, turned = _overlap_in_one_board_order(pair, (poses_a, poses_b), config.method)
+        pair, turned = _in_one_board_order(pair, shared_board_flip((poses_a, poses_b)))
         if turned:
             warnings.append(
                 "the two cameras labelled the shared board in opposite orders (their rolls "
                 "differ by more than 90 degrees); B's poses were turned to A's board frame"
             )
-        if config.method == "refined" and config.bundle:
-            est, sections, notes = bundle_overlap((poses_a, poses_b), pair, est, turned)
-            warnings += notes
-            bundles = sections or {}
+        Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
+        if config.method == "paper":
+            est = algorithm_1_overlap(Ta, Tb)
+        else:
+            rig = estimate_overlap_rig(Ta, Tb)
+            if config.bundle:
+                rig, sections, notes = bundle_overlap((poses_a, poses_b), pair, rig, turned)
+                warnings += notes
+                bundles = sections or {}
+            est = joint_of_rig(rig, Ta.shape[0])
         pairing = pairing_section(pair.pairing, config.pair_by)
         frames["ab"] = FramesUsed.from_inliers(est.inliers["ab"], pair.a.timestamps)
         # B's poses in A's frame: the articulation, whose travel sets the overlap's scale
@@ -212,9 +219,8 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     else:
         ta = load_trajectory(poses_a, config.format_a)
         tb = None if poses_b is None else load_trajectory(poses_b, config.format_b)
-        est = estimate_joint_fixed(
-            ta.T_world_cam, None if tb is None else tb.T_world_cam, config.method
-        )
+        fixed = algorithm_2_fixed_joint if config.method == "paper" else estimate_joint_fixed
+        est = fixed(ta.T_world_cam, None if tb is None else tb.T_world_cam)
         if config.method == "refined" and config.bundle:
             for cam, path, traj in (("a", poses_a, ta), ("b", poses_b, tb)):
                 if path is None or traj is None:

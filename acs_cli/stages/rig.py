@@ -583,11 +583,12 @@ def shared_board_orders(
     :func:`acs_cli.stages.bundle.shared_board_flip`); their worlds then differ by a half
     turn. For each joint between two cameras of a shared recording whose poses carry that
     board, the second camera's trajectory is turned to the first's order when its joint
-    then fits with less than half the residual (as ``acscal joint --overlap`` does); the
+    then fits with less than half the residual (:func:`acs_cli.stages.bundle.
+    board_order_residuals`, as ``acscal joint --overlap`` does); the
     trajectories in ``by_rec`` are replaced. Returns what was turned, as warnings, and the
     half turn of each camera turned (by :func:`label`).
     """
-    from acs_cli.stages.bundle import shared_board_flip
+    from acs_cli.stages.bundle import board_order_residuals, shared_board_flip
 
     notes: list[str] = []
     turns: dict[str, FloatArray] = {}
@@ -607,23 +608,7 @@ def shared_board_orders(
             if F is None:
                 continue
             tracks, _, _, _ = tracks_on_timeline(config, {a: trajs[a], b: trajs[b]}, rec)
-            sub = rig_topology([a, b], [(j.name, [a, b], j.type)], a)
-            n = tracks[a].valid.size
-            flipped = CameraTrack(
-                np.where(tracks[b].valid[:, None, None], F @ tracks[b].T_w_c, tracks[b].T_w_c),
-                tracks[b].valid,
-                tracks[b].unknown_scale,
-            )
-            rms = []
-            for tb in (tracks[b], flipped):
-                try:
-                    est = estimate_rig(
-                        sub, {a: tracks[a], b: tb}, reject_outliers=False,
-                        recordings=Recordings.single(n, True),
-                    )  # fmt: skip
-                    rms.append(est.edges[j.name].residual_rms)
-                except (DegenerateMotionError, InputError):
-                    rms.append(np.inf)
+            rms = board_order_residuals(j, a, tracks, F)
             if rms[1] < 0.5 * rms[0]:
                 t = trajs[b]
                 trajs[b] = dataclasses.replace(t, T_world_cam=F @ t.T_world_cam)

@@ -51,7 +51,9 @@ import numpy as np
 
 from acs_cli.core import se3
 from acs_cli.core.crlb import crlb_overlap, crlb_pivot
-from acs_cli.core.joint import JointEstimate, estimate_joint_fixed, estimate_joint_overlap
+from acs_cli.core.joint import JointEstimate, estimate_joint_fixed
+from acs_cli.core.overlap import estimate_joint_overlap
+from acs_cli.core.paper import algorithm_2_fixed_joint
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
@@ -298,9 +300,8 @@ class _TrialRunner:
         key = (method, scaled)
         if key not in self._fixed:
             try:
-                self._fixed[key] = estimate_joint_fixed(
-                    *self._poses("fixed", scaled), method=method
-                )
+                fixed = algorithm_2_fixed_joint if method == "paper" else estimate_joint_fixed
+                self._fixed[key] = fixed(*self._poses("fixed", scaled))
             except DegenerateMotionError as exc:
                 self._fixed[key] = exc
         out = self._fixed[key]

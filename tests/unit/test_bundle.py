@@ -18,7 +18,8 @@ from acs_cli.core.bundle import (
     right_jacobians,
 )
 from acs_cli.core.camera_models import camera_model
-from acs_cli.core.joint import estimate_joint_fixed, estimate_pivot
+from acs_cli.core.joint import estimate_joint_fixed
+from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.intrinsics import IntrinsicsArtifact
@@ -95,7 +96,7 @@ def _plain_chain(s: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
         se3.matrix_from_rotvec(np.array(rv).reshape(-1, 3)), np.array(tv).reshape(-1, 3)
     )
     T_wc = se3.invert_transforms(T_cb)
-    piv = estimate_pivot(T_wc, method="paper")
+    piv = algorithm_2_pivot(T_wc)
     return intrinsics_vector(K0, d0.ravel()), T_wc, piv.position_in_cam, piv.position_in_world
 
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from acs_cli.core import crlb, se3
+from acs_cli.core import crlb, paper, se3
 from acs_cli.core.joint import (
     HINGE_RATIO,
+    JointEstimate,
     estimate_joint_fixed,
-    estimate_joint_overlap,
     estimate_pivot,
     fixed_joint_warnings,
     lever_shapes,
@@ -20,6 +20,7 @@ from acs_cli.core.joint import (
     rotation_spread,
     rotation_variance_std,
 )
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.errors import DegenerateMotionError, InputError
 from sample_data_gen import acs_sim as sim
 
@@ -42,6 +43,15 @@ def _rms(errors: list[np.ndarray] | np.ndarray) -> float:
 _corrupt = sim.corrupt_poses
 
 
+def _fixed(
+    T_wa_a: np.ndarray, T_wb_b: np.ndarray | None = None, method: str = "refined"
+) -> JointEstimate:
+    """The fixed-joint estimate of ``method``: refined, or the paper's Algorithm II."""
+    if method == "paper":
+        return paper.algorithm_2_fixed_joint(T_wa_a, T_wb_b)
+    return estimate_joint_fixed(T_wa_a, T_wb_b, method)
+
+
 # ----------------------------------------------------------------------------- exact recovery
 
 
@@ -49,7 +59,7 @@ _corrupt = sim.corrupt_poses
 def test_fixed_joint_exact_one_camera(rng: np.random.Generator, method: str) -> None:
     rig = sim.make_rig(rng)
     seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES)
-    est = estimate_joint_fixed(seq.T_wa_a, method=method)
+    est = _fixed(seq.T_wa_a, method=method)
     np.testing.assert_allclose(est.position_in_a, rig.o_a, atol=1e-9)
     assert est.position_in_b is None and est.covariance_b is None and est.std_b is None
     assert est.scenario == "fixed_joint" and est.method == method
@@ -64,7 +74,7 @@ def test_fixed_joint_exact_two_cameras(rng: np.random.Generator, method: str) ->
     rig = sim.make_rig(rng)
     seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES)
     # B's trajectory need not be paired with A's
-    est = estimate_joint_fixed(seq.T_wa_a, seq.T_wb_b[:20], method=method)
+    est = _fixed(seq.T_wa_a, seq.T_wb_b[:20], method=method)
     np.testing.assert_allclose(est.position_in_a, rig.o_a, atol=1e-9)
     assert est.position_in_b is not None
     np.testing.assert_allclose(est.position_in_b, rig.o_b, atol=1e-9)
@@ -77,7 +87,7 @@ def test_fixed_joint_exact_two_cameras(rng: np.random.Generator, method: str) ->
 def test_fixed_joint_exact_with_three_frames(rng: np.random.Generator) -> None:
     rig = sim.make_rig(rng)
     seq = sim.fixed_joint_sequence(rng, rig, 3)
-    est = estimate_joint_fixed(seq.T_wa_a, method="paper")
+    est = _fixed(seq.T_wa_a, method="paper")
     np.testing.assert_allclose(est.position_in_a, rig.o_a, atol=1e-9)
 
 
@@ -138,7 +148,7 @@ def test_fixed_joint_hinge_is_degenerate(rng: np.random.Generator) -> None:
         assert abs(axis @ _hinge_axis_in_b(rig)) == pytest.approx(1.0, abs=1e-3)
     # and camera A, which did not move at all, has too little rotation
     with pytest.raises(DegenerateMotionError, match="camera A: too little rotation"):
-        estimate_joint_fixed(np.broadcast_to(T_w_a, (N_FRAMES, 4, 4)), T_w_b)
+        _fixed(np.broadcast_to(T_w_a, (N_FRAMES, 4, 4)), T_w_b)
 
 
 def test_fixed_joint_single_axis_rotation_is_degenerate(rng: np.random.Generator) -> None:
@@ -151,7 +161,7 @@ def test_fixed_joint_single_axis_rotation_is_degenerate(rng: np.random.Generator
     T = se3.transforms_from_rt(R, np.array([1.0, 2.0, 3.0]) - se3.rotate(R, o))
     for method in ("refined", "paper"):
         with pytest.raises(DegenerateMotionError, match="camera B: the motion turns") as info:
-            estimate_joint_fixed(sim.fixed_joint_sequence(rng, sim.make_rig(rng)).T_wa_a, T, method)
+            _fixed(sim.fixed_joint_sequence(rng, sim.make_rig(rng)).T_wa_a, T, method)
         axis = np.asarray(info.value.details["hinge_axis_in_b"])
         assert abs(axis @ (R_c.T @ axis_w)) == pytest.approx(1.0, abs=1e-6)
         point = np.asarray(info.value.details["hinge_point_in_b"])
@@ -163,7 +173,7 @@ def test_too_little_rotation(rng: np.random.Generator) -> None:
     seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES, max_rotation_deg=1.0)
     for method in ("refined", "paper"):
         with pytest.raises(DegenerateMotionError, match="too little rotation") as info:
-            estimate_joint_fixed(seq.T_wa_a, method=method)
+            _fixed(seq.T_wa_a, method=method)
         assert info.value.details["rotation_spread_deg"] < 3.0
 
 
@@ -171,9 +181,9 @@ def test_fewer_than_three_frames(rng: np.random.Generator) -> None:
     rig = sim.make_rig(rng)
     fixed = sim.fixed_joint_sequence(rng, rig, 2)
     with pytest.raises(DegenerateMotionError, match="2 poses"):
-        estimate_joint_fixed(fixed.T_wa_a)
+        _fixed(fixed.T_wa_a)
     with pytest.raises(DegenerateMotionError, match="2 poses"):
-        estimate_joint_fixed(fixed.T_wa_a, method="paper")
+        _fixed(fixed.T_wa_a, method="paper")
     ov = sim.general_sequence(rng, rig, 2, shared_world=True)
     with pytest.raises(DegenerateMotionError, match="2 paired poses"):
         estimate_joint_overlap(ov.T_wa_a, ov.T_wb_b)
@@ -193,7 +203,7 @@ def test_input_errors(rng: np.random.Generator) -> None:
     rig = sim.make_rig(rng)
     seq = sim.general_sequence(rng, rig, N_FRAMES, shared_world=True)
     with pytest.raises(InputError, match="unknown method 'ml'"):
-        estimate_joint_fixed(seq.T_wa_a, method="ml")
+        _fixed(seq.T_wa_a, method="ml")
     with pytest.raises(InputError, match="unknown method"):
         estimate_joint_overlap(seq.T_wa_a, seq.T_wb_b, method="ml")
     with pytest.raises(InputError, match="30 for A and 29 for B"):
@@ -201,9 +211,9 @@ def test_input_errors(rng: np.random.Generator) -> None:
     bad = seq.T_wa_a.copy()
     bad[4, 1, 1] = np.nan
     with pytest.raises(InputError, match="camera A poses contains NaN"):
-        estimate_joint_fixed(bad)
+        _fixed(bad)
     with pytest.raises(InputError, match=r"camera B poses must have shape \(n, 4, 4\)"):
-        estimate_joint_fixed(seq.T_wa_a, seq.T_wb_b[:, :3])
+        _fixed(seq.T_wa_a, seq.T_wb_b[:, :3])
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -218,8 +228,8 @@ def test_fixed_joint_statistics() -> None:
         rig = sim.make_rig(rng)
         seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES)
         T = _noisy(rng, seq.T_wa_a)
-        ref = estimate_joint_fixed(T, method="refined")
-        pap = estimate_joint_fixed(T, method="paper")
+        ref = _fixed(T, method="refined")
+        pap = _fixed(T, method="paper")
         err_ref.append(ref.position_in_a - rig.o_a)
         err_pap.append(pap.position_in_a - rig.o_a)
         z.append((ref.position_in_a - rig.o_a) / ref.std_a)
@@ -273,9 +283,9 @@ def _fixed_outlier_trials() -> list[dict[str, object]]:
         T = _noisy(rng, seq.T_wa_a)
         frames = rng.choice(N_FRAMES, 3, replace=False)
         Tc = _corrupt(rng, T, rig.o_a, frames)
-        clean = estimate_joint_fixed(T)
-        dirty = estimate_joint_fixed(Tc)
-        paper = estimate_joint_fixed(Tc, method="paper")
+        clean = _fixed(T)
+        dirty = _fixed(Tc)
+        paper = _fixed(Tc, method="paper")
         trials.append(
             {
                 "frames": frames,
@@ -365,7 +375,7 @@ def test_fixed_joint_outlier_masking_case() -> None:
     seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES)
     T = _noisy(rng, seq.T_wa_a)
     frames = rng.choice(N_FRAMES, 3, replace=False)  # [14, 12, 23]
-    est = estimate_joint_fixed(_corrupt(rng, T, rig.o_a, frames))
+    est = _fixed(_corrupt(rng, T, rig.o_a, frames))
     # got: every frame kept, |error| = 0.27 m (clean data: 0.04 m), sigma_rot 7 deg (true 1.2)
     assert not est.inliers["a"][frames].any()
     assert np.linalg.norm(est.position_in_a - rig.o_a) <= 0.15
@@ -467,11 +477,11 @@ def test_motion_summary_recovers_the_rotation_about_each_axis(rng: np.random.Gen
 def test_ball_joint_motion_is_not_a_hinge(rng: np.random.Generator) -> None:
     rig = sim.make_rig(rng)
     seq = sim.fixed_joint_sequence(rng, rig, N_FRAMES)
-    est = estimate_joint_fixed(_noisy(rng, seq.T_wa_a), _noisy(rng, seq.T_wb_b))
+    est = _fixed(_noisy(rng, seq.T_wa_a), _noisy(rng, seq.T_wb_b))
     assert set(est.motion) == {"a", "b"}
     assert not est.motion["a"].near_hinge and not est.motion["b"].near_hinge
     assert fixed_joint_warnings(est, "m") == []
-    paper = estimate_joint_fixed(seq.T_wa_a, method="paper")
+    paper = _fixed(seq.T_wa_a, method="paper")
     np.testing.assert_allclose(paper.motion["a"].spread_deg, est.motion["a"].spread_deg, rtol=0.1)
     ov = sim.general_sequence(rng, rig, N_FRAMES, shared_world=True)
     assert estimate_joint_overlap(ov.T_wa_a, ov.T_wb_b).motion == {}  # fixed joint only

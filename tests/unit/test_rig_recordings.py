@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from acs_cli.core import se3
-from acs_cli.core.joint import estimate_joint_overlap
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.rig import rig_topology
 from acs_cli.core.rig_solve import CameraTrack, Recordings, estimate_rig
 from acs_cli.errors import DegenerateMotionError, InputError

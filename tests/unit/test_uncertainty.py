@@ -19,7 +19,8 @@ import pytest
 import sample_data_gen.acs_sim as sim
 from acs_cli.core import se3
 from acs_cli.core.bundle import bundle_adjust_fixed_joint, intrinsics_vector, project_points
-from acs_cli.core.joint import estimate_joint_fixed, estimate_joint_overlap, estimate_pivot
+from acs_cli.core.joint import estimate_joint_fixed, estimate_pivot
+from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.relpose import JointPrior, estimate_relpose
 
 N_TRIALS = 40

@@ -80,9 +80,12 @@ def point_residual(
 
 def point_start(Rp: FloatArray, tp: FloatArray, Rq: FloatArray, tq: FloatArray) -> FloatArray:
     """``(6,)`` ``(o_p, o_q)`` by the paper's Algorithm I from poses ``(m, 3, 3)``,
-    ``(m, 3)`` in one world: eq. (13), ``R_p o_p - R_q o_q = t_q - t_p``, linear."""
-    A = np.concatenate([Rp, -Rq], axis=2).reshape(-1, 6)
-    return np.asarray(np.linalg.lstsq(A, (tq - tp).reshape(-1), rcond=None)[0])
+    ``(m, 3)`` in one world: eq. (9), ``R_p o_p - R_q o_q = t_q - t_p``, linear
+    (:func:`acs_cli.core.paper.algorithm_1_solve`)."""
+    from acs_cli.core.paper import algorithm_1_solve  # here: the registry imports little
+
+    x, _ = algorithm_1_solve(se3.transforms_from_rt(Rp, tp), se3.transforms_from_rt(Rq, tq))
+    return np.asarray(x)
 
 
 class Edge(Protocol):
