@@ -26,7 +26,7 @@ rig's.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -67,6 +67,7 @@ MIN_FRAMES_SELF_CALIBRATION = 14
 DEFAULT_PRIOR_STD = 1e-6
 #: The two-body rig's names: camera A, camera B and their joint.
 _A, _B, _JOINT = "a", "b", "joint"
+TWO_BODY_JOINT = _JOINT
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,9 @@ class RelposeEstimate:
     mu_b_std: float | None = None
     noise: dict[str, float] = field(default_factory=dict)
     residuals: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the two-body rig's estimate behind a refined result (:func:`two_body_rig`), for the
+    #: bundle adjustment to start from; None for the paper's method
+    rig: RigEstimate | None = None
 
     @property
     def T_a_b(self) -> FloatArray:
@@ -374,9 +378,13 @@ def relpose_from_rig(
     inliers[edge.inliers] = True
     residuals = np.zeros((n, 3))
     # the rig's residual is j_a - j_b in world B; the pair's has the other sign
-    residuals[edge.inliers] = -edge.residual_blocks["pos"]
-    o_a, C_a = edge.position_own_in[_A]
-    o_b, C_b = edge.position_own_in[_B]
+    if "pos" in edge.residual_blocks:
+        residuals[edge.inliers] = -edge.residual_blocks["pos"]
+    own = edge.position_own_in or {  # a metric rig (the bundle's): the same
+        c: (edge.position_in[c], edge.position_cov_in[c]) for c in (_A, _B)
+    }
+    o_a, C_a = own[_A]
+    o_b, C_b = own[_B]
     metric = a.units_per_metre is not None
     return RelposeEstimate(
         T_b_a=se3.invert_transforms(T_a_b),
@@ -400,6 +408,25 @@ def relpose_from_rig(
         mu_b_std=b.units_per_metre_std if metric else None,
         noise=dict(edge.noise),
         residuals=residuals,
+        rig=rig,
+    )
+
+
+def relpose_refined_by(est: RelposeEstimate, rig: RigEstimate) -> RelposeEstimate:
+    """``est`` with its relative pose, joint and world-to-world transform (and their
+    covariances) from a refinement of its rig (the bundle adjustment); the frames, residuals
+    and noise of the pose solve are kept."""
+    r = relpose_from_rig(rig, est.inliers.size, est.unknown_scale, est.self_calibrated)
+    return replace(
+        est,
+        T_b_a=r.T_b_a,
+        covariance=r.covariance,
+        position_in_a=r.position_in_a,
+        covariance_a=r.covariance_a,
+        position_in_b=r.position_in_b,
+        covariance_b=r.covariance_b,
+        T_wb_wa=r.T_wb_wa,
+        rig=rig,
     )
 
 

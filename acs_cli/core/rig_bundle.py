@@ -65,10 +65,14 @@ from acs_cli.core.rig_solve import (
     CameraEstimate,
     CameraTrack,
     EdgeEstimate,
+    EdgePrior,
     RigEstimate,
 )
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
+
+#: Std (metres) of a joint's point given without one: taken as exact.
+DEFAULT_PRIOR_STD = 1e-6
 
 __all__ = [
     "MIN_RIG_BUNDLE_FRAMES",
@@ -268,6 +272,9 @@ class _Model:
     w_px: float = 1.0
     w_rot: dict[str, float] = field(default_factory=dict)
     w_trans: dict[str, float] = field(default_factory=dict)
+    # joints known beforehand (a fixed-joint session): (joint, side, point (3,) in metres,
+    # whitener (3, 3)): rows W (o_side - point) on the joint's point in that camera
+    priors: list[tuple[RigJoint, int, FloatArray, FloatArray]] = field(default_factory=list)
 
     @property
     def cams(self) -> list[str]:
@@ -351,19 +358,31 @@ class _Model:
 
     def residuals(self, x: FloatArray) -> FloatArray:
         """Whitened residuals (the order of :meth:`row_frames`): pixels, then each pose-only
-        body's rotation and translation rows frame by frame."""
+        body's rotation and translation rows frame by frame, then the joint priors' rows."""
         px, pose = self.raw(x)
         out = [self.w_px * r.ravel() for r in px]
         for b in self.bodies:
             w = np.array([self.w_rot[b]] * 3 + [self.w_trans[b]] * 3)
             out.append((pose[b] * w).ravel())
+        for j, side, point, Wh in self.priors:
+            g = joint_model(j.type).bundle_geometry(
+                x[self.L.geom[j.name]], self.R0[j.name], self.geom0[j.name]
+            )
+            out.append(Wh @ (g[3 * side : 3 * side + 3] - point))
         return np.concatenate(out)
 
     def row_frames(self) -> np.ndarray:
-        """The frame of each residual row (the order of :meth:`residuals`)."""
+        """The frame of each residual row (the order of :meth:`residuals`; a prior's rows,
+        which no frame's unknowns touch, are filed under the first frame)."""
         rows = [np.repeat(self.obs[c][0], 2) for c in self.cams]
         rows += [np.repeat(np.arange(self.L.n), 6) for _ in self.bodies]
+        rows += [np.zeros(3, int) for _ in self.priors]
         return np.concatenate(rows)
+
+    def prior_rows(self) -> np.ndarray:
+        """The joint priors' rows in :meth:`residuals` (the last ones)."""
+        total = self.row_frames().size
+        return np.arange(total - 3 * len(self.priors), total)
 
     def pose_rows(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Each pose-only body's rotation and translation rows in :meth:`residuals`."""
@@ -503,9 +522,10 @@ def bundle_adjust_rig(
     initial: RigEstimate,
     frames: np.ndarray,
     poses: dict[str, CameraTrack] | None = None,
+    priors: dict[str, EdgePrior] | None = None,
 ) -> RigBundle:
     """Maximum-likelihood calibration of a rig from its cameras' board corners and the
-    measured poses of its pose-only bodies.
+    measured poses of its pose-only bodies (and joints known beforehand).
 
     Parameters
     ----------
@@ -522,6 +542,10 @@ def bundle_adjust_rig(
     poses : dict of CameraTrack, optional
         The measured poses (``T_world_body`` in the body's own world, metres) of every
         body without corners (a robot's flange, a motion-capture segment, an INS).
+    priors : dict of EdgePrior, optional
+        Joints known beforehand (a fixed-joint session), by joint name: their points
+        (``position_in``, metres, with ``covariance_in``; without one, a tight prior) fused
+        with the corners, as in the pose-based solve (:func:`acs_cli.core.rig_solve.estimate_rig`).
 
     Returns
     -------
@@ -561,6 +585,7 @@ def bundle_adjust_rig(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
     model, x0 = _initial(topology, views, poses, initial, frames)
+    model.priors = _bundle_priors(topology, priors or {})
     L = model.L
     row_frame = model.row_frames()
 
@@ -578,7 +603,7 @@ def bundle_adjust_rig(
     def jac(x: FloatArray) -> object:
         return lsq.block_jacobian(model.residuals, x, fun(x), L.n_shared, L.block, row_frame)
 
-    if model.bodies:
+    if model.bodies or model.priors:  # weights of known and fitted noise levels together
         _start_noise(model, x0)
         x = x0
         # the refits are a fixed-point iteration s -> F(s) on the log noise levels, which
@@ -640,6 +665,35 @@ def bundle_adjust_rig(
     return RigBundle(
         est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success), bodies
     )
+
+
+def _bundle_priors(
+    topo: RigTopology, priors: dict[str, EdgePrior]
+) -> list[tuple[RigJoint, int, FloatArray, FloatArray]]:
+    """The rows of joints known beforehand (:class:`~acs_cli.core.rig_solve.EdgePrior`,
+    points in metres); ``InputError`` for a prior the bundle cannot take."""
+    out: list[tuple[RigJoint, int, FloatArray, FloatArray]] = []
+    for name, pr in priors.items():
+        j = topo.joint(name)
+        if not joint_model(j.type).has_point:
+            raise InputError(f"joints.{name}: a {j.type} joint has no position to give")
+        if pr.units == "metre" or pr.line_in or pr.axis_in:
+            raise InputError(
+                f"joints.{name}: the bundle adjustment takes a joint's point in metres (its "
+                "lines, axes and metric priors of unknown-scale rigs only in the pose solve)"
+            )
+        for c, pos in pr.position_in.items():
+            if c not in j.between:
+                raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
+            C = np.asarray(pr.covariance_in.get(c, np.eye(3) * DEFAULT_PRIOR_STD**2), float)
+            try:
+                Wh = np.linalg.inv(np.linalg.cholesky(C))
+            except np.linalg.LinAlgError:
+                raise InputError(
+                    f"joints.{name}: the covariance given for {c} is not positive definite"
+                ) from None
+            out.append((j, j.between.index(c), np.asarray(pos, float), Wh))
+    return out
 
 
 def _noise(model: _Model) -> FloatArray:
@@ -722,6 +776,9 @@ def _refit_noise(model: _Model, x: FloatArray, J: object) -> None:
                 model.w_rot[b] = w
             else:
                 model.w_trans[b] = w
+    if model.priors:  # their rows take their share of the unknowns too (known weights)
+        Jk = np.asarray(Js[model.prior_rows()].toarray())
+        taken += float(np.sum(Jk.T * scipy.linalg.cho_solve(cf, Jk.T)))
     allpx = np.concatenate([r.ravel() for r in px])
     redundancy = max(allpx.size - (x.size - taken), 1.0)
     model.w_px = 1.0 / max(float(np.sqrt(np.sum(allpx**2) / redundancy)), 1e-6)
@@ -896,7 +953,12 @@ def _assemble(
                 q: float(np.degrees(np.sqrt(max(np.trace(Cg[9:12, 9:12]), 0.0)))),
             }
         edges[j.name] = dataclasses.replace(
-            e0, position_in=pos, position_cov_in=pcov, axis_in=axis, axis_std_deg_in=astd,
+            e0,
+            position_in=pos,
+            position_cov_in=pcov,
+            axis_in=axis,
+            axis_std_deg_in=astd,
             T_q_p=T_q_p,
-        )  # fmt: skip
+            position_own_in={c: (pos[c], pcov[c]) for c in (p, q)},
+        )  # fmt: skip  (a metric rig: each camera's own units are the reference's)
     return dataclasses.replace(initial, cameras=cams, edges=edges)

@@ -20,15 +20,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from acs_cli.core.bundle import (
     MIN_FRAME_CORNERS,
-    ArticulatedBundle,
     FixedJointBundle,
-    bundle_adjust_articulated,
     bundle_adjust_fixed_joint,
     camera_matrix,
     intrinsics_vector,
@@ -37,10 +34,17 @@ from acs_cli.core.camera_models import camera_model
 from acs_cli.core.intrinsics import degenerate_distortion, outlier_views
 from acs_cli.core.joint import JointEstimate
 from acs_cli.core.overlap import JOINT, OVERLAP_RIG
-from acs_cli.core.relpose import DEFAULT_PRIOR_STD, JointPrior, RelposeEstimate
-from acs_cli.core.rig import RigJoint, rig_topology
+from acs_cli.core.relpose import (
+    TWO_BODY_JOINT,
+    JointPrior,
+    RelposeEstimate,
+    prior_for_rig,
+    relpose_refined_by,
+    two_body_rig,
+)
+from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
-from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import CameraTrack, EdgePrior, Recordings, RigEstimate, estimate_rig
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
@@ -335,42 +339,6 @@ def _pair_views(
     ), warnings
 
 
-def _articulated(
-    views: tuple[CornerViews, CornerViews],
-    pair: PairedTrajectories,
-    inliers: np.ndarray,
-    o_a: np.ndarray,
-    o_b: np.ndarray,
-    **kwargs: Any,
-) -> tuple[ArticulatedBundle | None, dict[str, BundleSection] | None, list[str]]:
-    """The two-camera bundle over the paired inlier frames (``inliers`` is thinned in place
-    to the frames adjusted): result, section, warnings."""
-    keep = kwargs.pop("keep", None)
-    used, thinned = bundle_frames(inliers, keep)
-    inliers[:] = used
-    notes = [thinned] if thinned else []
-    ba = bundle_adjust_articulated(
-        views[0].corners[inliers], None, views[0].board_points,  # NaN: not seen
-        views[1].corners[inliers], None, views[1].board_points,
-        views[0].intrinsics, views[1].intrinsics,
-        pair.a.T_world_cam[inliers], pair.b.T_world_cam[inliers], o_a, o_b,
-        models=(views[0].model, views[1].model), **kwargs,
-    )  # fmt: skip
-    if not ba.success:
-        return None, None, [*notes, "the bundle adjustment did not converge; the pose-based "
-                            "estimate is kept"]  # fmt: skip
-    n = int(inliers.sum())
-    notes += degenerate_warning("A", ba.model_a, ba.intrinsics_a, ba.intrinsics_covariance_a)
-    notes += degenerate_warning("B", ba.model_b, ba.intrinsics_b, ba.intrinsics_covariance_b)
-    sections = {
-        "a": bundle_section(views[0], ba.intrinsics_a, ba.intrinsics_std_a, ba.rms_px["a"],
-                      ba.sigma_px, n),
-        "b": bundle_section(views[1], ba.intrinsics_b, ba.intrinsics_std_b, ba.rms_px["b"],
-                      ba.sigma_px, n),
-    }  # fmt: skip
-    return ba, sections, notes
-
-
 def bundle_overlap(
     poses: tuple[Path, Path],
     pair: PairedTrajectories,
@@ -392,10 +360,26 @@ def bundle_overlap(
     ):
         return est, None, [*warnings, "the two cameras saw different boards; no bundle "
                            "adjustment (the overlap scenario needs one shared board)"]  # fmt: skip
-    used = np.zeros(pair.a.T_world_cam.shape[0], bool)
-    used[est.edges[JOINT].inliers] = True
+    return _two_body_bundle(OVERLAP_RIG, JOINT, views, est, None, warnings)
+
+
+def _two_body_bundle(
+    topology: RigTopology,
+    joint: str,
+    views: tuple[CornerViews, CornerViews],
+    est: RigEstimate,
+    priors: dict[str, EdgePrior] | None,
+    warnings: list[str],
+) -> tuple[RigEstimate, dict[str, BundleSection] | None, list[str]]:
+    """The two-body rig ``est`` (cameras ``a`` and ``b``) refined on both cameras' corners
+    over the joint's inlier frames: the estimate, the sections and the warnings."""
+    used = np.zeros(views[0].corners.shape[0], bool)
+    used[est.edges[joint].inliers] = True
+    if not used[est.reference_frame]:
+        return est, None, [*warnings, "the reference frame was rejected as an outlier; no "
+                           "bundle adjustment"]  # fmt: skip
     frames, thinned = bundle_frames(used, est.reference_frame)
-    warnings += [thinned] if thinned else []
+    warnings = [*warnings, thinned] if thinned else list(warnings)
     if frames.sum() < MIN_RIG_BUNDLE_FRAMES:
         return est, None, [*warnings, f"no bundle adjustment: {int(frames.sum())} frames "
                            f"(at least {MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
@@ -405,7 +389,7 @@ def bundle_overlap(
         for c, v in zip(("a", "b"), views, strict=True)
     }  # fmt: skip
     try:
-        ba = bundle_adjust_rig(OVERLAP_RIG, cams, est, np.flatnonzero(frames))
+        ba = bundle_adjust_rig(topology, cams, est, np.flatnonzero(frames), priors=priors)
     except DegenerateMotionError as exc:
         return est, None, [*warnings, f"no bundle adjustment: {exc.message}; the pose-based "
                            "estimate is kept"]  # fmt: skip
@@ -430,45 +414,25 @@ def bundle_general(
     est: RelposeEstimate,
     prior: JointPrior | None,
 ) -> tuple[RelposeEstimate, dict[str, BundleSection] | None, list[str]]:
-    """Refine the general scenario's relative pose and joint on both cameras' corners.
+    """Refine the general scenario's relative pose and joint on both cameras' corners: the
+    two-body rig of :func:`acs_cli.core.relpose.two_body_rig` through the rig's bundle
+    adjustment (:func:`acs_cli.core.rig_bundle.bundle_adjust_rig`).
 
     Each camera sees its own board; the world-A-to-world-B transform is one more unknown.
     A joint from a fixed-joint session (``prior``, metric) is fused with the corners.
     """
     if est.unknown_scale:
         return est, None, ["no bundle adjustment under unknown scale (corners are metric)"]
+    if est.rig is None:
+        return est, None, []
     views, warnings = _pair_views(poses, pair)
     if views is None:
         return est, None, warnings
-    inl = est.inliers.copy()
-    if not inl[est.reference]:
-        return est, None, [*warnings, "the reference frame was rejected as an outlier; no "
-                           "bundle adjustment"]  # fmt: skip
-    priors: dict[str, tuple[np.ndarray, np.ndarray] | None] = {"a": None, "b": None}
-    if prior is not None:
-        for key, pos, cov in (
-            ("a", prior.position_in_a, prior.covariance_a),
-            ("b", prior.position_in_b, prior.covariance_b),
-        ):
-            if pos is not None:  # a joint given without uncertainty is taken as exact
-                C = np.eye(3) * DEFAULT_PRIOR_STD**2 if cov is None else np.asarray(cov)
-                priors[key] = (np.asarray(pos), C)
-    ba, sections, notes = _articulated(
-        views, pair, inl, est.position_in_a, est.position_in_b, keep=est.reference,
-        T_wb_wa0=est.T_wb_wa, prior_a=priors["a"], prior_b=priors["b"],
-    )  # fmt: skip
-    warnings += notes
-    if ba is None:
-        return est, None, warnings
-    k = int(np.count_nonzero(inl[: est.reference]))  # the reference among the frames used
-    refined = replace(
-        est,
-        T_b_a=ba.T_b_a[k],
-        covariance=ba.pose_covariances[k],
-        position_in_a=ba.position_in_a,
-        covariance_a=ba.covariance_a,
-        position_in_b=ba.position_in_b,
-        covariance_b=ba.covariance_b,
-        T_wb_wa=ba.T_wb_wa,
+    edge_prior = None if prior is None else prior_for_rig(prior, unknown_scale=False)
+    priors = None if edge_prior is None else {TWO_BODY_JOINT: edge_prior}
+    rig, sections, warnings = _two_body_bundle(
+        two_body_rig(), TWO_BODY_JOINT, views, est.rig, priors, warnings
     )
-    return refined, sections, warnings
+    if sections is None:
+        return est, None, warnings
+    return relpose_refined_by(est, rig), sections, warnings

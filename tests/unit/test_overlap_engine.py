@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_bundle_articulated import BOARD, _perturb, _run, _scene
+from test_bundle_articulated import BOARD, _perturb, _scene
 
 from acs_cli.core.overlap import JOINT, OVERLAP_RIG, estimate_overlap_rig, joint_of_rig
 from acs_cli.core.paper import algorithm_1_overlap
@@ -42,22 +42,17 @@ def test_the_bundle_recovers_noise_free_corners(rng: np.random.Generator) -> Non
     np.testing.assert_allclose(j.position_in_b, s["o_b"], atol=1e-8)
 
 
-def test_the_bundle_is_as_accurate_as_the_pair_bundle_and_honest() -> None:
-    """Over seeded trials (0.3 px of corner noise): the rig's bundle puts the joint as close
-    to the truth as the retired two-camera bundle did (measured: 1.00x), and its errors over
-    the reported stds have unit spread."""
-    err_rig, err_pair, z = [], [], []
+def test_the_bundle_is_honest() -> None:
+    """Over seeded trials (0.3 px of corner noise), the joint's errors over the reported
+    stds have unit spread. (The rig's bundle put the joint where the retired two-camera
+    bundle did: 1.00x, 20 seeds; tests/unit/test_bundle_articulated.py.)"""
+    z = []
     for seed in range(12):
         rng = np.random.default_rng([seed, 1])
         s = _scene(rng, True, sigma_px=0.3)
-        pair = _run(s, np.random.default_rng([seed, 2]), True)
         ba = _rig_bundle(s, np.random.default_rng([seed, 2]))
         e = ba.estimate.edges[JOINT]
-        err_rig.append(np.r_[e.position_in["a"] - s["o_a"], e.position_in["b"] - s["o_b"]])
-        err_pair.append(np.r_[pair.position_in_a - s["o_a"], pair.position_in_b - s["o_b"]])
         z.append((e.position_in["a"] - s["o_a"]) / np.sqrt(np.diag(e.position_cov_in["a"])))
-    rms_rig, rms_pair = np.sqrt(np.mean(np.square(err_rig))), np.sqrt(np.mean(np.square(err_pair)))
-    assert rms_rig <= 1.05 * rms_pair, (rms_rig, rms_pair)
     assert 0.6 < float(np.sqrt(np.mean(np.square(z)))) < 1.5
 
 
