@@ -91,6 +91,10 @@ REFERENCE_GAIN = 1e2
 #: reweighting, whatever the start (a world frame, a reference camera, the order of ``between``).
 REWEIGHT_ROUNDS = 12
 SETTLED_NOISE = 1e-5
+#: The fits of the outlier tests (without the suspects) settle their noise levels to this
+#: (relative), in at most this many rounds.
+TEST_SETTLED_NOISE = 0.02
+TEST_REWEIGHT_ROUNDS = 4
 #: Rounds of outlier tests (each followed by a refit), at most.
 REJECTION_ROUNDS = 8
 #: Normalised information eigenvalue below which a direction is not determined at all.
@@ -986,10 +990,11 @@ def _fit_without(
         st.mask[name][f] = False
     x_loo = x
     noise: dict[str, dict[str, float]] = {}
-    for _ in range(REWEIGHT_ROUNDS):
+    # a test's fit: its noise levels to 2% (the statistic's own sampling error is larger)
+    for _ in range(TEST_REWEIGHT_ROUNDS):
         before = noise
         noise = _refit_weights(st, x_loo, st.L.size)
-        if before and _settled(before, noise):
+        if before and _settled(before, noise, TEST_SETTLED_NOISE):
             break
         x_loo = solve(x_loo)
     rows = _edge_rows(st)
@@ -1510,12 +1515,16 @@ def _own_world(st: _State, c: str) -> int:
     return int(st.widx[c][k] if on[k] else st.widx[c][int(np.argmax(on))])
 
 
-def _settled(a: dict[str, dict[str, float]], b: dict[str, dict[str, float]]) -> bool:
-    """Whether refitted noise levels moved by less than :data:`SETTLED_NOISE` (relative)."""
+def _settled(
+    a: dict[str, dict[str, float]], b: dict[str, dict[str, float]], tol: float = 0.0
+) -> bool:
+    """Whether refitted noise levels moved by less than ``tol`` (relative; default
+    :data:`SETTLED_NOISE`)."""
+    tol = tol or SETTLED_NOISE
     for name, d in b.items():
         for key, v in d.items():
             old = a.get(name, {}).get(key)
-            if old is None or abs(v - old) > SETTLED_NOISE * max(abs(old), 1e-300):
+            if old is None or abs(v - old) > tol * max(abs(old), 1e-300):
                 return False
     return True
 
