@@ -44,6 +44,7 @@ from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.core.quality import RESIDUAL, length_scale
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
+from acs_cli.core.rig_solve import TEST_SETTLED_NOISE
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.time_offset import (
     PoseInterpolator,
@@ -812,6 +813,7 @@ def diagnose_relpose(
             unknown_scale=unknown_scale,
             method="paper" if paper else "refined",
             reject_outliers=False,
+            noise_tolerance=TEST_SETTLED_NOISE,
         ).residuals
 
     metric = prior is not None and prior.metric and unknown_scale

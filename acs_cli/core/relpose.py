@@ -171,6 +171,7 @@ def estimate_relpose(
     method: str = "refined",
     reject_outliers: bool = True,
     accept_weak: bool = False,
+    noise_tolerance: float = 0.0,
 ) -> RelposeEstimate:
     """Relative pose (and scale) of two cameras joined by a joint, from general motion.
 
@@ -193,6 +194,8 @@ def estimate_relpose(
         Return a self-calibrated joint a narrow motion hardly determines instead of refusing
         it (``--accept-weak``; the stage marks the result weak); a joint that hardly bends
         or bends about one axis is refused whatever it says.
+    noise_tolerance : float
+        Passed to :func:`~acs_cli.core.rig_solve.estimate_rig` (a scan's quick fits).
 
     Returns
     -------
@@ -236,7 +239,9 @@ def estimate_relpose(
             )
     if method == "paper":
         return _paper(Ta, Tb, prior, unknown_scale, reference)
-    est = _refined(Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers)
+    est = _refined(
+        Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers, noise_tolerance
+    )
     _check_determined(est, Ta, Tb, accept_weak)
     return est
 
@@ -328,6 +333,7 @@ def _refined(
     reference: int,
     self_cal: bool,
     reject_outliers: bool,
+    noise_tolerance: float = 0.0,
 ) -> RelposeEstimate:
     """The two-body rig through the rig engine, its result in the pair's vocabulary."""
     n = Ta.shape[0]
@@ -345,6 +351,7 @@ def _refined(
             priors=None if edge_prior is None else {_JOINT: edge_prior},
             reject_outliers=reject_outliers,
             accept_weak=True,  # the std levels are judged below, in the pair's words
+            noise_tolerance=noise_tolerance,
         )
     except DegenerateMotionError as e:
         # what the motion lacks, with the worlds' rotation from the linear start

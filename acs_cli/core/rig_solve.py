@@ -95,6 +95,8 @@ SETTLED_NOISE = 1e-5
 #: (relative), in at most this many rounds.
 TEST_SETTLED_NOISE = 0.02
 TEST_REWEIGHT_ROUNDS = 4
+#: The least-squares method of each solve (:func:`acs_cli.core.lsq.solve`).
+RIG_METHOD = "normal"
 #: Rounds of outlier tests (each followed by a refit), at most.
 REJECTION_ROUNDS = 8
 #: Normalised information eigenvalue below which a direction is not determined at all.
@@ -1234,6 +1236,7 @@ def estimate_rig(
     reject_outliers: bool = True,
     accept_weak: bool = False,
     recordings: Recordings | None = None,
+    noise_tolerance: float = 0.0,
 ) -> RigEstimate:
     """Calibrate a rig from every camera's general motion: one maximum-likelihood solve.
 
@@ -1256,6 +1259,11 @@ def estimate_rig(
         and which joints each holds still (default: one recording, a world per camera). A
         held joint gets its prior from that recording by Algorithm II
         (:func:`fixed_joint_prior`; ``priors`` given for the same part win).
+    noise_tolerance : float
+        How far (relative) the refitted noise levels may still move when the reweighting
+        stops: :data:`SETTLED_NOISE` by default (the fixed point: the estimate does not
+        depend on its start); :data:`TEST_SETTLED_NOISE` for a scan's many quick fits (a
+        clock offset's cost at each candidate), whose residuals need not be that precise.
 
     Returns
     -------
@@ -1449,7 +1457,7 @@ def estimate_rig(
             f_sub,
             x[free],
             jac=j_sub,
-            method="trf",
+            method=RIG_METHOD,
             ftol=1e-10,
             xtol=1e-10,
             gtol=1e-10,
@@ -1467,7 +1475,7 @@ def estimate_rig(
         for _ in range(REWEIGHT_ROUNDS):
             before = noise
             noise = _refit_weights(st, x, L.size)
-            if before and _settled(before, noise):
+            if before and _settled(before, noise, noise_tolerance):
                 break
             x, nf, _sol = run(x)
             nfev += nf

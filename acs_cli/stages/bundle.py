@@ -44,7 +44,14 @@ from acs_cli.core.relpose import (
 )
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
-from acs_cli.core.rig_solve import CameraTrack, EdgePrior, Recordings, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import (
+    TEST_SETTLED_NOISE,
+    CameraTrack,
+    EdgePrior,
+    Recordings,
+    RigEstimate,
+    estimate_rig,
+)
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
@@ -312,7 +319,7 @@ def board_order_residuals(
         try:
             est = estimate_rig(
                 sub, {first: tracks[first], second: t}, reject_outliers=False,
-                recordings=Recordings.single(n, True),
+                recordings=Recordings.single(n, True), noise_tolerance=TEST_SETTLED_NOISE,
             )  # fmt: skip
             rms.append(est.edges[joint.name].residual_rms)
         except (DegenerateMotionError, InputError):

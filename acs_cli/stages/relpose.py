@@ -20,6 +20,7 @@ from acs_cli.core.quality import (
     relative_pose_measures,
 )
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
+from acs_cli.core.rig_solve import TEST_SETTLED_NOISE
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.time_offset import (
     PoseInterpolator,
@@ -192,7 +193,12 @@ def run_relpose(
     def fit(Ta: FloatArray, Tb: FloatArray) -> FloatArray:
         """The joint residuals of the refined estimate on one pairing (for the time offset)."""
         return estimate_relpose(
-            Ta, Tb, prior, unknown_scale=config.unknown_scale, reject_outliers=False
+            Ta,
+            Tb,
+            prior,
+            unknown_scale=config.unknown_scale,
+            reject_outliers=False,
+            noise_tolerance=TEST_SETTLED_NOISE,
         ).residuals
 
     offset = None

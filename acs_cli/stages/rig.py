@@ -49,6 +49,7 @@ from acs_cli.core.rig_bundle import (
     bundle_adjust_rig,
 )
 from acs_cli.core.rig_solve import (
+    TEST_SETTLED_NOISE,
     CameraTrack,
     EdgePrior,
     Recordings,
@@ -671,6 +672,7 @@ def pose_format_diagnosis(
                 est = estimate_rig(
                     config.topology, trial, reference_frame=k, priors=priors,
                     reject_outliers=False, accept_weak=True, recordings=recordings,
+                    noise_tolerance=TEST_SETTLED_NOISE,
                 )  # fmt: skip
             except (DegenerateMotionError, InputError):
                 continue
@@ -773,7 +775,10 @@ def _edge_fit(
             q: CameraTrack(Tq, ok, config.cameras[q].unknown_scale),
         }
         recs = Recordings.single(Tp.shape[0], shared)
-        est = estimate_rig(topo, tracks, priors=prior, reject_outliers=False, recordings=recs)
+        est = estimate_rig(
+            topo, tracks, priors=prior, reject_outliers=False, recordings=recs,
+            noise_tolerance=TEST_SETTLED_NOISE,
+        )  # fmt: skip
         return est.edges[j.name].residual_blocks
 
     return fit
