@@ -258,6 +258,28 @@ def test_a_hinge_or_a_rigid_pair_recovered_exactly(rng: np.random.Generator, joi
         assert not r.has_point and r.axis_in_a is None
 
 
+def test_an_overlapping_hinge_recovered_exactly(rng: np.random.Generator) -> None:
+    """``joint --overlap --joint-type hinge``'s bundle: the overlap's hinge rig refined on
+    noise-free corners of the shared board gives the hinge's point and axes."""
+    s = _scene(rng, True, sigma_px=0.0, joint="hinge")
+    n = s["ca"].shape[0]
+    Ta = _perturb(s["T_wa_a"], rng, 0.01, 0.005)
+    Tb = _perturb(s["T_wb_b"], rng, 0.01, 0.005)
+    est = estimate_overlap_rig(Ta, Tb, joint_type="hinge")
+    views = {
+        c: CameraViews(s[f"c{c}"], np.isfinite(s[f"c{c}"]).all(axis=2), BOARD, s[f"i{c}"] * 1.0)
+        for c in ("a", "b")
+    }
+    ba = bundle_adjust_rig(est.topology, views, est, np.arange(n))
+    assert ba.success and ba.rms_px["a"] < 1e-6 and ba.rms_px["b"] < 1e-6
+    j = joint_of_rig(ba.estimate, n)
+    assert j.joint_type == "hinge"
+    np.testing.assert_allclose(j.position_in_a, s["o_a"], atol=1e-7)
+    np.testing.assert_allclose(np.asarray(j.position_in_b), s["o_b"], atol=1e-7)
+    assert abs(abs(float(j.axis_in["a"] @ s["axis_a"])) - 1) < 1e-10
+    assert abs(abs(float(j.axis_in["b"] @ s["axis_b"])) - 1) < 1e-10
+
+
 @pytest.mark.parametrize("overlap", [True, False], ids=["overlap", "general"])
 def test_reported_std_matches_the_spread(overlap: bool) -> None:
     """Over seeded trials, the joint's and T_b_a's errors divided by the reported standard
