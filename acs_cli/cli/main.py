@@ -62,6 +62,16 @@ class Method(str, Enum):
     paper = "paper"
 
 
+class JointType(str, Enum):
+    ball = "ball"
+    hinge = "hinge"
+    rigid = "rigid"
+
+
+def _joint_type_opt(help_text: str) -> Any:
+    return typer.Option("--joint-type", help=help_text)
+
+
 class TrajFormat(str, Enum):
     auto = "auto"
     tum = "tum"
@@ -161,6 +171,13 @@ def joint(
     max_dt: MaxDtOpt = None,
     length_unit: UnitOpt = "m",
     accept_weak: AcceptWeakOpt = False,
+    joint_type: Annotated[
+        JointType,
+        _joint_type_opt(
+            "--overlap, refined method: the joint is a ball (default) or a hinge (its axis "
+            "in each camera is written too); rigid is refused (no joint point: use relpose)."
+        ),
+    ] = JointType.ball,
     json_out: JsonOpt = False,
 ) -> None:
     """Locate the joint in each camera's frame.
@@ -189,6 +206,7 @@ def joint(
         length_unit=length_unit,
         bundle=bundle,
         accept_weak=accept_weak,
+        joint_type=joint_type.value,
     )
     run = run_joint(poses_a, poses_b, output, cfg)
     est = run.estimate
@@ -199,6 +217,9 @@ def joint(
     table.add_row("position_in_a", _fmt(est.position_in_a), _fmt(est.std_a))
     if est.position_in_b is not None and est.std_b is not None:
         table.add_row("position_in_b", _fmt(est.position_in_b), _fmt(est.std_b))
+    for cam, axis in est.axis_in.items():
+        std = est.axis_std_deg_in.get(cam)
+        table.add_row(f"axis_in_{cam} (std deg)", _fmt(axis), "" if std is None else f"{std:.3g}")
     for key, rms in est.residual_rms.items():
         table.add_row(f"residual RMS ({key})", f"{rms:.4g}", "")
     out.print(table)
@@ -267,6 +288,13 @@ def relpose(
         typer.Option("--max-offset", min=0.0, help="Largest clock offset searched, seconds."),
     ] = 0.5,
     accept_weak: AcceptWeakOpt = False,
+    joint_type: Annotated[
+        JointType,
+        _joint_type_opt(
+            "Refined method: the joint is a ball (default), a hinge (its axis in each camera "
+            "is written too) or rigid (a constant T_b_a; no joint point, no --joint)."
+        ),
+    ] = JointType.ball,
     json_out: JsonOpt = False,
 ) -> None:
     """Relative pose T_b_a of two cameras joined by a joint (no overlap needed).
@@ -310,6 +338,7 @@ def relpose(
         estimate_time_offset=estimate_time_offset,
         max_offset=max_offset,
         accept_weak=accept_weak,
+        joint_type=joint_type.value,
     )
     run = run_relpose(poses_a, poses_b, joint_file or joint_metric, output, cfg)
     est = run.estimate
@@ -329,9 +358,13 @@ def relpose(
         _fmt(rel["translation_b_in_a"]),
         _fmt(rel["translation_b_in_a_std"]),
     )
-    j = run.artifact["joint"]
-    table.add_row("joint.position_in_a", _fmt(j["position_in_a"]), _fmt(j["position_in_a_std"]))
-    table.add_row("joint.position_in_b", _fmt(j["position_in_b"]), _fmt(j["position_in_b_std"]))
+    j = run.artifact.get("joint")
+    if j is not None:
+        for key in ("position_in_a", "position_in_b"):
+            table.add_row(f"joint.{key}", _fmt(j[key]), _fmt(j[f"{key}_std"]))
+        for key in ("axis_in_a", "axis_in_b"):
+            if key in j:
+                table.add_row(f"joint.{key} (std deg)", _fmt(j[key]), f"{j[f'{key}_std_deg']:.3g}")
     if unknown_scale:
         table.add_row("phi_ba = mu_b / mu_a", f"{est.phi_ba:.5f}", f"{est.phi_std:.5f}")
         if est.mu_a is not None:

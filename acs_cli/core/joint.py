@@ -88,6 +88,11 @@ class JointEstimate:
     noise: dict[str, dict[str, float]] = field(default_factory=dict)
     position_in_world: dict[str, FloatArray] = field(default_factory=dict)
     motion: dict[str, MotionSummary] = field(default_factory=dict)
+    #: the declared joint (``ball`` or ``hinge``; ``joint --overlap --joint-type``)
+    joint_type: str = "ball"
+    #: a hinge's unit axis in each camera's frame (``"a"``, ``"b"``) and its std (deg)
+    axis_in: dict[str, FloatArray] = field(default_factory=dict)
+    axis_std_deg_in: dict[str, float] = field(default_factory=dict)
 
     @property
     def std_a(self) -> FloatArray:

@@ -19,19 +19,66 @@ from __future__ import annotations
 
 import numpy as np
 
-from acs_cli.core.joint import JointEstimate, _check_method, hinge_explains, overlap_motion
+from acs_cli.core import se3
+from acs_cli.core.joint import (
+    JointEstimate,
+    OverlapMotion,
+    _check_method,
+    hinge_explains,
+    overlap_motion,
+    rotation_spread,
+)
 from acs_cli.core.paper import algorithm_1_overlap, algorithm_1_solve
-from acs_cli.core.rig import rig_topology
+from acs_cli.core.rig import RigTopology, rig_topology
 from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
-from acs_cli.errors import DegenerateMotionError
+from acs_cli.errors import DegenerateMotionError, InputError
 
-__all__ = ["JOINT", "OVERLAP_RIG", "estimate_joint_overlap", "estimate_overlap_rig", "joint_of_rig"]
+__all__ = [
+    "JOINT",
+    "OVERLAP_JOINT_TYPES",
+    "OVERLAP_RIG",
+    "check_overlap_joint_type",
+    "estimate_joint_overlap",
+    "estimate_overlap_rig",
+    "joint_of_rig",
+    "overlap_rig",
+]
 
 #: The joint's name in the two-body rig.
 JOINT = "joint"
 #: Camera A (the reference) and camera B joined by a ball joint.
 OVERLAP_RIG = rig_topology(["a", "b"], [(JOINT, ["a", "b"], "ball")], "a")
+#: The joint types an overlap can declare (``joint --overlap --joint-type``): a rigid pair
+#: has no joint point to locate.
+OVERLAP_JOINT_TYPES = ("ball", "hinge")
+
+
+def overlap_rig(joint_type: str = "ball") -> RigTopology:
+    """:data:`OVERLAP_RIG` with its joint declared ``joint_type`` (ball or hinge)."""
+    if joint_type == "ball":
+        return OVERLAP_RIG
+    check_overlap_joint_type(joint_type)
+    return rig_topology(["a", "b"], [(JOINT, ["a", "b"], joint_type)], "a")
+
+
+def check_overlap_joint_type(joint_type: str, method: str = "refined") -> None:
+    """Refuse a joint type an overlap cannot locate (a rigid pair has no joint point), or
+    one the paper's method does not model (ball only)."""
+    if joint_type == "rigid":
+        raise InputError(
+            "a rigid pair has no joint point for `joint --overlap` to locate; calibrate a "
+            "rigid pair's T_b_a with `acscal relpose --joint-type rigid`"
+        )
+    if joint_type not in OVERLAP_JOINT_TYPES:
+        raise InputError(
+            f"unknown joint type {joint_type!r}; choose one of ball, hinge (rigid: use relpose)"
+        )
+    if method == "paper" and joint_type != "ball":
+        raise InputError(
+            f"the paper's method models a ball joint only; a {joint_type} needs the refined "
+            "method (drop --method paper)"
+        )
 
 
 def overlap_tracks(T_w_a: FloatArray, T_w_b: FloatArray) -> dict[str, CameraTrack]:
@@ -41,7 +88,11 @@ def overlap_tracks(T_w_a: FloatArray, T_w_b: FloatArray) -> dict[str, CameraTrac
 
 
 def estimate_overlap_rig(
-    T_w_a: FloatArray, T_w_b: FloatArray, *, reject_outliers: bool = True
+    T_w_a: FloatArray,
+    T_w_b: FloatArray,
+    *,
+    reject_outliers: bool = True,
+    joint_type: str = "ball",
 ) -> RigEstimate:
     """The two-body rig of Algorithm I, solved by the rig engine.
 
@@ -50,6 +101,9 @@ def estimate_overlap_rig(
     T_w_a, T_w_b : ndarray, shape (n, 4, 4)
         Paired ``T_world_a`` and ``T_world_b`` in the same world frame.
     reject_outliers : bool
+    joint_type : {"ball", "hinge"}
+        A hinge's point is the one on its axis nearest camera A's centre, its axis in
+        ``axis_in``; an articulation about one axis is then what is expected, not refused.
 
     Returns
     -------
@@ -66,14 +120,15 @@ def estimate_overlap_rig(
         Too few frames, a rigid pair, or an articulation about one axis (the hinge's axis
         in both frames in ``details``, as :func:`acs_cli.core.joint.overlap_motion`).
     """
-    motion = overlap_motion(T_w_a, T_w_b)
+    hinge = joint_type == "hinge"
+    motion = _hinge_motion(T_w_a, T_w_b) if hinge else overlap_motion(T_w_a, T_w_b)
     n = motion.T_w_a.shape[0]
     # the reference instant is never rejected (its poses are corrected to fit): the frame
     # that fits eq. (9) best, where no gross outlier is
     residuals = algorithm_1_solve(motion.T_w_a, motion.T_w_b)[1]
     try:
         est = estimate_rig(
-            OVERLAP_RIG,
+            overlap_rig(joint_type),
             overlap_tracks(motion.T_w_a, motion.T_w_b),
             reference_frame=int(np.argmin(np.sum(residuals**2, axis=1))),
             reject_outliers=reject_outliers,
@@ -81,15 +136,36 @@ def estimate_overlap_rig(
             recordings=Recordings.single(n, shared_world=True),
         )
     except DegenerateMotionError:
-        if motion.spread.candidate_hinge:
+        if motion.spread.candidate_hinge and not hinge:
             raise motion.hinge_error() from None
         raise
+    if hinge:
+        return est
     e = est.edges[JOINT]
     # the articulation carries both cameras' rotation noise
     sigma_rel = float(np.sqrt(2.0) * np.radians(e.noise.get("sigma_rot_deg", 0.0)))
     if hinge_explains(motion.spread, e.position_cov_in["b"], e.position_in["b"], sigma_rel):
         raise motion.hinge_error()
     return est
+
+
+def _hinge_motion(T_w_a: FloatArray, T_w_b: FloatArray) -> OverlapMotion:
+    """:func:`acs_cli.core.joint.overlap_motion` for a declared hinge: a rigid pair is still
+    refused, an articulation about one axis is what a hinge does."""
+    Ta, Tb = se3.check_paired_transforms(T_w_a, T_w_b, "overlap")
+    if Ta.shape[0] < 3:
+        raise DegenerateMotionError(
+            f"{Ta.shape[0]} paired poses; an overlap calibration needs at least 3"
+        )
+    R_ab = np.einsum("nji,njk->nik", Ta[:, :3, :3], Tb[:, :3, :3])
+    try:
+        spread = rotation_spread(R_ab, "relative rotation between A and B")
+    except DegenerateMotionError as exc:
+        raise DegenerateMotionError(
+            "the hinge cannot be observed: " + exc.message + " Turn the hinge between frames.",
+            details=exc.details,
+        ) from None
+    return OverlapMotion(Ta, Tb, spread)
 
 
 def joint_of_rig(est: RigEstimate, n: int) -> JointEstimate:
@@ -113,11 +189,14 @@ def joint_of_rig(est: RigEstimate, n: int) -> JointEstimate:
         residual_rms={"ab": float(e.residual_rms)},
         inliers={"ab": inliers},
         noise={"ab": noise} if noise else {},
+        joint_type=e.joint.type,
+        axis_in={c: np.asarray(u, float) for c, u in e.axis_in.items()},
+        axis_std_deg_in={c: float(v) for c, v in e.axis_std_deg_in.items()},
     )
 
 
 def estimate_joint_overlap(
-    T_w_a: FloatArray, T_w_b: FloatArray, method: str = "refined"
+    T_w_a: FloatArray, T_w_b: FloatArray, method: str = "refined", joint_type: str = "ball"
 ) -> JointEstimate:
     """Algorithm I: the joint from paired poses of two cameras in one world.
 
@@ -140,7 +219,8 @@ def estimate_joint_overlap(
         enough (a rigid pair: no articulation), or that changes about one axis only.
     """
     _check_method(method)
+    check_overlap_joint_type(joint_type, method)
     if method == "paper":
         return algorithm_1_overlap(T_w_a, T_w_b)
-    est = estimate_overlap_rig(T_w_a, T_w_b)
+    est = estimate_overlap_rig(T_w_a, T_w_b, joint_type=joint_type)
     return joint_of_rig(est, est.cameras["a"].poses_in_reference_world.shape[0])

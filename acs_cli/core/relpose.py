@@ -48,6 +48,7 @@ from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
 __all__ = [
+    "JOINT_TYPES",
     "SINGLE_AXIS_RATIO",
     "UNDETERMINED_STD_FRACTION",
     "JointPrior",
@@ -68,6 +69,22 @@ DEFAULT_PRIOR_STD = 1e-6
 #: The two-body rig's names: camera A, camera B and their joint.
 _A, _B, _JOINT = "a", "b", "joint"
 TWO_BODY_JOINT = _JOINT
+#: The joint types a two-body rig can declare (``--joint-type``): a ball joint (the paper's),
+#: a hinge (one axis) or a rigid mount (a constant ``T_b_a``, no joint point).
+JOINT_TYPES = ("ball", "hinge", "rigid")
+
+
+def check_joint_type(joint_type: str, method: str = "refined") -> None:
+    """Refuse an unknown joint type, or one the paper's method does not have (ball only)."""
+    if joint_type not in JOINT_TYPES:
+        raise InputError(
+            f"unknown joint type {joint_type!r}; choose one of {', '.join(JOINT_TYPES)}"
+        )
+    if method == "paper" and joint_type != "ball":
+        raise InputError(
+            f"the paper's method models a ball joint only; a {joint_type} needs the refined "
+            "method (drop --method paper)"
+        )
 
 
 @dataclass(frozen=True)
@@ -144,6 +161,19 @@ class RelposeEstimate:
     #: the two-body rig's estimate behind a refined result (:func:`two_body_rig`), for the
     #: bundle adjustment to start from; None for the paper's method
     rig: RigEstimate | None = None
+    #: the declared joint (:data:`JOINT_TYPES`); a rigid pair has no joint point (its
+    #: ``position_in_*`` are zeros with zero covariances and mean nothing)
+    joint_type: str = "ball"
+    #: a hinge's axis in each camera's frame (unit vectors) and their std (deg); else None
+    axis_in_a: FloatArray | None = None
+    axis_in_b: FloatArray | None = None
+    axis_in_a_std_deg: float | None = None
+    axis_in_b_std_deg: float | None = None
+
+    @property
+    def has_point(self) -> bool:
+        """Whether the joint is a point (not a rigid mount)."""
+        return self.joint_type != "rigid"
 
     @property
     def T_a_b(self) -> FloatArray:
@@ -172,6 +202,7 @@ def estimate_relpose(
     reject_outliers: bool = True,
     accept_weak: bool = False,
     noise_tolerance: float = 0.0,
+    joint_type: str = "ball",
 ) -> RelposeEstimate:
     """Relative pose (and scale) of two cameras joined by a joint, from general motion.
 
@@ -194,6 +225,10 @@ def estimate_relpose(
         Return a self-calibrated joint a narrow motion hardly determines instead of refusing
         it (``--accept-weak``; the stage marks the result weak); a joint that hardly bends
         or bends about one axis is refused whatever it says.
+    joint_type : {"ball", "hinge", "rigid"}
+        The two-body rig's joint (:data:`JOINT_TYPES`; refined method only for a hinge or
+        a rigid mount). A hinge's point is the one on its axis nearest camera A's centre;
+        a rigid mount has no point and takes no prior (``T_b_a`` is constant).
     noise_tolerance : float
         Passed to :func:`~acs_cli.core.rig_solve.estimate_rig` (a scan's quick fits).
 
@@ -210,11 +245,14 @@ def estimate_relpose(
     """
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    check_joint_type(joint_type, method)
     Ta, Tb = _check_inputs(T_wa_a, T_wb_b, reference)
     n = Ta.shape[0]
     reference = reference % n
     prior = prior or JointPrior()
     self_cal = prior.position_in_a is None and prior.position_in_b is None
+    if joint_type == "rigid" and not self_cal:
+        raise InputError("a rigid joint has no joint point: give no joint file (--joint)")
     need = MIN_FRAMES_SELF_CALIBRATION if self_cal else MIN_FRAMES
     if n < need:
         raise DegenerateMotionError(
@@ -240,7 +278,15 @@ def estimate_relpose(
     if method == "paper":
         return _paper(Ta, Tb, prior, unknown_scale, reference)
     est = _refined(
-        Ta, Tb, prior, unknown_scale, reference, self_cal, reject_outliers, noise_tolerance
+        Ta,
+        Tb,
+        prior,
+        unknown_scale,
+        reference,
+        self_cal,
+        reject_outliers,
+        joint_type,
+        noise_tolerance,
     )
     _check_determined(est, Ta, Tb, accept_weak)
     return est
@@ -285,10 +331,11 @@ def _paper(
     )
 
 
-def two_body_rig() -> RigTopology:
-    """The pair as a rig: cameras ``a`` and ``b``, one ball joint, ``b`` the reference (the
-    rig reports lengths in the reference's units: ``T_b_a``'s translation in B's)."""
-    return RigTopology((_A, _B), (RigJoint(_JOINT, (_A, _B), "ball"),), _B)
+def two_body_rig(joint_type: str = "ball") -> RigTopology:
+    """The pair as a rig: cameras ``a`` and ``b``, one joint (a ball unless told), ``b`` the
+    reference (the rig reports lengths in the reference's units: ``T_b_a``'s translation in
+    B's)."""
+    return RigTopology((_A, _B), (RigJoint(_JOINT, (_A, _B), joint_type),), _B)
 
 
 def prior_for_rig(prior: JointPrior, unknown_scale: bool) -> EdgePrior | None:
@@ -333,6 +380,7 @@ def _refined(
     reference: int,
     self_cal: bool,
     reject_outliers: bool,
+    joint_type: str = "ball",
     noise_tolerance: float = 0.0,
 ) -> RelposeEstimate:
     """The two-body rig through the rig engine, its result in the pair's vocabulary."""
@@ -345,7 +393,7 @@ def _refined(
         _check_spread(se3.transform_points(Ta, np.asarray(prior.position_in_a, float)))
     try:
         rig = estimate_rig(
-            two_body_rig(),
+            two_body_rig(joint_type),
             tracks,
             reference_frame=reference,
             priors=None if edge_prior is None else {_JOINT: edge_prior},
@@ -368,7 +416,8 @@ def _refined(
             details={"rig": e.details, "diagnosis": notes},
         ) from None
     est = relpose_from_rig(rig, n, unknown_scale, self_cal)
-    _check_spread(se3.transform_points(Ta, est.position_in_a)[est.inliers])
+    if est.has_point:
+        _check_spread(se3.transform_points(Ta, est.position_in_a)[est.inliers])
     return est
 
 
@@ -387,11 +436,18 @@ def relpose_from_rig(
     # the rig's residual is j_a - j_b in world B; the pair's has the other sign
     if "pos" in edge.residual_blocks:
         residuals[edge.inliers] = -edge.residual_blocks["pos"]
-    own = edge.position_own_in or {  # a metric rig (the bundle's): the same
-        c: (edge.position_in[c], edge.position_cov_in[c]) for c in (_A, _B)
-    }
+    elif "trans" in edge.residual_blocks:  # a rigid mount: the translation rows
+        residuals[edge.inliers] = -edge.residual_blocks["trans"]
+    joint_type = edge.joint.type
+    if edge.position_in:
+        own = edge.position_own_in or {  # a metric rig (the bundle's): the same
+            c: (edge.position_in[c], edge.position_cov_in[c]) for c in (_A, _B)
+        }
+    else:  # a rigid mount has no point: zeros that RelposeEstimate.has_point disowns
+        own = {c: (np.zeros(3), np.zeros((3, 3))) for c in (_A, _B)}
     o_a, C_a = own[_A]
     o_b, C_b = own[_B]
+    axis = edge.axis_in
     metric = a.units_per_metre is not None
     return RelposeEstimate(
         T_b_a=se3.invert_transforms(T_a_b),
@@ -416,6 +472,11 @@ def relpose_from_rig(
         noise=dict(edge.noise),
         residuals=residuals,
         rig=rig,
+        joint_type=joint_type,
+        axis_in_a=np.asarray(axis[_A], float) if _A in axis else None,
+        axis_in_b=np.asarray(axis[_B], float) if _B in axis else None,
+        axis_in_a_std_deg=float(edge.axis_std_deg_in[_A]) if _A in axis else None,
+        axis_in_b_std_deg=float(edge.axis_std_deg_in[_B]) if _B in axis else None,
     )
 
 
@@ -434,6 +495,10 @@ def relpose_refined_by(est: RelposeEstimate, rig: RigEstimate) -> RelposeEstimat
         covariance_b=r.covariance_b,
         T_wb_wa=r.T_wb_wa,
         rig=rig,
+        axis_in_a=r.axis_in_a,
+        axis_in_b=r.axis_in_b,
+        axis_in_a_std_deg=r.axis_in_a_std_deg,
+        axis_in_b_std_deg=r.axis_in_b_std_deg,
     )
 
 
@@ -505,7 +570,7 @@ def _check_determined(
     reported, not refused. ``accept_weak`` lets a merely narrow motion through, never a
     joint that hardly bends or bends about one axis (:func:`motion_diagnosis`): its point
     is then arbitrary, not weak."""
-    if not est.self_calibrated:
+    if not est.self_calibrated or not est.has_point:
         return
     worst = {}
     for key, o, cov, T in (
@@ -520,6 +585,8 @@ def _check_determined(
         return
     R_w = se3.project_to_rotation(est.T_wb_wa[:3, :3])[0]
     notes = motion_diagnosis(Ta, Tb, R_w)
+    if est.joint_type == "hinge" and "one axis only" in notes["joint"]:
+        notes["joint"] = ""  # what a hinge does
     if accept_weak and not notes["joint"]:
         return
     why = "; ".join(v for v in notes.values() if v) or "the motion is too narrow for the noise"

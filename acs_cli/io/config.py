@@ -124,6 +124,8 @@ class JointSpec:
     scenario: str
     method: str = "refined"
     bundle: bool = True
+    #: the overlap's joint: ``ball`` or ``hinge`` (``joint --overlap --joint-type``)
+    joint_type: str = "ball"
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,8 @@ class RelposeSpec:
     self_calibrate: bool = False
     reference: int = 0
     bundle: bool = True
+    #: the two-body rig's joint (``relpose --joint-type``)
+    joint_type: str = "ball"
 
 
 @dataclass(frozen=True)
@@ -392,6 +396,11 @@ class JointStage(Section):
     scenario: Scenario
     method: Method = "refined"
     bundle: bool = True
+    joint_type: JointType = Field(
+        default="ball",
+        description="overlap, refined method: the joint is a ball or a hinge (rigid: no joint "
+        "point to locate; calibrate it with relpose)",
+    )
 
 
 class RelposeImages(Section):
@@ -408,6 +417,11 @@ class RelposeStage(Section):
     self_calibrate: bool = False
     reference: int = Field(default=0, ge=0)
     bundle: bool = True
+    joint_type: JointType = Field(
+        default="ball",
+        description="refined method: the joint is a ball, a hinge or rigid (a constant T_b_a: "
+        "no joint section, no self_calibrate needed)",
+    )
 
 
 class RunConfigFile(Section):
@@ -749,7 +763,19 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
 
     joint: JointSpec | None = None
     if m.joint is not None:
-        joint = JointSpec(m.joint.scenario, m.joint.method, m.joint.bundle)
+        joint = JointSpec(m.joint.scenario, m.joint.method, m.joint.bundle, m.joint.joint_type)
+        if joint.joint_type != "ball":
+            if joint.scenario != "overlap":
+                raise _fail(path, "joint.joint_type", "only for scenario overlap")
+            if joint.joint_type == "rigid":
+                raise _fail(
+                    path,
+                    "joint.joint_type",
+                    "rigid has no joint point to locate: remove the 'joint' section and set "
+                    "relpose.joint_type: rigid",
+                )
+            if joint.method == "paper":
+                raise _fail(path, "joint.joint_type", "the paper's method is ball only")
         for name, spec in cameras.items():
             if spec.images is None:
                 raise _fail(path, f"cameras.{name}.images", "missing (the joint stage needs it)")
@@ -768,14 +794,23 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             self_calibrate=r.self_calibrate,
             reference=r.reference,
             bundle=r.bundle,
+            joint_type=r.joint_type,
         )
+        if relpose.joint_type != "ball" and relpose.method == "paper":
+            raise _fail(path, "relpose.joint_type", "the paper's method is ball only")
+        if relpose.joint_type == "rigid" and joint is not None:
+            raise _fail(
+                path,
+                "relpose.joint_type",
+                "rigid has no joint point to take from the joint stage: remove the 'joint' section",
+            )
         if relpose.self_calibrate and joint is not None:
             raise _fail(
                 path,
                 "relpose.self_calibrate",
                 "true estimates the joint from the general motion: remove the 'joint' section",
             )
-        if not relpose.self_calibrate and joint is None:
+        if not relpose.self_calibrate and joint is None and relpose.joint_type != "rigid":
             raise _fail(
                 path, "joint", "missing (relpose needs it, or relpose.self_calibrate: true)"
             )

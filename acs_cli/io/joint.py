@@ -11,7 +11,7 @@ Keys (after the header): ``scenario`` (``fixed_joint`` or ``overlap``), ``joint`
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -353,6 +353,14 @@ class JointSection:
         The length unit (``joint.yaml`` only).
     source : str or None
         Where the joint came from (``relpose.yaml`` only).
+    type : str or None
+        The declared joint type when not a ball (``--joint-type hinge``); None (no key) for
+        a ball joint.
+    axis_in_a, axis_in_b : ndarray, shape (3,) or None
+        A hinge's unit axis in each camera's frame (then ``position_in_a`` is the axis point
+        nearest camera A's centre and ``position_in_b`` the same point in B).
+    axis_in_a_std_deg, axis_in_b_std_deg : float or None
+        One sigma of each axis direction (degrees, both directions across it together).
     """
 
     position_in_a: FloatArray
@@ -363,6 +371,36 @@ class JointSection:
     covariance_b: FloatArray | None = None
     units: str | None = None
     source: str | None = None
+    type: str | None = None
+    axis_in_a: FloatArray | None = None
+    axis_in_b: FloatArray | None = None
+    axis_in_a_std_deg: float | None = None
+    axis_in_b_std_deg: float | None = None
+
+    def with_axes(
+        self,
+        joint_type: str,
+        axis_in: dict[str, FloatArray],
+        axis_std_deg_in: dict[str, float],
+    ) -> JointSection:
+        """The section with a declared non-ball type and its axes (a ball's is unchanged)."""
+        if joint_type == "ball":
+            return self
+
+        def vec(c: str) -> FloatArray | None:
+            return np.asarray(axis_in[c], dtype=float) if c in axis_in else None
+
+        def std(c: str) -> float | None:
+            return float(axis_std_deg_in[c]) if c in axis_std_deg_in else None
+
+        return replace(
+            self,
+            type=joint_type,
+            axis_in_a=vec("a"),
+            axis_in_b=vec("b"),
+            axis_in_a_std_deg=std("a"),
+            axis_in_b_std_deg=std("b"),
+        )
 
     @classmethod
     def from_estimate(
@@ -406,6 +444,11 @@ class JointSection:
             optional_covariance3(d.get("covariance_b"), f"{key}.covariance_b", path),
             None if d.get("units") is None else str(d["units"]),
             None if d.get("source") is None else str(d["source"]),
+            None if d.get("type") is None else str(d["type"]),
+            optional_vector(d.get("axis_in_a"), f"{key}.axis_in_a", path),
+            optional_vector(d.get("axis_in_b"), f"{key}.axis_in_b", path),
+            _optional_std_deg(d.get("axis_in_a_std_deg"), f"{key}.axis_in_a_std_deg", path),
+            _optional_std_deg(d.get("axis_in_b_std_deg"), f"{key}.axis_in_b_std_deg", path),
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -421,6 +464,11 @@ class JointSection:
             out["covariance_a"] = self.covariance_a
         if self.covariance_b is not None:
             out["covariance_b"] = self.covariance_b
+        if self.type is not None:
+            out["type"] = self.type
+        for key in ("axis_in_a", "axis_in_a_std_deg", "axis_in_b", "axis_in_b_std_deg"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
         if self.units is not None:
             out["units"] = self.units
         if self.source is not None:
@@ -476,13 +524,38 @@ class JointSection:
             mul(self.covariance_b, factor**2),
             units,
             self.source,
+            self.type,
+            self.axis_in_a,
+            self.axis_in_b,
+            self.axis_in_a_std_deg,
+            self.axis_in_b_std_deg,
         )
 
     def summary_lines(self, unit: str) -> list[str]:
         lines = [f"  joint in A: {_fmt(self.position_in_a, self.position_in_a_std)} {unit}"]
         if self.position_in_b is not None:
             lines.append(f"  joint in B: {_fmt(self.position_in_b, self.position_in_b_std)} {unit}")
+        for cam, axis, std in (
+            ("A", self.axis_in_a, self.axis_in_a_std_deg),
+            ("B", self.axis_in_b, self.axis_in_b_std_deg),
+        ):
+            if axis is not None:
+                sd = "" if std is None else f" +- {std:.3g} deg"
+                lines.append(f"  {self.type or 'hinge'} axis in {cam}: {_fmt(axis, None)}{sd}")
         return lines
+
+
+def _optional_std_deg(value: Any, key: str, path: Source) -> float | None:
+    """A non-negative finite number of degrees, or None."""
+    if value is None:
+        return None
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"'{key}' must be a number of degrees", path=path) from None
+    if not np.isfinite(x) or x < 0:
+        raise InputError(f"'{key}' must be a finite non-negative number of degrees", path=path)
+    return x
 
 
 #: Largest difference between a std and the root of its covariance's diagonal, relative to

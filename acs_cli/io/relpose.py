@@ -292,6 +292,10 @@ class RelposeArtifact(YamlArtifact):
         ``general``.
     time_offset : TimeOffsetSection or None
         When estimated (``--estimate-time-offset``).
+    joint_type : str or None
+        The declared joint when not a ball (``--joint-type``): ``hinge`` (``joint`` then has
+        its axes) or ``rigid`` (a constant ``T_b_a``: no ``joint`` section, there is no
+        joint point). None (no key) for a ball joint.
     header : dict
     source : str or None
     """
@@ -309,6 +313,7 @@ class RelposeArtifact(YamlArtifact):
     header: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     verdict: VerdictSection | None = None
+    joint_type: str | None = None
 
     @property
     def unknown_scale(self) -> bool:
@@ -327,6 +332,11 @@ class RelposeArtifact(YamlArtifact):
 
     def require_joint(self) -> JointSection:
         """The joint in both cameras, or an ``InputError`` naming the missing key."""
+        if self.joint is None and self.joint_type == "rigid":
+            raise InputError(
+                "this relpose.yaml is of a rigid pair (joint_type: rigid): it has no joint",
+                path=self.source,
+            )
         if self.joint is None:
             raise InputError("missing key 'joint.position_in_a'", path=self.source)
         if self.joint.position_in_b is None:
@@ -359,13 +369,16 @@ class RelposeArtifact(YamlArtifact):
             else TimeOffsetSection.parse(doc["time_offset"], path),
             header=header_of(doc),
             source=str(path),
+            joint_type=None if doc.get("joint_type") is None else str(doc["joint_type"]),
         )
 
     def body(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "scenario": self.scenario,
-            "relative_pose": self.relative_pose.to_plain(),
         }
+        if self.joint_type is not None:
+            out["joint_type"] = self.joint_type
+        out["relative_pose"] = self.relative_pose.to_plain()
         if self.joint is not None:
             out["joint"] = self.joint.to_plain()
         if self.scale is not None:
@@ -427,7 +440,7 @@ def load_joint_artifact(path: str | Path) -> JointArtifact | RelposeArtifact:
             raise
     rel = RelposeArtifact.load(p)
     if rel.joint is None:
-        raise InputError("missing key 'joint.position_in_a'", path=p)
+        rel.require_joint()  # raises, saying what is missing (a rigid pair has no joint)
     return rel
 
 

@@ -33,14 +33,13 @@ from acs_cli.core.bundle import (
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.intrinsics import degenerate_distortion, outlier_views
 from acs_cli.core.joint import JointEstimate
-from acs_cli.core.overlap import JOINT, OVERLAP_RIG
+from acs_cli.core.overlap import JOINT
 from acs_cli.core.relpose import (
     TWO_BODY_JOINT,
     JointPrior,
     RelposeEstimate,
     prior_for_rig,
     relpose_refined_by,
-    two_body_rig,
 )
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
@@ -367,7 +366,7 @@ def bundle_overlap(
     ):
         return est, None, [*warnings, "the two cameras saw different boards; no bundle "
                            "adjustment (the overlap scenario needs one shared board)"]  # fmt: skip
-    return _two_body_bundle(OVERLAP_RIG, JOINT, views, est, None, warnings)
+    return _two_body_bundle(est.topology, JOINT, views, est, None, warnings)
 
 
 def _two_body_bundle(
@@ -438,7 +437,7 @@ def bundle_general(
     edge_prior = None if prior is None else prior_for_rig(prior, unknown_scale=False)
     priors = None if edge_prior is None else {TWO_BODY_JOINT: edge_prior}
     rig, sections, warnings = _two_body_bundle(
-        two_body_rig(), TWO_BODY_JOINT, views, est.rig, priors, warnings
+        est.rig.topology, TWO_BODY_JOINT, views, est.rig, priors, warnings
     )
     if sections is None:
         return est, None, warnings

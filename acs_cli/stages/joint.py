@@ -27,6 +27,7 @@ from acs_cli.core.joint import (
 )
 from acs_cli.core.overlap import (
     OVERLAP_RIG,
+    check_overlap_joint_type,
     estimate_joint_overlap,
     estimate_overlap_rig,
     joint_of_rig,
@@ -102,6 +103,10 @@ class JointConfig:
     accept_weak : bool
         Write a result past a refusal level of :mod:`acs_cli.core.quality` anyway, marked
         weak (``--accept-weak``).
+    joint_type : {"ball", "hinge"}
+        Overlap, refined method: the two-body rig's joint (``--joint-type``). A hinge is
+        written with its axis in each camera (``joint.axis_in_a``, ...); a rigid pair has
+        no joint point to locate and is refused.
     """
 
     scenario: str = "fixed_joint"
@@ -113,16 +118,17 @@ class JointConfig:
     length_unit: str = "m"
     bundle: bool = True
     accept_weak: bool = False
+    joint_type: str = "ball"
 
 
 JointRun = StageRun[JointEstimate]
 
 
 def joint_section(est: JointEstimate, length_unit: str) -> JointSection:
-    """The ``joint`` section of an artifact from an estimate."""
+    """The ``joint`` section of an artifact from an estimate (a hinge's with its axes)."""
     return JointSection.from_estimate(
         est.position_in_a, est.covariance_a, est.position_in_b, est.covariance_b, units=length_unit
-    )
+    ).with_axes(est.joint_type, est.axis_in, est.axis_std_deg_in)
 
 
 def _in_one_board_order(
@@ -180,6 +186,12 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     """
     if config.scenario not in SCENARIOS:
         raise InputError(f"unknown scenario {config.scenario!r}")
+    if config.joint_type != "ball" and config.scenario != "overlap":
+        raise InputError(
+            "--joint-type applies to `joint --overlap` and `relpose`; a fixed-joint session "
+            "locates a ball joint (a pivot)"
+        )
+    check_overlap_joint_type(config.joint_type, config.method)
     inputs = {"poses_a": poses_a} | ({"poses_b": poses_b} if poses_b is not None else {})
     check_distinct_output(output, inputs.values())
     check_writable(output)
@@ -206,7 +218,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         if config.method == "paper":
             est = algorithm_1_overlap(Ta, Tb)
         else:
-            rig = estimate_overlap_rig(Ta, Tb)
+            rig = estimate_overlap_rig(Ta, Tb, joint_type=config.joint_type)
             if config.bundle:
                 rig, sections, notes = bundle_overlap((poses_a, poses_b), pair, rig, turned)
                 warnings += notes
@@ -243,7 +255,12 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
                 f"(timestamps {fr.rejected[:10]})"
             )
     if config.scenario == "overlap":
-        findings = overlap_findings(est, pair, poses_by_key["ab"], config.length_unit)
+        # the diagnosis refits ball joints: a declared hinge is not second-guessed by them
+        findings = (
+            overlap_findings(est, pair, poses_by_key["ab"], config.length_unit)
+            if config.joint_type == "ball"
+            else []
+        )
     else:
         findings = fixed_joint_findings(est, {"a": ta, "b": tb}, config.length_unit)
     verdict = judge(joint_verdict_measures(est, poses_by_key), config.accept_weak, findings)
@@ -268,6 +285,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         "joint",
         inputs,
         method=f"{config.method}: {METHOD_TEXT[(config.scenario, config.method)]}"
+        + ("" if config.joint_type == "ball" else f"; the joint declared a {config.joint_type}")
         + (
             "; then a bundle adjustment on the detected corners (intrinsics, joint and "
             "per-frame rotations; overlap: both cameras together) for the cameras listed in "

@@ -19,7 +19,13 @@ from acs_cli.core.quality import (
     length_scale,
     relative_pose_measures,
 )
-from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose, paper_pose_std
+from acs_cli.core.relpose import (
+    JointPrior,
+    RelposeEstimate,
+    check_joint_type,
+    estimate_relpose,
+    paper_pose_std,
+)
 from acs_cli.core.rig_solve import TEST_SETTLED_NOISE
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.time_offset import (
@@ -83,6 +89,10 @@ class RelposeConfig:
     accept_weak : bool
         Write a result past a refusal level of :mod:`acs_cli.core.quality` anyway, marked
         weak (``--accept-weak``).
+    joint_type : {"ball", "hinge", "rigid"}
+        The two-body rig's joint (``--joint-type``; refined method only unless ball). A
+        hinge adds its axis in each camera to ``joint``; a rigid mount has no joint point:
+        ``relpose.yaml`` then has no ``joint`` section, and a joint file is refused.
     """
 
     method: str = "refined"
@@ -99,6 +109,7 @@ class RelposeConfig:
     estimate_time_offset: bool = False
     max_offset: float = DEFAULT_MAX_OFFSET
     accept_weak: bool = False
+    joint_type: str = "ball"
 
 
 RelposeRun = StageRun[RelposeEstimate]
@@ -160,9 +171,16 @@ def run_relpose(
     DegenerateMotionError
         The motion cannot determine the answer (nothing is written).
     """
+    check_joint_type(config.joint_type, config.method)
+    rigid = config.joint_type == "rigid"
+    if rigid and joint is not None:
+        raise InputError(
+            "a rigid joint has no joint point to take from a joint file: drop --joint "
+            "(--joint-metric), or declare the joint a ball or a hinge"
+        )
     if config.self_calibrate and joint is not None:
         raise InputError("--self-calibrate estimates the joint; do not also give a joint file")
-    if not config.self_calibrate and joint is None:
+    if not config.self_calibrate and joint is None and not rigid:
         raise InputError(
             "give the joint (--joint joint.yaml or --joint-metric joint.yaml), or "
             "--self-calibrate to estimate it from this recording"
@@ -199,6 +217,7 @@ def run_relpose(
             unknown_scale=config.unknown_scale,
             reject_outliers=False,
             noise_tolerance=TEST_SETTLED_NOISE,
+            joint_type=config.joint_type,
         ).residuals
 
     offset = None
@@ -215,6 +234,7 @@ def run_relpose(
         reference=config.reference,
         method=config.method,
         accept_weak=config.accept_weak,
+        joint_type=config.joint_type,
     )
     if offset is None and config.method == "refined":
         warnings += _synchronisation(traj_a, traj_b, fit)
@@ -241,16 +261,25 @@ def run_relpose(
         reference_timestamp_b=float(pair.b.timestamps[est.reference]),
         T_wb_wa=est.T_wb_wa,
     )
-    joint_sec = JointSection.from_estimate(
-        est.position_in_a,
-        est.covariance_a,
-        est.position_in_b,
-        est.covariance_b,
-        source="self-calibrated from this recording"
-        if est.self_calibrated
-        else "refined from the given joint and this recording"
-        if est.method == "refined"
-        else "the given joint, position_in_a refined by the paper's LM",
+    # a rigid mount has no joint point: no joint section (the header's method says rigid)
+    joint_sec = (
+        JointSection.from_estimate(
+            est.position_in_a,
+            est.covariance_a,
+            est.position_in_b,
+            est.covariance_b,
+            source="self-calibrated from this recording"
+            if est.self_calibrated
+            else "refined from the given joint and this recording"
+            if est.method == "refined"
+            else "the given joint, position_in_a refined by the paper's LM",
+        ).with_axes(
+            est.joint_type,
+            _axes(est.axis_in_a, est.axis_in_b),
+            _axes(est.axis_in_a_std_deg, est.axis_in_b_std_deg),
+        )
+        if est.has_point
+        else None
     )
     scale = None
     if config.unknown_scale:
@@ -280,20 +309,28 @@ def run_relpose(
         bundle_adjustment=bundle_section or {},
     )
     mode = (
-        "self-calibration"
+        "a rigid mount (constant T_b_a: hand-eye calibration; no joint point)"
+        if rigid
+        else "self-calibration"
         if est.self_calibrated
         else ("Algorithm IV" if config.unknown_scale else "Algorithm III")
     )
+    if config.joint_type == "hinge":
+        mode += ", the joint declared a hinge (its point: the axis point nearest A's centre)"
     method_text = (
         f"paper: {mode} as published (linear eq. (24), SVD projection, LM over roll, pitch, "
         "yaw, T_BA, O_A" + (", phi" if config.unknown_scale else "") + ")"
         if config.method == "paper"
-        else f"refined: {mode}; joint in both cameras, world-to-world "
+        else f"refined: {mode}; "
+        + ("T_b_a" if rigid else "joint in both cameras")
+        + ", world-to-world "
         + ("similarity" if config.unknown_scale else "rigid transform")
         + " by weighted ML over all frames, reference poses corrected by the joint constraint"
         + (
             "; then a bundle adjustment on both cameras' corners (intrinsics, joint, "
-            "world-to-world transform, per-frame poses of A and joint rotations)"
+            "world-to-world transform, per-frame poses of A"
+            + ("" if rigid else " and joint rotations")
+            + ")"
             if bundle_section is not None
             else ""
         )
@@ -329,6 +366,7 @@ def run_relpose(
         ),
         header=header,
         source=str(output),
+        joint_type=None if config.joint_type == "ball" else config.joint_type,
     )
     art.save(output)
     return StageRun(est, to_plain(art.to_doc()), output, warnings)
@@ -345,6 +383,8 @@ def relpose_findings(
     residual is suspicious against the rig's length scale in B (the verdict's scale);
     ``timed``: also try the clocks (not when the offset was estimated)."""
     Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
+    if est.joint_type != "ball":  # the diagnosis refits ball joints
+        return []
     if not fit_is_suspicious(est.residual_rms, length_scale(est.position_in_b, Tb)):
         return []
     unit = "B units" if config.unknown_scale else config.length_unit
@@ -374,10 +414,12 @@ def relpose_verdict_measures(est: RelposeEstimate, pair: PairedTrajectories) -> 
     each camera (B's with the residual, which is in B's units, and the rejected share), and
     ``T_b_a`` (and ``phi_ba`` under unknown scale)."""
     Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
-    out = joint_measures(est.position_in_a, est.covariance_a, Ta, None, None, "the joint in A")
-    out += joint_measures(
-        est.position_in_b, est.covariance_b, Tb, est.residual_rms, est.inliers, "the joint in B"
-    )
+    out: list[Measure] = []
+    if est.has_point:
+        out += joint_measures(est.position_in_a, est.covariance_a, Ta, None, None, "the joint in A")
+        out += joint_measures(
+            est.position_in_b, est.covariance_b, Tb, est.residual_rms, est.inliers, "the joint in B"
+        )
     out += relative_pose_measures(
         est.T_b_a,
         est.covariance,
@@ -454,6 +496,11 @@ def _synchronisation(
         f"{100 * (1 - ratio):.0f}% smaller: the cameras are probably not synchronised; "
         "estimate the offset with --estimate-time-offset"
     ]
+
+
+def _axes(a: Any, b: Any) -> dict[str, Any]:
+    """``{"a": a, "b": b}`` without the Nones."""
+    return {k: v for k, v in (("a", a), ("b", b)) if v is not None}
 
 
 def _float_or_none(x: Any) -> float | None:

@@ -397,6 +397,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             method=jspec.method,
             bundle=jspec.bundle,
             accept_weak=config.accept_weak,
+            joint_type=jspec.joint_type,
         )
         pa, pb = poses["a"], poses.get("b")
         jout = joint_file
@@ -414,7 +415,9 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "method": jspec.method,
                     "bundle": jspec.bundle,
                     "accept_weak": config.accept_weak,
-                },
+                }
+                # a ball's options as before (a resumed run's stages stay done)
+                | ({"joint_type": jspec.joint_type} if jspec.joint_type != "ball" else {}),
                 [joint_file],
                 do_joint,
             )
@@ -428,6 +431,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             reference=rel.reference,
             bundle=rel.bundle,
             accept_weak=config.accept_weak,
+            joint_type=rel.joint_type,
         )
         rout = out / "relpose.yaml"
         ga, gb = general["a"], general["b"]
@@ -448,7 +452,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "reference": rel.reference,
                     "bundle": rel.bundle,
                     "accept_weak": config.accept_weak,
-                },
+                }
+                | ({"joint_type": rel.joint_type} if rel.joint_type != "ball" else {}),
                 [rout],
                 do_relpose,
             )

@@ -60,9 +60,11 @@ def _scene(
     sigma_px: float,
     n: int = 20,
     models: tuple[str, str] = ("pinhole", "pinhole"),
+    joint: str = "ball",
 ) -> dict:
     """Camera A looks at board A 0.75 m away; B hangs on a joint beside A and looks at the
-    same board (overlap) or at its own board behind A (general)."""
+    same board (overlap) or at its own board behind A (general). ``joint``: ``hinge`` turns
+    B about one axis (its point the axis point nearest A's centre), ``rigid`` not at all."""
     ia, ib = _intrinsics(rng, models[0]), _intrinsics(rng, models[1])
     up = np.array([0.0, -1.0, 0.0])
     T_wa_a_rest = _look_at(CENTRE + np.array([-0.15, 0, -0.75]), CENTRE, up)
@@ -81,6 +83,11 @@ def _scene(
     o_a = (np.linalg.inv(T_wa_a_rest) @ [*joint_w, 1])[:3]
     o_b = (np.linalg.inv(T_wa_b_rest) @ [*joint_w, 1])[:3]
     T_a_b_rest = np.linalg.inv(T_wa_a_rest) @ T_wa_b_rest
+    axis_b = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
+    axis_a = T_a_b_rest[:3, :3] @ axis_b
+    if joint == "hinge":  # the axis point nearest A's centre, the same point in B
+        o_a = o_a - (o_a @ axis_a) * axis_a
+        o_b = (np.linalg.inv(T_a_b_rest) @ [*o_a, 1])[:3]
     T_wb_wa = np.linalg.inv(T_wa_boardb)
     Ta, Tb, ca, cb, Tab = [], [], [], [], []
     while len(Ta) < n:
@@ -88,7 +95,12 @@ def _scene(
         d[:3, :3] = se3.matrix_from_rotvec(rng.normal(0, 0.08, 3))
         d[:3, 3] = rng.normal(0, 0.05, 3)
         T_wa_a = T_wa_a_rest @ d
-        R_ab = T_a_b_rest[:3, :3] @ se3.matrix_from_rotvec(rng.normal(0, 0.12, 3))
+        if joint == "ball":
+            R_ab = T_a_b_rest[:3, :3] @ se3.matrix_from_rotvec(rng.normal(0, 0.12, 3))
+        elif joint == "hinge":
+            R_ab = T_a_b_rest[:3, :3] @ se3.matrix_from_rotvec(rng.normal(0, 0.2) * axis_b)
+        else:
+            R_ab = T_a_b_rest[:3, :3]
         T_a_b = np.eye(4)
         T_a_b[:3, :3], T_a_b[:3, 3] = R_ab, o_a - R_ab @ o_b
         T_wb_b = T_wb_wa @ T_wa_a @ T_a_b
@@ -107,7 +119,7 @@ def _scene(
     return {
         "ia": ia, "ib": ib, "o_a": o_a, "o_b": o_b, "T_wa_a": np.array(Ta),
         "T_wb_b": np.array(Tb), "T_b_a": np.linalg.inv(np.array(Tab)), "T_wb_wa": T_wb_wa,
-        "ca": np.array(ca), "cb": np.array(cb),
+        "ca": np.array(ca), "cb": np.array(cb), "axis_a": axis_a, "axis_b": axis_b,
     }  # fmt: skip
 
 
@@ -208,6 +220,64 @@ def test_exact_recovery(rng: np.random.Generator, overlap: bool) -> None:
     assert ba.success
     _assert_exact(ba, s)
     np.testing.assert_allclose(ba.T_wb_wa, s["T_wb_wa"], atol=1e-8)
+
+
+@pytest.mark.parametrize("joint", ["hinge", "rigid"])
+def test_a_hinge_or_a_rigid_pair_recovered_exactly(rng: np.random.Generator, joint: str) -> None:
+    """``relpose --joint-type``'s bundle: the two-body rig of a hinge or a rigid mount (its
+    own topology) refined on noise-free corners gives the truth: ``T_b_a``, the hinge's
+    point and axis in each camera, the intrinsics (general scenario)."""
+    s = _scene(rng, False, sigma_px=0.0, joint=joint)
+    n = s["ca"].shape[0]
+    Ta = _perturb(s["T_wa_a"], rng, 0.01, 0.005)
+    Tb = _perturb(s["T_wb_b"], rng, 0.01, 0.005)
+    start = None
+    if joint == "hinge":
+        start = JointPrior(s["o_a"], s["o_b"], np.eye(3) * 1e-4, np.eye(3) * 1e-4)
+    rel = estimate_relpose(Ta, Tb, start, joint_type=joint, accept_weak=True)
+    assert rel.rig is not None and rel.rig.topology.joints[0].type == joint
+    off = {c: np.r_[1.01, 0.99, np.ones(s[f"i{c}"].size - 2)] for c in ("a", "b")}
+    views = {
+        c: CameraViews(s[f"c{c}"], np.isfinite(s[f"c{c}"]).all(axis=2), BOARD, s[f"i{c}"] * off[c])
+        for c in ("a", "b")
+    }
+    ba = bundle_adjust_rig(rel.rig.topology, views, rel.rig, np.arange(n))
+    assert ba.success and ba.rms_px["a"] < 1e-6 and ba.rms_px["b"] < 1e-6
+    for c in ("a", "b"):
+        np.testing.assert_allclose(ba.intrinsics[c], s[f"i{c}"], rtol=1e-6, atol=1e-8)
+    r = relpose_refined_by(rel, ba.estimate)
+    np.testing.assert_allclose(r.T_b_a, s["T_b_a"][0], atol=1e-7)
+    np.testing.assert_allclose(r.T_wb_wa, s["T_wb_wa"], atol=1e-7)
+    if joint == "hinge":
+        np.testing.assert_allclose(r.position_in_a, s["o_a"], atol=1e-7)
+        np.testing.assert_allclose(r.position_in_b, s["o_b"], atol=1e-7)
+        assert r.axis_in_a is not None and r.axis_in_b is not None
+        assert abs(abs(float(r.axis_in_a @ s["axis_a"])) - 1) < 1e-10
+        assert abs(abs(float(r.axis_in_b @ s["axis_b"])) - 1) < 1e-10
+    else:
+        assert not r.has_point and r.axis_in_a is None
+
+
+def test_an_overlapping_hinge_recovered_exactly(rng: np.random.Generator) -> None:
+    """``joint --overlap --joint-type hinge``'s bundle: the overlap's hinge rig refined on
+    noise-free corners of the shared board gives the hinge's point and axes."""
+    s = _scene(rng, True, sigma_px=0.0, joint="hinge")
+    n = s["ca"].shape[0]
+    Ta = _perturb(s["T_wa_a"], rng, 0.01, 0.005)
+    Tb = _perturb(s["T_wb_b"], rng, 0.01, 0.005)
+    est = estimate_overlap_rig(Ta, Tb, joint_type="hinge")
+    views = {
+        c: CameraViews(s[f"c{c}"], np.isfinite(s[f"c{c}"]).all(axis=2), BOARD, s[f"i{c}"] * 1.0)
+        for c in ("a", "b")
+    }
+    ba = bundle_adjust_rig(est.topology, views, est, np.arange(n))
+    assert ba.success and ba.rms_px["a"] < 1e-6 and ba.rms_px["b"] < 1e-6
+    j = joint_of_rig(ba.estimate, n)
+    assert j.joint_type == "hinge"
+    np.testing.assert_allclose(j.position_in_a, s["o_a"], atol=1e-7)
+    np.testing.assert_allclose(np.asarray(j.position_in_b), s["o_b"], atol=1e-7)
+    assert abs(abs(float(j.axis_in["a"] @ s["axis_a"])) - 1) < 1e-10
+    assert abs(abs(float(j.axis_in["b"] @ s["axis_b"])) - 1) < 1e-10
 
 
 @pytest.mark.parametrize("overlap", [True, False], ids=["overlap", "general"])

@@ -1,0 +1,228 @@
+"""``--joint-type`` on ``acscal relpose`` and ``acscal joint --overlap`` (issue 19, item 4):
+the two-body rig declared a hinge or a rigid mount, through the real CLI on simulated pairs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_runner import acscal
+
+from acs_cli.core import se3
+from acs_cli.errors import InputError
+from acs_cli.io.joint import JointArtifact, JointSection
+from acs_cli.io.relpose import RelposeArtifact, load_joint_artifact
+from acs_cli.io.trajectory import write_tum
+from sample_data_gen.acs_sim import add_pose_noise
+from sample_data_gen.rig_sim import RigRecording, rig_recording
+
+SIGMA_ROT_DEG, SIGMA_TRANS = 0.1, 0.002
+
+
+def _pair(root: Path, jtype: str, seed: int) -> tuple[RigRecording, dict[str, Path]]:
+    """A two-camera rig of ``jtype`` (cameras a, b; general motion): each camera's noisy
+    trajectory in its own world (``a``, ``b``) and both in the physical world (``wa``,
+    ``wb``, noisy too), as TUM files."""
+    rng = np.random.default_rng(seed)
+    rec = rig_recording(
+        rng, 80, joints=(("j", ("a", "b"), jtype),), reference="a",
+        sigma_rot_deg=SIGMA_ROT_DEG, sigma_trans=SIGMA_TRANS,
+    )  # fmt: skip
+    files = {}
+    for key, T in (
+        ("a", rec.T_wc_c["a"]),
+        ("b", rec.T_wc_c["b"]),
+        ("wa", add_pose_noise(rng, rec.T_W_c["a"], SIGMA_ROT_DEG, SIGMA_TRANS)),
+        ("wb", add_pose_noise(rng, rec.T_W_c["b"], SIGMA_ROT_DEG, SIGMA_TRANS)),
+    ):
+        files[key] = root / f"{jtype}_{key}.tum"
+        write_tum(files[key], rec.timestamps, T)
+    return rec, files
+
+
+@pytest.fixture(scope="module")
+def hinge(tmp_path_factory: pytest.TempPathFactory) -> tuple[RigRecording, dict[str, Path]]:
+    return _pair(tmp_path_factory.mktemp("hinge"), "hinge", 7)
+
+
+@pytest.fixture(scope="module")
+def rigid(tmp_path_factory: pytest.TempPathFactory) -> tuple[RigRecording, dict[str, Path]]:
+    return _pair(tmp_path_factory.mktemp("rigid"), "rigid", 8)
+
+
+def _angle_deg(u: np.ndarray, v: np.ndarray) -> float:
+    """The angle between two lines (directions up to sign), degrees."""
+    c = abs(float(u @ v)) / (np.linalg.norm(u) * np.linalg.norm(v))
+    return float(np.degrees(np.arccos(min(1.0, c))))
+
+
+def _check_pose(art: RelposeArtifact, T_true: np.ndarray, k: float = 5.0) -> None:
+    """``T_b_a`` within ``k`` of its stds of the truth (right rotation perturbation, t)."""
+    T = np.asarray(art.relative_pose.T_b_a)
+    C = np.asarray(art.relative_pose.T_b_a_covariance)
+    std = np.sqrt(np.diag(C))
+    d_rot = se3.rotvec_from_matrix(T_true[:3, :3].T @ T[:3, :3])
+    d_t = T[:3, 3] - T_true[:3, 3]
+    assert np.all(np.abs(d_rot) < k * std[:3] + 1e-9), (d_rot, std[:3])
+    assert np.all(np.abs(d_t) < k * std[3:] + 1e-9), (d_t, std[3:])
+
+
+def _check_hinge_axes(joint: JointSection, rec: RigRecording) -> None:
+    e = rec.edges["j"]
+    assert joint.type == "hinge"
+    assert e.axis_p is not None and e.axis_q is not None
+    for axis, std, truth in (
+        (joint.axis_in_a, joint.axis_in_a_std_deg, e.axis_p),
+        (joint.axis_in_b, joint.axis_in_b_std_deg, e.axis_q),
+    ):
+        assert axis is not None and std is not None
+        assert abs(np.linalg.norm(axis) - 1.0) < 1e-9
+        assert _angle_deg(np.asarray(axis), truth) < 4.0 * std + 1e-6, (axis, truth, std)
+    # the point on the axis nearest A's centre, and the same point in B
+    for pos, cov, truth in (
+        (joint.position_in_a, joint.covariance("a"), e.o_p),
+        (joint.position_in_b, joint.covariance("b"), e.o_q),
+    ):
+        err = np.linalg.norm(np.asarray(pos) - truth)
+        assert err < 5.0 * np.sqrt(np.trace(cov)) + 1e-9, (pos, truth)
+    assert abs(float(np.asarray(joint.position_in_a) @ np.asarray(joint.axis_in_a))) < 1e-6
+
+
+def test_relpose_self_calibrates_a_hinge(
+    hinge: tuple[RigRecording, dict[str, Path]], tmp_path: Path
+) -> None:
+    rec, f = hinge
+    out = tmp_path / "relpose.yaml"
+    res = acscal(
+        "relpose", "--self-calibrate", "--joint-type", "hinge",
+        "--poses-a", f["a"], "--poses-b", f["b"], "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "joint.axis_in_a" in res.stdout
+    art = RelposeArtifact.load(out)
+    assert art.joint_type == "hinge"
+    assert art.joint is not None
+    _check_hinge_axes(art.joint, rec)
+    _check_pose(art, rec.T_cam_ref(0)["b"])
+    assert "declared a hinge" in str(art.header["method"])
+
+
+def test_joint_overlap_locates_a_hinge_and_relpose_takes_it(
+    hinge: tuple[RigRecording, dict[str, Path]], tmp_path: Path
+) -> None:
+    rec, f = hinge
+    joint = tmp_path / "joint.yaml"
+    res = acscal(
+        "joint", "--overlap", "--joint-type", "hinge",
+        "--poses-a", f["wa"], "--poses-b", f["wb"], "-o", joint,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    art = JointArtifact.load(joint)
+    _check_hinge_axes(art.joint, rec)
+    # as a ball, the same motion is refused: it bends about one axis only
+    res = acscal(
+        "joint", "--overlap", "--poses-a", f["wa"], "--poses-b", f["wb"], "-o", tmp_path / "b.yaml"
+    )
+    assert res.returncode != 0 and "axis" in res.stderr
+    # the hinge's point as the prior of the relative pose
+    out = tmp_path / "relpose.yaml"
+    res = acscal(
+        "relpose", "--joint", joint, "--joint-type", "hinge",
+        "--poses-a", f["a"], "--poses-b", f["b"], "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    rel = RelposeArtifact.load(out)
+    assert rel.joint is not None and rel.joint.axis_in_a is not None
+    _check_pose(rel, rec.T_cam_ref(0)["b"])
+
+
+def test_relpose_rigid_recovers_a_constant_pose(
+    rigid: tuple[RigRecording, dict[str, Path]], tmp_path: Path
+) -> None:
+    rec, f = rigid
+    poses = {}
+    for k in (0, 40):
+        out = tmp_path / f"relpose_{k}.yaml"
+        res = acscal(
+            "relpose", "--joint-type", "rigid", "--reference", str(k),
+            "--poses-a", f["a"], "--poses-b", f["b"], "-o", out,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        art = RelposeArtifact.load(out)
+        assert art.joint_type == "rigid"
+        assert art.joint is None  # no joint point: no joint section
+        assert "joint" not in out.read_text().split("relative_pose:")[1].split("quality:")[0]
+        _check_pose(art, rec.T_cam_ref(k)["b"])
+        poses[k] = art.relative_pose
+    # one constant T_b_a whatever the reference instant (the truth's too)
+    assert np.allclose(rec.T_cam_ref(0)["b"], rec.T_cam_ref(40)["b"])
+    T0, T40 = np.asarray(poses[0].T_b_a), np.asarray(poses[40].T_b_a)
+    std = np.sqrt(np.diag(np.asarray(poses[0].T_b_a_covariance)))
+    assert np.degrees(np.linalg.norm(se3.rotvec_from_matrix(T0[:3, :3].T @ T40[:3, :3]))) < max(
+        0.5 * np.degrees(std[:3].max()), 1e-6
+    )
+    assert np.linalg.norm(T0[:3, 3] - T40[:3, 3]) < max(0.5 * std[3:].max(), 1e-9)
+    # its relpose.yaml is no joint for a later --joint
+    with pytest.raises(InputError, match="rigid"):
+        load_joint_artifact(tmp_path / "relpose_0.yaml")
+
+
+def test_the_default_is_the_ball_joint_unchanged(tmp_path: Path) -> None:
+    """``--joint-type ball`` writes what no option writes, byte for byte but the time."""
+    ball = _pair(tmp_path, "ball", 9)[1]
+    texts = []
+    for extra in ((), ("--joint-type", "ball")):
+        out = tmp_path / f"relpose{len(extra)}.yaml"
+        res = acscal(
+            "relpose", "--self-calibrate", *extra,
+            "--poses-a", ball["a"], "--poses-b", ball["b"], "-o", out,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        texts.append([ln for ln in out.read_text().splitlines() if not ln.startswith("created:")])
+    assert texts[0] == texts[1]
+    assert not any("joint_type" in ln or "axis_in" in ln for ln in texts[0])
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (("joint", "--overlap", "--joint-type", "rigid"), "rigid pair has no joint point"),
+        (("joint", "--fixed-joint", "--joint-type", "hinge"), "--joint-type applies to"),
+        (("joint", "--overlap", "--joint-type", "hinge", "--method", "paper"), "ball joint only"),
+        (("relpose", "--self-calibrate", "--joint-type", "hinge", "--method", "paper"),
+         "ball joint only"),
+    ],
+)  # fmt: skip
+def test_refusals_are_one_line_and_exit_2(
+    hinge: tuple[RigRecording, dict[str, Path]],
+    tmp_path: Path,
+    args: tuple[str, ...],
+    words: str,
+) -> None:
+    _, f = hinge
+    a, b = (f["wa"], f["wb"]) if args[0] == "joint" else (f["a"], f["b"])
+    res = acscal(*args, "--poses-a", a, "--poses-b", b, "-o", tmp_path / "out.yaml")
+    assert res.returncode == 2, res.stderr
+    assert words in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out.yaml").exists()
+
+
+def test_rigid_refuses_a_joint_file(
+    hinge: tuple[RigRecording, dict[str, Path]], tmp_path: Path
+) -> None:
+    _, f = hinge
+    joint = tmp_path / "joint.yaml"
+    res = acscal(
+        "joint", "--overlap", "--joint-type", "hinge",
+        "--poses-a", f["wa"], "--poses-b", f["wb"], "-o", joint,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    res = acscal(
+        "relpose", "--joint", joint, "--joint-type", "rigid",
+        "--poses-a", f["a"], "--poses-b", f["b"], "-o", tmp_path / "out.yaml",
+    )  # fmt: skip
+    assert res.returncode == 2
+    assert "rigid joint has no joint point" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
