@@ -16,8 +16,9 @@ The relative pose at the reference instant ``k`` follows as
 ``method="paper"`` runs the paper's own formulation (:func:`acs_cli.core.paper.relative_pose_paper`:
 eq. (24) linear, then Levenberg-Marquardt taking the reference frame as exact). The refined
 method is the rig engine on a two-body rig (:func:`acs_cli.core.rig_solve.estimate_rig`:
-cameras ``a`` and ``b``, one ball joint, each camera in its own world, ``b`` the reference so
-that lengths come out in B's units): every frame alike, the joint in both cameras together
+cameras ``a`` and ``b``, one joint (a ball unless ``joint_type`` says hinge or rigid),
+each camera in its own world, ``b`` the reference so that lengths come out in B's units):
+every frame alike, the joint in both cameras together
 with ``X``, frames weighted by their noise, a joint from a fixed-joint calibration as a
 prior, outliers rejected by the studentised test, and the two reference poses corrected by
 the joint constraint. This module only translates between the pair's vocabulary and the
@@ -270,7 +271,7 @@ def estimate_relpose(
                 "about two or more axes"
                 + (
                     ", or give the joint from a fixed-joint session (--joint)"
-                    if self_cal
+                    if self_cal and joint_type != "rigid"
                     else ", or use the refined method, which handles it with a known joint"
                 ),
                 details={"diagnosis": notes},
@@ -402,17 +403,20 @@ def _refined(
             noise_tolerance=noise_tolerance,
         )
     except DegenerateMotionError as e:
+        if "model_refuse_deg" in (e.details or {}):
+            raise  # the poses do not fit the declared joint type: the rig's words say which
         # what the motion lacks, with the worlds' rotation from the linear start
         R_w = se3.project_to_rotation(similarity_from_lifted(Ta, Tb, None)[0])[0]
         notes = motion_diagnosis(Ta, Tb, R_w)
         why = "; ".join(v for v in notes.values() if v) or "the motion is too narrow for the noise"
+        wants_joint = self_cal and joint_type != "rigid"  # a rigid mount has no point
         raise DegenerateMotionError(
             "the motion does not determine the relative pose"
-            + (" and the joint (self-calibration)" if self_cal else "")
+            + (" and the joint (self-calibration)" if wants_joint else "")
             + f" ({why}). Record general motion: the rig turning about several axes while it "
             "moves and bends"
-            + (", or give the joint from a fixed-joint session (--joint)" if self_cal else "")
-            + ".",
+            + (", or give the joint from a fixed-joint session (--joint)" if wants_joint else "")
+            + f". (The rig's solve: {e.message})",
             details={"rig": e.details, "diagnosis": notes},
         ) from None
     est = relpose_from_rig(rig, n, unknown_scale, self_cal)

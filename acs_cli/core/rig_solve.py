@@ -28,14 +28,16 @@ its first world as its own frame (no unknowns: nothing could tell them). The rig
 A camera shared by two edges ties them together: its world's ``X`` appears in both. Scales are
 free for every camera whose units differ from the reference's (unknown scale on either
 side). Joint priors (e.g. from fixed-joint sessions) add rows. The reference instant's poses
-are unknowns too, tied to their measurements by the pose noise, so that ``T_cam_ref`` is
-the maximum-likelihood pose and not the noisy measured one.
+get corrections tied to their measurements by the pose noise: held at zero while the rig is
+estimated (every frame alike, so which instant is the reference moves no estimate), then
+solved with the rest held and that instant's constraints made hard, so that ``T_cam_ref``
+fits the joints and is not the noisy measured pose.
 
 Weights: the point residual of a ball or hinge has covariance ``theta_t I + theta_r L_i``
 with ``L_i`` the lever shapes of both cameras (as in :mod:`acs_cli.core.estimation`), the
 noise levels fitted per edge; axis and rigid residuals have one fitted variance each. The
-solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`: scipy's
-``least_squares``, trust-region steps on the analytic sparse Jacobian) with
+solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`:
+Levenberg-Marquardt on the normal equations of the analytic sparse Jacobian) with
 refitting the noise levels, and rejects per edge the frames whose externally studentised
 residual is beyond the threshold the two-camera estimators use (:func:`_reject`), then, as
 they do, the worst frames left out and predicted by a refit without them, alone or in
@@ -82,9 +84,9 @@ UNDETERMINED_STD_FRACTION = JOINT_STD.refuse
 MIN_SHARED_WORLD_FRAMES = 3
 #: Largest share of an edge's frames rejected as outliers.
 MAX_OUTLIER_FRACTION = 0.3
-#: The reference instant's constraint rows are weighted this much more than the others: the
-#: poses there are unknowns (tied to their measurements by the pose noise), and the joint
-#: constraints hold for them exactly, as for the two-camera estimator's reference poses.
+#: When the reference instant's pose corrections are solved (after the estimate), its
+#: constraint rows are weighted this much more than the others: the corrected poses fit the
+#: joints (nearly) exactly.
 REFERENCE_GAIN = 1e2
 #: Noise-level refits (each followed by a solve), at most; they stop when the levels settle
 #: (move by less than SETTLED_NOISE, relative): the solution is then the fixed point of the
@@ -467,6 +469,9 @@ class _State:
     # f = exp(x[col]) converting reference units to the prior's (1 where col is None)
     priors: list[tuple[str, int, FloatArray, FloatArray, int | None]]  # (joint, at, value, W, col)
     length: float = 1.0  # the rig's length scale (reference units), for noise floors
+    # unknowns the estimate fits (the reference instant's corrections held apart): the
+    # degrees of freedom the noise levels are corrected for
+    n_free: int = 0
 
     def frames_of(self, c: str) -> np.ndarray:
         """``(n,)`` bool: the instants where camera ``c`` is on an edge."""
@@ -995,7 +1000,7 @@ def _fit_without(
     # a test's fit: its noise levels to 2% (the statistic's own sampling error is larger)
     for _ in range(TEST_REWEIGHT_ROUNDS):
         before = noise
-        noise = _refit_weights(st, x_loo, st.L.size)
+        noise = _refit_weights(st, x_loo, st.n_free)
         if before and _settled(before, noise, TEST_SETTLED_NOISE):
             break
         x_loo = solve(x_loo)
@@ -1072,7 +1077,7 @@ def _reject_left_out(
         m[np.setdiff1d(f, out)] = True
         dropped += out.size
     if dropped:
-        _refit_weights(st, x_loo, st.L.size)
+        _refit_weights(st, x_loo, st.n_free)
         return dropped, x_loo
     groups = {
         name: f[: estimation.MASKING_GROUP]
@@ -1098,9 +1103,9 @@ def _reject_left_out(
             else:
                 m[g] = True
         if dropped:
-            _refit_weights(st, x_g, st.L.size)
+            _refit_weights(st, x_g, st.n_free)
             return dropped, x_g
-    _refit_weights(st, x, st.L.size)
+    _refit_weights(st, x, st.n_free)
     return 0, x
 
 
@@ -1249,7 +1254,7 @@ def estimate_rig(
     reference_frame : int
         The instant at which ``T_cam_ref`` is reported.
     priors : dict of EdgePrior, optional
-        Joints known beforehand, by joint name (reference units).
+        Joints known beforehand, by joint name (in the units each says, ``EdgePrior.units``).
     reject_outliers : bool
     accept_weak : bool
         Return joints whose std alone is past the refusal level instead of refusing them
@@ -1336,9 +1341,11 @@ def estimate_rig(
         """The log-scale column converting reference units to the prior's (None: same)."""
         if pr.units == "metre":
             return L.metre
-        if pr.units == "own":
-            ok = np.flatnonzero(tracks[c].valid)
-            w = int(wg.widx[c][k] if tracks[c].valid[k] else wg.widx[c][ok[0]])
+        if pr.units == "own":  # the world _own_world reports its own units in
+            on = np.zeros(tracks[c].valid.size, bool)
+            for j in topology.edges_of(c):
+                on[frames[j.name]] = True
+            w = int(wg.widx[c][k] if on[k] else wg.widx[c][int(np.argmax(on))])
             return L.logs.get(w)
         return None
 
@@ -1426,6 +1433,7 @@ def estimate_rig(
         w_delta={c: np.full(6, 1e3) for c in with_delta},
         priors=prior_rows,
         length=max(travel, 1e-9),
+        n_free=L.size - 6 * len(L.delta),
     )
 
     def fun(x: FloatArray) -> FloatArray:
@@ -1474,7 +1482,7 @@ def estimate_rig(
         noise: dict[str, dict[str, float]] = {}
         for _ in range(REWEIGHT_ROUNDS):
             before = noise
-            noise = _refit_weights(st, x, L.size)
+            noise = _refit_weights(st, x, st.n_free)
             if before and _settled(before, noise, noise_tolerance):
                 break
             x, nf, _sol = run(x)
