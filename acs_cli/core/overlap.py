@@ -29,6 +29,7 @@ from acs_cli.core.joint import (
     rotation_spread,
 )
 from acs_cli.core.paper import algorithm_1_overlap, algorithm_1_solve
+from acs_cli.core.relpose import check_joint_type
 from acs_cli.core.rig import RigTopology, rig_topology
 from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
 from acs_cli.core.se3 import FloatArray
@@ -36,7 +37,6 @@ from acs_cli.errors import DegenerateMotionError, InputError
 
 __all__ = [
     "JOINT",
-    "OVERLAP_JOINT_TYPES",
     "OVERLAP_RIG",
     "check_overlap_joint_type",
     "estimate_joint_overlap",
@@ -49,9 +49,6 @@ __all__ = [
 JOINT = "joint"
 #: Camera A (the reference) and camera B joined by a ball joint.
 OVERLAP_RIG = rig_topology(["a", "b"], [(JOINT, ["a", "b"], "ball")], "a")
-#: The joint types an overlap can declare (``joint --overlap --joint-type``): a rigid pair
-#: has no joint point to locate.
-OVERLAP_JOINT_TYPES = ("ball", "hinge")
 
 
 def overlap_rig(joint_type: str = "ball") -> RigTopology:
@@ -70,15 +67,7 @@ def check_overlap_joint_type(joint_type: str, method: str = "refined") -> None:
             "a rigid pair has no joint point for `joint --overlap` to locate; calibrate a "
             "rigid pair's T_b_a with `acscal relpose --joint-type rigid`"
         )
-    if joint_type not in OVERLAP_JOINT_TYPES:
-        raise InputError(
-            f"unknown joint type {joint_type!r}; choose one of ball, hinge (rigid: use relpose)"
-        )
-    if method == "paper" and joint_type != "ball":
-        raise InputError(
-            f"the paper's method models a ball joint only; a {joint_type} needs the refined "
-            "method (drop --method paper)"
-        )
+    check_joint_type(joint_type, method)  # unknown types, and the paper's ball only
 
 
 def overlap_tracks(T_w_a: FloatArray, T_w_b: FloatArray) -> dict[str, CameraTrack]:

@@ -995,15 +995,8 @@ def _fit_without(
     out of the masks."""
     for name, f in left.items():
         st.mask[name][f] = False
-    x_loo = x
-    noise: dict[str, dict[str, float]] = {}
     # a test's fit: its noise levels to 2% (the statistic's own sampling error is larger)
-    for _ in range(TEST_REWEIGHT_ROUNDS):
-        before = noise
-        noise = _refit_weights(st, x_loo, st.n_free)
-        if before and _settled(before, noise, TEST_SETTLED_NOISE):
-            break
-        x_loo = solve(x_loo)
+    x_loo, _ = _settle(st, x, solve, TEST_SETTLED_NOISE, TEST_REWEIGHT_ROUNDS)
     rows = _edge_rows(st)
     for name, f in left.items():  # their residuals (a masked row is zero)
         st.mask[name][f] = True
@@ -1476,25 +1469,21 @@ def estimate_rig(
 
     nfev = 0
 
-    def settle(x: FloatArray) -> tuple[FloatArray, dict[str, dict[str, float]]]:
-        """Solve and refit the noise levels until they settle (their fixed point)."""
+    def solve(x: FloatArray) -> FloatArray:
         nonlocal nfev
-        noise: dict[str, dict[str, float]] = {}
-        for _ in range(REWEIGHT_ROUNDS):
-            before = noise
-            noise = _refit_weights(st, x, st.n_free)
-            if before and _settled(before, noise, noise_tolerance):
-                break
-            x, nf, _sol = run(x)
-            nfev += nf
-        return x, noise
+        x, nf, _sol = run(x)
+        nfev += nf
+        return x
+
+    def settle(x: FloatArray) -> tuple[FloatArray, dict[str, dict[str, float]]]:
+        return _settle(st, x, solve, noise_tolerance, REWEIGHT_ROUNDS)
 
     x, noise = settle(x0)
     if reject_outliers:
         for _ in range(REJECTION_ROUNDS):
             if _reject(st, x) == 0:
                 # outliers that hide each other: the leave-out and masking tests, with refits
-                dropped, x = _reject_left_out(st, x, lambda x0: run(x0)[0])
+                dropped, x = _reject_left_out(st, x, solve)
                 if dropped == 0:
                     break
             x, noise = settle(x)
@@ -1529,6 +1518,26 @@ def _own_world(st: _State, c: str) -> int:
     k = st.ref_frame
     on = st.frames_of(c)
     return int(st.widx[c][k] if on[k] else st.widx[c][int(np.argmax(on))])
+
+
+def _settle(
+    st: _State,
+    x: FloatArray,
+    solve: Callable[[FloatArray], FloatArray],
+    tol: float,
+    rounds: int,
+) -> tuple[FloatArray, dict[str, dict[str, float]]]:
+    """Solve and refit the noise levels in turn until they move by less than ``tol``
+    (relative; 0: :data:`SETTLED_NOISE`), at most ``rounds`` refits: the solution and the
+    last levels."""
+    noise: dict[str, dict[str, float]] = {}
+    for _ in range(rounds):
+        before = noise
+        noise = _refit_weights(st, x, st.n_free)
+        if before and _settled(before, noise, tol):
+            break
+        x = solve(x)
+    return x, noise
 
 
 def _settled(

@@ -52,20 +52,6 @@ def lstsq_scaled(A: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     return x / scale, s
 
 
-def similarity_from_points(
-    P: FloatArray, Q: FloatArray, with_scale: bool
-) -> tuple[FloatArray, FloatArray, float]:
-    """Umeyama: ``R, t, s`` minimising ``sum |Q_i - (s R P_i + t)|^2`` for ``(n, 3)`` points."""
-    mp, mq = P.mean(axis=0), Q.mean(axis=0)
-    Pc, Qc = P - mp, Q - mq
-    Sigma = Qc.T @ Pc / P.shape[0]
-    U, D, Vt = np.linalg.svd(Sigma)
-    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ S @ Vt
-    s = float(np.trace(np.diag(D) @ S) / np.mean(np.sum(Pc**2, axis=1))) if with_scale else 1.0
-    return R, mq - s * R @ mp, s
-
-
 def similarity_from_lifted(Ts: FloatArray, Tt: FloatArray, o_s: FloatArray | None) -> Start:
     """Linear ``R_X, t_X, phi, o_s, o_t`` from paired poses ``(n, 4, 4)`` of two worlds.
 

@@ -32,6 +32,7 @@ from acs_cli.core.joints.base import (
     unit,
 )
 from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import InputError
 
 
 def _rz(theta: FloatArray) -> FloatArray:
@@ -46,6 +47,37 @@ def _rz(theta: FloatArray) -> FloatArray:
 def _across(v: FloatArray) -> FloatArray:
     """``(3,)`` rotation vector ``(v0, v1, 0)``: a turn across the local z axis."""
     return np.array([v[0], v[1], 0.0])
+
+
+def _axis_geometry(
+    e: FloatArray, anchor: Any
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """``o_p, o_q, u_p, u_q`` of a hinge's unknowns ``e`` (9,): the axes are steps
+    ``u = unit(u0 + B a)`` from the starting directions ``anchor = (u0p, u0q)``; ``o_p`` lies
+    in the plane across ``u_p`` through ``p``'s centre (the axis point nearest it)."""
+    u0p, u0q = anchor
+    Bp, Bq = tangent_basis(u0p), tangent_basis(u0q)
+    up = unit(u0p + Bp @ e[5:7])
+    uq = unit(u0q + Bq @ e[7:9])
+    o_p = Bp @ e[:2]
+    o_p = o_p - (o_p @ up) * up
+    return o_p, e[2:5], up, uq
+
+
+def _residual_axis_geometry(
+    e: FloatArray, anchor: Any
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """:func:`_axis_geometry` with the point moved along the axis to the one nearest both
+    cameras' centres together (least ``|o_p|^2 + |o_q|^2``).
+
+    Any point of the axis satisfies the constraint, but the pose noise reaches the residual
+    through the lever arms, so the point used must not depend on which camera is named
+    first: this one is symmetric in ``p`` and ``q`` (swapping ``between`` changes no
+    estimate), and the least-noisy point of the line. Priors and results keep the reported
+    point (nearest ``p``'s centre)."""
+    o_p, o_q, u_p, u_q = _axis_geometry(e, anchor)
+    s = -0.5 * float(o_p @ u_p + o_q @ u_q)
+    return o_p + s * u_p, o_q + s * u_q, u_p, u_q
 
 
 class Hinge(JointModel):
@@ -66,28 +98,12 @@ class Hinge(JointModel):
     def geometry(self, e: FloatArray, anchor: Any) -> Geometry:
         """``o_p, o_q`` and the unit axes ``u_p, u_q``; ``o_p`` is the axis point nearest
         ``p``'s centre."""
-        u0p, u0q = anchor
-        Bp, Bq = tangent_basis(u0p), tangent_basis(u0q)
-        up = unit(u0p + Bp @ e[5:7])
-        uq = unit(u0q + Bq @ e[7:9])
-        o_p = Bp @ e[:2]
-        o_p = o_p - (o_p @ up) * up
-        return o_p, e[2:5], up, uq
+        return _axis_geometry(e, anchor)
 
     def residual_geometry(self, e: FloatArray, anchor: Any) -> Geometry:
         """The point moved along the axis to the one nearest both cameras' centres together
-        (least ``|o_p|^2 + |o_q|^2``).
-
-        Any point of the axis satisfies the constraint, but the pose noise reaches the
-        residual through the lever arms, so the point used must not depend on which camera
-        is named first: this one is symmetric in ``p`` and ``q`` (swapping ``between``
-        changes no estimate), and the least-noisy point of the line. Priors and results
-        keep the reported point (nearest ``p``'s centre)."""
-        o_p, o_q, u_p, u_q = self.geometry(e, anchor)
-        if u_p is None or u_q is None:
-            return o_p, o_q, u_p, u_q
-        s = -0.5 * float(o_p @ u_p + o_q @ u_q)
-        return o_p + s * u_p, o_q + s * u_q, u_p, u_q
+        (:func:`_residual_axis_geometry`)."""
+        return _residual_axis_geometry(e, anchor)
 
     def start(
         self,
@@ -118,16 +134,14 @@ class Hinge(JointModel):
         Rq: FloatArray,
         tq: FloatArray,
     ) -> dict[str, FloatArray]:
-        o_p, o_q, u_p, u_q = self.residual_geometry(e, anchor)
-        assert u_p is not None and u_q is not None
+        o_p, o_q, u_p, u_q = _residual_axis_geometry(e, anchor)
         return {
             "pos": point_residual(o_p, o_q, Rp, tp, Rq, tq),  # eq. (24)
             "rot": se3.rotate(Rp, u_p) - se3.rotate(Rq, u_q),  # one axis
         }
 
     def jacobian(self, jc: Any) -> None:
-        o_p, o_q, u_p, u_q = self.residual_geometry(jc.e, jc.anchor)
-        assert u_p is not None and u_q is not None
+        o_p, o_q, u_p, u_q = _residual_axis_geometry(jc.e, jc.anchor)
         Dg = geometry_jacobian(self, jc.e, jc.anchor, for_residuals=True)
         point_jacobian(jc, o_p, o_q, Dg)
         p, q, m = jc.p, jc.q, jc.m
@@ -230,7 +244,11 @@ class Hinge(JointModel):
         T_p_q: FloatArray,
         k: int,
     ) -> tuple[FloatArray | None, dict[str, FloatArray], FloatArray, FloatArray]:
-        assert axis_p is not None
+        if axis_p is None:
+            raise InputError(
+                "a hinge's bundle adjustment starts from its axis: the pose-based estimate "
+                "gives none"
+            )
         u_p = axis_p / np.linalg.norm(axis_p)
         A = np.column_stack([tangent_basis(u_p), u_p])
         if np.linalg.det(A) < 0:
