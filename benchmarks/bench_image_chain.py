@@ -33,12 +33,13 @@ import cv2
 import numpy as np
 import yaml
 
-from acs_cli.core.bundle import bundle_adjust_fixed_joint, intrinsics_vector
+from acs_cli.core.bundle import intrinsics_vector
 from acs_cli.core.checkerboard import detect_checkerboard
 from acs_cli.core.intrinsics import board_points, calibrate
 from acs_cli.core.joint import estimate_pivot
 from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.core.pnp import board_pose, camera_in_board
+from acs_cli.core.rig_bundle import bundle_adjust_fixed_joint
 from acs_cli.errors import DegenerateMotionError
 from sample_data_gen.render import render_scenario
 

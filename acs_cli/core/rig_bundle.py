@@ -60,7 +60,7 @@ from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import check_frame_corners, information, observed
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.joints import JointModel, joint_model
-from acs_cli.core.rig import RigJoint, RigTopology
+from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_solve import (
     CameraEstimate,
     CameraTrack,
@@ -76,11 +76,14 @@ DEFAULT_PRIOR_STD = 1e-6
 
 __all__ = [
     "MIN_RIG_BUNDLE_FRAMES",
+    "PIVOT_RIG",
     "CameraViews",
+    "FixedJointBundle",
     "PoseBodyEstimate",
     "PoseBodyFit",
     "RigBundle",
     "RigidEdgeEstimate",
+    "bundle_adjust_fixed_joint",
     "bundle_adjust_rig",
 ]
 
@@ -193,6 +196,8 @@ class RigBundle:
         The solver converged.
     pose_bodies : dict of body to PoseBodyFit
         The bodies that had poses only (empty when every body has corners).
+    per_frame_rms_px : dict of camera to ndarray (len(frames),)
+        Each camera's reprojection RMS per adjusted frame.
     """
 
     estimate: RigEstimate
@@ -204,13 +209,19 @@ class RigBundle:
     frames: np.ndarray
     success: bool
     pose_bodies: dict[str, PoseBodyFit] = field(default_factory=dict)
+    per_frame_rms_px: dict[str, FloatArray] = field(default_factory=dict)
 
 
 class _Layout:
     """Where each unknown lives: shared ones first, then one block per frame."""
 
     def __init__(
-        self, topo: RigTopology, n: int, free: dict[str, list[int]], one_world: set[str]
+        self,
+        topo: RigTopology,
+        n: int,
+        free: dict[str, list[int]],
+        one_world: set[str],
+        static: bool = False,
     ) -> None:
         k = 0
         self.free = free  # per camera: indices of its refined intrinsics
@@ -230,7 +241,9 @@ class _Layout:
             self.geom[j.name] = slice(k, k + size)
             k += size
         self.n_shared = k
-        f = 6  # the reference camera's pose G[i]
+        # the reference body's pose G[i], unless it is static (held at its start)
+        self.pose = slice(0, 0 if static else 6)
+        f = self.pose.stop
         self.art = {}
         for j in topo.joints:
             dof = joint_model(j.type).articulation_dof  # its articulation at each frame
@@ -315,8 +328,10 @@ class _Model:
     def poses(self, x: FloatArray) -> dict[str, tuple[FloatArray, FloatArray]]:
         """Each camera's pose in the reference board's frame, ``G[i] T_ref_c[i]``."""
         blocks = x[self.L.n_shared :].reshape(self.L.n, self.L.block)
-        RG = np.matmul(self.G0[:, :3, :3], se3.matrix_from_rotvec(blocks[:, :3]))
-        tG = self.G0[:, :3, 3] + blocks[:, 3:6]
+        RG, tG = self.G0[:, :3, :3], self.G0[:, :3, 3]
+        if self.L.pose.stop:
+            g = blocks[:, self.L.pose]
+            RG, tG = np.matmul(RG, se3.matrix_from_rotvec(g[:, :3])), tG + g[:, 3:]
         return {c: (np.matmul(RG, R), tG + _apply(RG, t)) for c, (R, t) in self.chain(x).items()}
 
     def board(self, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
@@ -400,9 +415,14 @@ def _check(
     views: dict[str, CameraViews],
     poses: dict[str, CameraTrack],
     est: RigEstimate,
+    static: bool = False,
 ) -> int:
     """The timeline's length; ``InputError`` naming what does not fit."""
-    missing = [c for c in topo.cameras if c not in views and c not in poses]
+    missing = [
+        c
+        for c in topo.cameras
+        if c not in views and c not in poses and not (static and c == topo.reference)
+    ]
     if missing:
         raise InputError(
             f"no corners for camera(s) {', '.join(missing)}, and no poses to fit as bodies "
@@ -461,13 +481,16 @@ def _initial(
     poses: dict[str, CameraTrack],
     est: RigEstimate,
     frames: np.ndarray,
+    static: bool = False,
 ) -> tuple[_Model, FloatArray]:
-    """The model and its starting unknowns, from the pose-based estimate."""
+    """The model and its starting unknowns, from the pose-based estimate (a static
+    reference body: the world of a joint held still, whose bodies' boards are that world)."""
     L = _Layout(
         topo,
         frames.size,
         {c: camera_model(v.model).free() for c, v in views.items()},
-        _in_reference_world(est),
+        set(topo.cameras) if static else _in_reference_world(est),
+        static,
     )
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
     x = np.zeros(L.size)
@@ -523,6 +546,7 @@ def bundle_adjust_rig(
     frames: np.ndarray,
     poses: dict[str, CameraTrack] | None = None,
     priors: dict[str, EdgePrior] | None = None,
+    static: bool = False,
 ) -> RigBundle:
     """Maximum-likelihood calibration of a rig from its cameras' board corners and the
     measured poses of its pose-only bodies (and joints known beforehand).
@@ -546,6 +570,11 @@ def bundle_adjust_rig(
         Joints known beforehand (a fixed-joint session), by joint name: their points
         (``position_in``, metres, with ``covariance_in``; without one, a tight prior) fused
         with the corners, as in the pose-based solve (:func:`acs_cli.core.rig_solve.estimate_rig`).
+    static : bool
+        The reference body does not move: it is the world of a joint held still (the
+        paper's fixed-joint motion, a pivot; :func:`bundle_adjust_fixed_joint`), with
+        neither corners nor poses, its pose held at ``initial``'s, and every other body's
+        board in it.
 
     Returns
     -------
@@ -560,7 +589,7 @@ def bundle_adjust_rig(
         Corners and poses that leave part of the rig undetermined.
     """
     poses = dict(poses or {})
-    n_total = _check(topology, views, poses, initial)
+    n_total = _check(topology, views, poses, initial, static)
     frames = np.unique(np.asarray(frames, dtype=int))
     if frames.size < MIN_RIG_BUNDLE_FRAMES:
         raise InputError(
@@ -584,7 +613,7 @@ def bundle_adjust_rig(
         raise InputError(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
-    model, x0 = _initial(topology, views, poses, initial, frames)
+    model, x0 = _initial(topology, views, poses, initial, frames, static)
     model.priors = _bundle_priors(topology, priors or {})
     L = model.L
     row_frame = model.row_frames()
@@ -655,6 +684,13 @@ def bundle_adjust_rig(
         c: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if r.size else 0.0
         for c, r in zip(model.cams, px, strict=True)
     }
+    per_frame = {}
+    for c, r in zip(model.cams, px, strict=True):
+        fi = model.obs[c][0]
+        counts = np.maximum(np.bincount(fi, minlength=frames.size), 1)
+        per_frame[c] = np.sqrt(
+            np.bincount(fi, weights=np.sum(r**2, axis=1), minlength=frames.size) / counts
+        )
     bodies = _pose_bodies(model, x, cov, where, pose)
     cams = dict(est.cameras)
     for b, fit in bodies.items():
@@ -663,7 +699,16 @@ def bundle_adjust_rig(
         cams[b] = PoseBodyEstimate(**fields, pose_fit=fit)
     est = dataclasses.replace(est, cameras=cams)
     return RigBundle(
-        est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success), bodies
+        est,
+        intr,
+        std,
+        icov,
+        rms,
+        float(np.sqrt(sigma2)),
+        frames,
+        bool(sol.success),
+        bodies,
+        per_frame,
     )
 
 
@@ -962,3 +1007,164 @@ def _assemble(
             position_own_in={c: (pos[c], pcov[c]) for c in (p, q)},
         )  # fmt: skip  (a metric rig: each camera's own units are the reference's)
     return dataclasses.replace(initial, cameras=cams, edges=edges)
+
+
+@dataclass(frozen=True)
+class FixedJointBundle:
+    """Result of :func:`bundle_adjust_fixed_joint`.
+
+    Attributes
+    ----------
+    model : str
+        The camera model (:data:`acs_cli.core.camera_models.CAMERA_MODELS`).
+    intrinsics : ndarray, shape (p,)
+        Named by the model's ``names`` (``fx fy cx cy k1 k2 p1 p2 k3`` for pinhole).
+    intrinsics_covariance : ndarray, shape (p, p)
+        Pixel noise estimated; 0 rows and columns for held intrinsics.
+    joint_in_cam : ndarray, shape (3,)
+        The joint in the camera's frame (metres, the board's unit).
+    joint_covariance : ndarray, shape (3, 3)
+        Of ``joint_in_cam`` (metres squared).
+    joint_in_world : ndarray, shape (3,)
+        The joint in the board's frame.
+    rms_px : float
+        Reprojection RMS over the corners used.
+    per_frame_rms_px : ndarray, shape (n,)
+    sigma_px : float
+        Estimated standard deviation of a corner coordinate.
+    success : bool
+    """
+
+    model: str
+    intrinsics: FloatArray
+    intrinsics_covariance: FloatArray
+    joint_in_cam: FloatArray
+    joint_covariance: FloatArray
+    joint_in_world: FloatArray
+    rms_px: float
+    per_frame_rms_px: FloatArray
+    sigma_px: float
+    success: bool
+
+    @property
+    def intrinsics_std(self) -> FloatArray:
+        """``(p,)`` standard deviations of the intrinsics (0 for held ones)."""
+        return np.sqrt(np.clip(np.diag(self.intrinsics_covariance), 0.0, None))
+
+    @property
+    def joint_std(self) -> FloatArray:
+        return np.sqrt(np.diag(self.joint_covariance))
+
+
+#: A fixed-joint session as a rig: its world (the board) and the camera, joined by the
+#: joint the motion holds still; the world is the static reference.
+PIVOT_RIG = rig_topology(("world", "camera"), [("joint", ("world", "camera"), "ball")], "world")
+
+
+def bundle_adjust_fixed_joint(
+    corners: FloatArray,
+    valid: np.ndarray | None,
+    board_points: FloatArray,
+    intrinsics0: FloatArray,
+    T_world_cam0: FloatArray,
+    joint_in_cam0: FloatArray,
+    joint_in_world0: FloatArray,
+    *,
+    model: str = "pinhole",
+) -> FixedJointBundle:
+    """Maximum-likelihood fixed-joint calibration of one camera from its corners: the rig
+    bundle adjustment (:func:`bundle_adjust_rig`) of :data:`PIVOT_RIG`.
+
+    The camera turns about a point fixed in its board's frame (the paper's fixed-joint
+    motion, a pivot), so frame ``i``'s pose is ``[R_i, p_w - R_i o]`` (eq. (2) with the
+    world as the static body): the unknowns are the intrinsics, the joint in the camera
+    ``o`` and in the board ``p_w``, and each frame's rotation ``R_i``.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (n, m, 2)
+        Detected corners of ``n`` frames (pixels), in board-point order; NaN where a
+        frame did not see the corner.
+    valid : ndarray of bool, shape (n, m), or None
+        Which corners to use (besides the finite ones); None: every finite corner.
+    board_points : ndarray, shape (m, 3)
+        The corners in the board's frame (metres).
+    intrinsics0 : ndarray, shape (p,)
+        Initial intrinsics of ``model`` (e.g. from ``cv2.calibrateCamera``); the model's
+        ``held`` ones (``k3`` of the pinhole model) stay as given.
+    T_world_cam0 : ndarray, shape (n, 4, 4)
+        Initial poses (e.g. from PnP); only their rotations are used.
+    joint_in_cam0, joint_in_world0 : ndarray, shape (3,)
+        Initial joint (e.g. from :func:`acs_cli.core.joint.estimate_joint_fixed`).
+    model : {"pinhole", "rational", "fisheye"}
+
+    Returns
+    -------
+    FixedJointBundle
+
+    Raises
+    ------
+    InputError
+        Shapes that do not fit, too few frames, or a frame with fewer than
+        :data:`acs_cli.core.bundle.MIN_FRAME_CORNERS` corners.
+    """
+    corners = np.asarray(corners, dtype=float)
+    n = corners.shape[0] if corners.ndim == 3 else 0
+    seen = observed(corners, valid, np.asarray(board_points, dtype=float))
+    T0 = se3.check_transforms(T_world_cam0, "initial poses")
+    if T0.shape[0] != n:
+        raise InputError(f"{T0.shape[0]} initial poses for {n} frames")
+    o, p_w = (np.asarray(v, dtype=float).reshape(3) for v in (joint_in_cam0, joint_in_world0))
+    T_world_cam = se3.transforms_from_rt(T0[:, :3, :3], p_w - se3.rotate(T0[:, :3, :3], o))
+    edge = EdgeEstimate(
+        joint=PIVOT_RIG.joints[0],
+        position_in={"world": p_w, "camera": o},
+        position_cov_in={},
+        axis_in={},
+        axis_std_deg_in={},
+        T_q_p=np.eye(4),
+        residual_rms=0.0,
+        frames_used=n,
+        frames_rejected=0,
+        inliers=np.arange(n),
+        noise={},
+    )
+    start = RigEstimate(
+        topology=PIVOT_RIG,
+        reference_frame=0,
+        cameras={
+            "world": CameraEstimate(
+                None,
+                np.zeros((6, 6)),
+                poses_in_reference_world=np.broadcast_to(np.eye(4), (n, 4, 4)).copy(),
+            ),
+            "camera": CameraEstimate(None, np.zeros((6, 6)), poses_in_reference_world=T_world_cam),
+        },
+        edges={"joint": edge},
+        cost=0.0,
+        iterations=0,
+    )
+    views = CameraViews(
+        corners,
+        seen,
+        np.asarray(board_points, dtype=float),
+        np.asarray(intrinsics0, dtype=float),
+        model,
+    )
+    size = camera_model(model).size
+    if views.intrinsics.shape != (size,):
+        raise InputError(f"the {model} model takes {size} intrinsics, got {views.intrinsics.shape}")
+    ba = bundle_adjust_rig(PIVOT_RIG, {"camera": views}, start, np.arange(n), static=True)
+    e = ba.estimate.edges["joint"]
+    return FixedJointBundle(
+        model=model,
+        intrinsics=ba.intrinsics["camera"],
+        intrinsics_covariance=ba.intrinsics_covariance["camera"],
+        joint_in_cam=e.position_in["camera"],
+        joint_covariance=e.position_cov_in["camera"],
+        joint_in_world=e.position_in["world"],
+        rms_px=ba.rms_px["camera"],
+        per_frame_rms_px=ba.per_frame_rms_px["camera"],
+        sigma_px=ba.sigma_px,
+        success=ba.success,
+    )

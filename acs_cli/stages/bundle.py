@@ -23,13 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from acs_cli.core.bundle import (
-    MIN_FRAME_CORNERS,
-    FixedJointBundle,
-    bundle_adjust_fixed_joint,
-    camera_matrix,
-    intrinsics_vector,
-)
+from acs_cli.core.bundle import MIN_FRAME_CORNERS, camera_matrix, intrinsics_vector
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.intrinsics import degenerate_distortion, outlier_views
 from acs_cli.core.joint import JointEstimate
@@ -42,7 +36,13 @@ from acs_cli.core.relpose import (
     relpose_refined_by,
 )
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
-from acs_cli.core.rig_bundle import MIN_RIG_BUNDLE_FRAMES, CameraViews, bundle_adjust_rig
+from acs_cli.core.rig_bundle import (
+    MIN_RIG_BUNDLE_FRAMES,
+    CameraViews,
+    FixedJointBundle,
+    bundle_adjust_fixed_joint,
+    bundle_adjust_rig,
+)
 from acs_cli.core.rig_solve import (
     TEST_SETTLED_NOISE,
     CameraTrack,
