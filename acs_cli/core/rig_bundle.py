@@ -220,7 +220,7 @@ class _Layout:
         topo: RigTopology,
         n: int,
         free: dict[str, list[int]],
-        one_world: set[str],
+        worlds: list[tuple[int, str]],
         static: bool = False,
     ) -> None:
         k = 0
@@ -230,11 +230,12 @@ class _Layout:
             if c in free:  # a camera with corners (not a pose-only body)
                 self.intr[c] = slice(k, k + len(free[c]))
                 k += len(free[c])
-        self.world = {}
-        for c in topo.cameras:
-            if c not in one_world:  # the reference's world (a shared world) has no unknowns
-                self.world[c] = slice(k, k + 6)
-                k += 6
+        # each (recording, body)'s board (a pose-only body's world) with unknowns: all but
+        # each recording's gauge (the reference's world; another recording's first body's)
+        self.world: dict[tuple[int, str], slice] = {}
+        for w in worlds:
+            self.world[w] = slice(k, k + 6)
+            k += 6
         self.geom = {}
         for j in topo.joints:
             size = joint_model(j.type).bundle_params  # the joint's fixed geometry
@@ -271,15 +272,20 @@ class _Model:
     L: _Layout
     views: dict[str, CameraViews]
     frames: np.ndarray  # timeline indices adjusted
-    G0: FloatArray  # (n, 4, 4) reference camera in its board's frame
-    W0: dict[str, FloatArray]  # (4, 4) per non-reference camera
+    rec: np.ndarray  # (n,) the recording of each adjusted frame
+    # per recording, the bodies it saw (each with corners or poses at all its frames)
+    present: list[frozenset[str]]
+    G0: FloatArray  # (n, 4, 4) reference body in the reference world (its virtual pose
+    #                 where its recording did not see it)
+    W0: dict[tuple[int, str], FloatArray]  # (4, 4) each (recording, body)'s board
     # per joint: its model's fixed rotation (a ball's (n, 3, 3) articulations, a rigid
     # joint's (3, 3)) and starting geometry (JointModel.bundle_start)
     R0: dict[str, FloatArray | None]
     geom0: dict[str, dict[str, FloatArray]]
     obs: dict[str, tuple[np.ndarray, np.ndarray, FloatArray]]  # frame, corner, pixels
-    # pose-only bodies: their measured poses at every adjusted frame (rotations, translations)
-    meas: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    # pose-only bodies: their measured poses (rotations, translations) and the adjusted
+    # frames they are at
+    meas: dict[str, tuple[FloatArray, FloatArray, np.ndarray]] = field(default_factory=dict)
     # weights (1 / sigma) of the pixel rows and of each pose-only body's rotation and
     # translation rows
     w_px: float = 1.0
@@ -288,6 +294,10 @@ class _Model:
     # joints known beforehand (a fixed-joint session): (joint, side, point (3,) in metres,
     # whitener (3, 3)): rows W (o_side - point) on the joint's point in that camera
     priors: list[tuple[RigJoint, int, FloatArray, FloatArray]] = field(default_factory=list)
+    # the articulation unknowns of joints a frame's recording does not see: held at their
+    # start by rows of unit weight (they move nothing else, or only what the frame's pose
+    # takes back)
+    held: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
     @property
     def cams(self) -> list[str]:
@@ -334,16 +344,20 @@ class _Model:
             RG, tG = np.matmul(RG, se3.matrix_from_rotvec(g[:, :3])), tG + g[:, 3:]
         return {c: (np.matmul(RG, R), tG + _apply(RG, t)) for c, (R, t) in self.chain(x).items()}
 
-    def board(self, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
-        """``W_c``: camera ``c``'s board frame (a pose-only body's world) in the reference
-        body's world."""
-        if c == self.topo.reference:
-            return np.eye(3), np.zeros(3)
-        W0 = self.W0[c]
-        if c not in self.L.world:  # in the reference's (shared) world: held
+    def board(self, x: FloatArray, c: str, r: int = 0) -> tuple[FloatArray, FloatArray]:
+        """``W_c``: camera ``c``'s board frame (a pose-only body's world) in recording ``r``
+        in the reference world."""
+        W0 = self.W0.get((r, c), np.eye(4))
+        if (r, c) not in self.L.world:  # a recording's gauge: held
             return W0[:3, :3], W0[:3, 3]
-        w = x[self.L.world[c]]
+        w = x[self.L.world[(r, c)]]
         return W0[:3, :3] @ se3.matrix_from_rotvec(w[:3]), W0[:3, 3] + w[3:]
+
+    def boards(self, x: FloatArray, c: str) -> tuple[FloatArray, FloatArray]:
+        """Body ``c``'s board in every recording, ``(R, 3, 3)`` and ``(R, 3)`` (the
+        identity where it was not seen)."""
+        Ws = [self.board(x, c, r) for r in range(len(self.present))]
+        return np.stack([W[0] for W in Ws]), np.stack([W[1] for W in Ws])
 
     def raw(self, x: FloatArray) -> tuple[list[FloatArray], dict[str, FloatArray]]:
         """Unweighted residuals: pixels ``(k, 2)`` per camera with corners (in
@@ -355,18 +369,20 @@ class _Model:
         for c in self.cams:
             R, t = poses[c]
             fi, ki, px = self.obs[c]
-            Rw, tw = self.board(x, c)
-            Xw = self.views[c].board_points[ki] @ Rw.T + tw
+            Rw, tw = self.boards(x, c)
+            r = self.rec[fi]
+            Xw = _apply(Rw[r], self.views[c].board_points[ki]) + tw[r]
             x_cam = np.einsum("kji,kj->ki", R[fi], Xw - t[fi])  # R^T (W X - t)
             cam = camera_model(self.views[c].model)
             px_out.append(cam.project(x_cam, self.intrinsics(x, c)) - px)
         pose_out: dict[str, FloatArray] = {}
         for b in self.bodies:
-            R, t = poses[b]
-            Rw, tw = self.board(x, b)
-            Rp = np.matmul(Rw.T, R)  # W_b^-1 G_b: the body's pose in its own world
-            tp = (t - tw) @ Rw
-            RM, tM = self.meas[b]
+            RM, tM, f = self.meas[b]
+            R, t = poses[b][0][f], poses[b][1][f]
+            Rw, tw = self.boards(x, b)
+            Rw, tw = Rw[self.rec[f]], tw[self.rec[f]]
+            Rp = np.matmul(np.swapaxes(Rw, 1, 2), R)  # W_b^-1 G_b: its pose in its world
+            tp = _apply(np.swapaxes(Rw, 1, 2), t - tw)
             rot = se3.rotvec_from_matrix(np.matmul(np.swapaxes(RM, 1, 2), Rp))
             pose_out[b] = np.concatenate([rot, tp - tM], axis=1)
         return px_out, pose_out
@@ -384,19 +400,21 @@ class _Model:
                 x[self.L.geom[j.name]], self.R0[j.name], self.geom0[j.name]
             )
             out.append(Wh @ (g[3 * side : 3 * side + 3] - point))
+        out.append(x[self.held])
         return np.concatenate(out)
 
     def row_frames(self) -> np.ndarray:
         """The frame of each residual row (the order of :meth:`residuals`; a prior's rows,
         which no frame's unknowns touch, are filed under the first frame)."""
         rows = [np.repeat(self.obs[c][0], 2) for c in self.cams]
-        rows += [np.repeat(np.arange(self.L.n), 6) for _ in self.bodies]
+        rows += [np.repeat(self.meas[b][2], 6) for b in self.bodies]
         rows += [np.zeros(3, int) for _ in self.priors]
+        rows.append((self.held - self.L.n_shared) // self.L.block)
         return np.concatenate(rows)
 
     def prior_rows(self) -> np.ndarray:
         """The joint priors' rows in :meth:`residuals` (the last ones)."""
-        total = self.row_frames().size
+        total = self.row_frames().size - self.held.size
         return np.arange(total - 3 * len(self.priors), total)
 
     def pose_rows(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -404,9 +422,10 @@ class _Model:
         start = sum(2 * self.obs[c][0].size for c in self.cams)
         out = {}
         for b in self.bodies:
-            rows = start + np.arange(6 * self.L.n).reshape(self.L.n, 6)
+            m = self.meas[b][2].size
+            rows = start + np.arange(6 * m).reshape(m, 6)
             out[b] = (rows[:, :3].ravel(), rows[:, 3:].ravel())
-            start += 6 * self.L.n
+            start += 6 * m
         return out
 
 
@@ -475,21 +494,84 @@ def _in_reference_world(est: RigEstimate) -> set[str]:
     return {ref}
 
 
+def _recordings(
+    topo: RigTopology, est: RigEstimate, frames: np.ndarray
+) -> tuple[np.ndarray, list[frozenset[str]]]:
+    """The recording of each adjusted frame ``(n,)`` and, per recording, the bodies it names
+    (its worlds' bodies; every body in a one-recording estimate); ``InputError`` for a
+    recording whose bodies the rig's tree does not join through bodies it saw (each would
+    need a pose of its own, which the bundle does not carry)."""
+    recs = est.recordings
+    if recs is None or not est.worlds:
+        return np.zeros(frames.size, int), [frozenset(topo.cameras)] * (
+            1 if recs is None else len(recs.names)
+        )
+    present = []
+    parent = {s.target: s.source for s in topo.tree_order()}
+    for name in recs.names:
+        here = frozenset(c for w in est.worlds if w.recording == name for c in w.cameras)
+        roots = [c for c in here if parent.get(c) not in here]
+        if len(roots) > 1:
+            raise InputError(
+                f"recordings.{name}: bodies {', '.join(sorted(roots))} are not joined by "
+                "joints between bodies it saw; the bundle adjustment takes recordings whose "
+                "bodies form one connected part of the rig"
+            )
+        present.append(here)
+    return recs.of_frame[frames], present
+
+
+def _world_starts(
+    topo: RigTopology, est: RigEstimate, present: list[frozenset[str]]
+) -> dict[tuple[int, str], FloatArray]:
+    """Each (recording, body)'s board in the reference world, from the pose-based
+    estimate's worlds (a one-world estimate: each body's ``world_to_reference_world``)."""
+    out: dict[tuple[int, str], FloatArray] = {}
+    recs = est.recordings
+    for r, here in enumerate(present):
+        for c in here:
+            out[(r, c)] = est.cameras[c].world_to_reference_world
+            for w in est.worlds:
+                if recs is not None and w.recording == recs.names[r] and c in w.cameras:
+                    out[(r, c)] = w.T_ref_world
+    return out
+
+
 def _initial(
     topo: RigTopology,
     views: dict[str, CameraViews],
     poses: dict[str, CameraTrack],
     est: RigEstimate,
     frames: np.ndarray,
+    rec: np.ndarray,
+    present: list[frozenset[str]],
     static: bool = False,
 ) -> tuple[_Model, FloatArray]:
     """The model and its starting unknowns, from the pose-based estimate (a static
-    reference body: the world of a joint held still, whose bodies' boards are that world)."""
+    reference body: the world of a joint held still, whose bodies' boards are that world).
+
+    Each recording's boards are fixed up to one rigid motion with its frames' poses: the
+    gauge holds the reference's world (and the bodies sharing it) in its recording, and in
+    every other recording the board of its body nearest the reference in the tree (all of
+    them in a shared world). ``rec`` and ``present``: :func:`_recordings`."""
+    k = int(np.flatnonzero(frames == est.reference_frame)[0])
+    order = [topo.reference] + [s.target for s in topo.tree_order()]
+    shared = () if est.recordings is None else est.recordings.shared_world
+    gauge: list[set[str]] = []
+    for r, here in enumerate(present):
+        if static:
+            gauge.append(set(topo.cameras))
+        elif r == rec[k]:
+            gauge.append(_in_reference_world(est))
+        elif r < len(shared) and shared[r]:
+            gauge.append(set(here))
+        else:
+            gauge.append({next(c for c in order if c in here)} if here else set())
     L = _Layout(
         topo,
         frames.size,
         {c: camera_model(v.model).free() for c, v in views.items()},
-        set(topo.cameras) if static else _in_reference_world(est),
+        [(r, c) for r, here in enumerate(present) for c in topo.cameras if c in here - gauge[r]],
         static,
     )
     G = {c: est.cameras[c].poses_in_reference_world[frames] for c in topo.cameras}
@@ -497,11 +579,13 @@ def _initial(
     blocks = np.zeros((frames.size, L.block))
     R0: dict[str, FloatArray | None] = {}
     geom0: dict[str, dict[str, FloatArray]] = {}
-    k = int(np.flatnonzero(frames == est.reference_frame)[0])
+    held: list[int] = []
     for j in topo.joints:
         p, q = j.between
         e = est.edges[j.name]
+        active = np.array([p in present[r] and q in present[r] for r in rec])
         T_p_q = np.matmul(se3.invert_transforms(G[p]), G[q])
+        T_p_q[~active] = np.eye(4)
         R0[j.name], geom0[j.name], x[L.geom[j.name]], blocks[:, L.art[j.name]] = joint_model(
             j.type
         ).bundle_start(
@@ -509,8 +593,10 @@ def _initial(
             e.axis_in.get(p),
             e.T_q_p,
             T_p_q,
-            k,
+            k if active[k] else int(np.argmax(active)),
         )
+        blocks[~active, L.art[j.name]] = 0.0
+        held += [c for i in np.flatnonzero(~active) for c in L.frame_columns(int(i), L.art[j.name])]
     intr = np.zeros(L.n_shared)
     for c in views:
         intr[L.intr[c]] = np.asarray(views[c].intrinsics, float)[L.free[c]]
@@ -520,22 +606,36 @@ def _initial(
     for c, v in views.items():
         fi, ki = np.nonzero(observed(v.corners, v.valid, v.board_points)[frames])
         obs[c] = (fi, ki, v.corners[frames][fi, ki])
-    meas = {
-        b: (tr.T_w_c[frames, :3, :3].copy(), tr.T_w_c[frames, :3, 3].copy())
-        for b, tr in poses.items()
-    }
+    meas = {}
+    for b, tr in poses.items():
+        f = np.flatnonzero(tr.valid[frames])
+        meas[b] = (tr.T_w_c[frames[f], :3, :3].copy(), tr.T_w_c[frames[f], :3, 3].copy(), f)
     model = _Model(
         topo=topo,
         L=L,
         views=views,
         frames=frames,
-        G0=G[topo.reference],
-        W0={c: est.cameras[c].world_to_reference_world for c in topo.cameras},
+        rec=rec,
+        present=present,
+        G0=G[topo.reference].copy(),
+        W0=_world_starts(topo, est, present),
         R0=R0,
         geom0=geom0,
         obs=obs,
         meas=meas,
+        held=np.asarray(held, dtype=int),
     )
+    # where a recording did not see the reference body, its pose is virtual: the one that
+    # puts the recording's first body (nearest the reference) where the estimate has it
+    chain = model.chain(x)
+    for r, here in enumerate(present):
+        f = np.flatnonzero(rec == r)
+        if topo.reference in here or not here or not f.size:
+            continue
+        root = next(c for c in order if c in here)
+        R, t = chain[root]
+        T_ref_root = se3.transforms_from_rt(R[f], t[f])
+        model.G0[f] = np.matmul(G[root][f], se3.invert_transforms(T_ref_root))
     return model, x
 
 
@@ -598,11 +698,15 @@ def bundle_adjust_rig(
         )
     if frames[0] < 0 or frames[-1] >= n_total or initial.reference_frame not in frames:
         raise InputError("the frames must be on the timeline and include the reference instant")
+    for c, v in views.items():  # (the messages name the board's corners)
+        observed(v.corners, v.valid, v.board_points, f"camera {c}'s corners")
+    rec, present = _recordings(topology, initial, frames)
     for c, v in views.items():
-        seen = observed(v.corners, v.valid, v.board_points, f"camera {c}'s corners")
-        check_frame_corners(seen[frames], f"camera {c}", frames)
+        f = frames[[c in present[r] for r in rec]]
+        check_frame_corners(observed(v.corners, v.valid, v.board_points)[f], f"camera {c}", f)
     for b, tr in poses.items():
-        gaps = frames[~tr.valid[frames]]
+        f = frames[[b in present[r] for r in rec]]
+        gaps = f[~tr.valid[f]]
         if gaps.size:
             raise InputError(
                 f"body {b} has no pose at frame(s) {', '.join(map(str, gaps[:5]))}: a bundle "
@@ -613,7 +717,7 @@ def bundle_adjust_rig(
         raise InputError(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
-    model, x0 = _initial(topology, views, poses, initial, frames, static)
+    model, x0 = _initial(topology, views, poses, initial, frames, rec, present, static)
     model.priors = _bundle_priors(topology, priors or {})
     L = model.L
     row_frame = model.row_frames()
@@ -824,6 +928,7 @@ def _refit_noise(model: _Model, x: FloatArray, J: object) -> None:
     if model.priors:  # their rows take their share of the unknowns too (known weights)
         Jk = np.asarray(Js[model.prior_rows()].toarray())
         taken += float(np.sum(Jk.T * scipy.linalg.cho_solve(cf, Jk.T)))
+    taken += model.held.size  # each held unknown's row takes it whole
     allpx = np.concatenate([r.ravel() for r in px])
     redundancy = max(allpx.size - (x.size - taken), 1.0)
     model.w_px = 1.0 / max(float(np.sqrt(np.sum(allpx**2) / redundancy)), 1e-6)
@@ -843,10 +948,14 @@ def _pose_bodies(
         boards: dict[str, FloatArray] = {}
         covs: dict[str, FloatArray] = {}
         for c in model.cams:
+            both = [r for r, here in enumerate(model.present) if {b, c} <= here]
+            if not both:  # never seen together: no board in the body's world
+                continue
+            r = both[0]
 
-            def T(xx: FloatArray, c: str = c, b: str = b) -> FloatArray:
-                Rb, tb = model.board(xx, b)
-                Rc, tc = model.board(xx, c)
+            def T(xx: FloatArray, c: str = c, b: str = b, r: int = r) -> FloatArray:
+                Rb, tb = model.board(xx, b, r)
+                Rc, tc = model.board(xx, c, r)
                 return se3.transforms_from_rt(Rb.T @ Rc, Rb.T @ (tc - tb))
 
             T0 = T(x)
@@ -858,14 +967,17 @@ def _pose_bodies(
                 )
 
             cols = [
-                i for w in (b, c) if w in L.world for i in range(L.world[w].start, L.world[w].stop)
+                i
+                for w in ((r, b), (r, c))
+                if w in L.world
+                for i in range(L.world[w].start, L.world[w].stop)
             ]
             idx = [where[i] for i in cols]
             boards[c] = T0
             covs[c] = lsq.propagate(vec, x, cols, cov[np.ix_(idx, idx)])[1]
         e = pose[b]
         out[b] = PoseBodyFit(
-            frames=int(model.L.n),
+            frames=int(model.meas[b][2].size),
             sigma_rot_deg=float(np.degrees(1.0 / model.w_rot[b])),
             sigma_trans=float(1.0 / model.w_trans[b]),
             rms_rot_deg=float(np.degrees(np.sqrt(np.mean(np.sum(e[:, :3] ** 2, axis=1))))),
@@ -876,10 +988,13 @@ def _pose_bodies(
     return out
 
 
-def _relative(T_q_ref: FloatArray | None, T_p_ref: FloatArray | None) -> FloatArray:
-    """``T_q_p`` from two ``T_cam_ref`` (every camera of a bundle has one)."""
+def _relative(
+    T_q_ref: FloatArray | None, T_p_ref: FloatArray | None, otherwise: FloatArray
+) -> FloatArray:
+    """``T_q_p`` from two ``T_cam_ref``; ``otherwise`` when either camera has none (a joint
+    of a recording without the reference instant)."""
     if T_q_ref is None or T_p_ref is None:
-        raise ValueError("a camera of the bundle has no pose at the reference instant")
+        return otherwise
     return T_q_ref @ se3.invert_transforms(T_p_ref)
 
 
@@ -922,9 +1037,22 @@ def _assemble(
         return se3.invert_transforms(se3.transforms_from_rt(R[k_ref], t[k_ref]))
 
     poses = model.poses(x)
+    r_ref = int(model.rec[k_ref])
+    recs = initial.recordings
+    n_all = initial.cameras[topo.reference].poses_in_reference_world.shape[0]
+    of_frame = np.zeros(n_all, int) if recs is None else recs.of_frame
     cams: dict[str, CameraEstimate] = {}
     for c in topo.cameras:
         c0 = initial.cameras[c]
+        # every measured pose mapped into the reference world by its recording's refined
+        # board frame (as the pose-based solve maps them by its own)
+        Rw, tw = model.boards(x, c)
+        W0 = np.stack([model.W0.get((r, c), np.eye(4)) for r in range(len(model.present))])
+        D = np.matmul(se3.transforms_from_rt(Rw, tw), se3.invert_transforms(W0))
+        world = np.matmul(D[of_frame], c0.poses_in_reference_world)
+        if c0.T_cam_ref is None or c not in model.present[r_ref]:  # not at the reference
+            cams[c] = dataclasses.replace(c0, poses_in_reference_world=world)
+            continue
         T0 = T_cam_ref(x, c)
         cols: list[int] = []
         for s in topo.path(topo.reference, c):
@@ -936,13 +1064,8 @@ def _assemble(
             return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
 
         C6 = lsq.propagate(vec, x, cols, sub(cols))[1] if cols else np.zeros((6, 6))
-        # every measured pose mapped into the reference world by the refined board frame (as
-        # the pose-based solve maps them by its own), and at the reference instant the
-        # bundle's pose, which T_cam_ref describes
-        Rw, tw = model.board(x, c)
-        W = se3.transforms_from_rt(Rw, tw)
-        world = np.matmul(W @ se3.invert_transforms(c0.world_to_reference_world),
-                          c0.poses_in_reference_world)  # fmt: skip
+        # at the reference instant the bundle's pose, which T_cam_ref describes
+        W = se3.transforms_from_rt(Rw[r_ref], tw[r_ref])
         R_k, t_k = poses[c]
         world[initial.reference_frame] = se3.transforms_from_rt(R_k[k_ref], t_k[k_ref])
         cams[c] = dataclasses.replace(
@@ -957,7 +1080,7 @@ def _assemble(
         p, q = j.between
         e0 = initial.edges[j.name]
         cols = list(range(L.n_shared))[L.geom[j.name]]
-        T_q_p = _relative(cams[q].T_cam_ref, cams[p].T_cam_ref)
+        T_q_p = _relative(cams[q].T_cam_ref, cams[p].T_cam_ref, e0.T_q_p)
         jm = joint_model(j.type)
         if jm.constant_transform:
 

@@ -13,7 +13,7 @@ from test_bundle import LENSES, hide_corners  # the same lenses and partial view
 from acs_cli.core import lsq, se3
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.rig_bundle import CameraViews, RigBundle, bundle_adjust_rig
-from acs_cli.core.rig_solve import RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import Recordings, RigEstimate, estimate_rig
 from acs_cli.errors import InputError
 from sample_data_gen.rig_sim import CornerRecording, rig_corner_recording
 
@@ -236,3 +236,54 @@ def test_propagate_is_exact_for_a_linear_map(rng: np.random.Generator) -> None:
     value, cov = lsq.propagate(lambda v: M @ v[cols], x, cols, C)
     np.testing.assert_allclose(value, M @ x[cols])
     np.testing.assert_allclose(cov, M @ C @ M.T, rtol=1e-6)
+
+
+def test_two_recordings_of_a_chain_share_its_joints_and_intrinsics() -> None:
+    """A chain cam0 -ball- cam1 -hinge- cam2 from two recordings (the hip trial without
+    cam2, the knee trial without cam0): one bundle adjustment over both, each recording with
+    its own boards and frames, recovers both joints within their stds and far beyond the
+    pose-based estimate, and each camera's intrinsics from every recording that saw it."""
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    n = 160
+    rec = rig_corner_recording(np.random.default_rng(2), n, joints=joints, noise_px=NOISE_PX)
+    topo = rec.rig.topology
+    of = np.repeat([0, 1], n // 2)
+    absent = {"cam2": of == 0, "cam0": of == 1}
+    tracks = {
+        c: dataclasses.replace(t, valid=t.valid & ~absent[c]) if c in absent else t
+        for c, t in rec.tracks().items()
+    }
+    views = {
+        c: dataclasses.replace(v, valid=v.valid & ~absent[c][:, None]) if c in absent else v
+        for c, v in rec.views().items()
+    }
+    common = np.ones(n, bool)
+    for c in topo.cameras:
+        common &= views[c].valid.any(axis=1) | absent.get(c, np.zeros(n, bool))
+    ref = int(np.flatnonzero(common & (of == 0))[0])
+    recs = Recordings(("hip", "knee"), of, (False, False))
+    est = estimate_rig(topo, tracks, reference_frame=ref, recordings=recs)
+    ba = bundle_adjust_rig(topo, views, est, np.flatnonzero(common))
+    assert ba.success
+    assert ba.sigma_px == pytest.approx(NOISE_PX, rel=0.1)
+    for name, (p, q), _ in joints:
+        truth = rec.rig.edges[name]
+        e, e0 = ba.estimate.edges[name], est.edges[name]
+        for c, o in ((p, truth.o_p), (q, truth.o_q)):
+            err = np.linalg.norm(e.position_in[c] - o)
+            std = np.sqrt(np.trace(e.position_cov_in[c]))
+            assert err < 4 * std, (name, c, err, std)
+            assert err < 0.5 * np.linalg.norm(e0.position_in[c] - o), (name, c)
+    for c in topo.cameras:
+        err = np.abs(ba.intrinsics[c][:2] - rec.intrinsics[c][:2])
+        assert np.all(err < 4 * ba.intrinsics_std[c][:2]), (c, err, ba.intrinsics_std[c])
+    # cam2 was not at the reference instant: no pose there, as in the pose-based estimate
+    assert ba.estimate.cameras["cam2"].T_cam_ref is None
+    # a recording whose bodies the tree joins only through a body it did not see
+    knee = [w for w in est.worlds if w.recording == "knee"]
+    worlds = [w for w in est.worlds if w.recording != "knee"]
+    worlds += [dataclasses.replace(knee[0], cameras=(c,)) for c in ("cam0", "cam2")]
+    with pytest.raises(InputError, match=r"recordings\.knee: bodies cam0, cam2 are not joined"):
+        bundle_adjust_rig(
+            topo, views, dataclasses.replace(est, worlds=worlds), np.flatnonzero(common)
+        )
