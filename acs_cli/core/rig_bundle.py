@@ -1129,7 +1129,20 @@ def _assemble(
             T_q_p=T_q_p,
             position_own_in={c: (pos[c], pcov[c]) for c in (p, q)},
         )  # fmt: skip  (a metric rig: each camera's own units are the reference's)
-    return dataclasses.replace(initial, cameras=cams, edges=edges)
+    worlds = []
+    names = () if recs is None else recs.names
+    for w in initial.worlds:  # each world with unknowns: the bundle's, with its covariance
+        r = names.index(w.recording) if w.recording in names else -1
+        sl = model.L.world.get((r, w.cameras[0]))
+        if sl is not None and not w.shared:
+            Rw, tw = model.board(x, w.cameras[0], r)
+            w = dataclasses.replace(
+                w,
+                T_ref_world=se3.transforms_from_rt(Rw, tw),
+                covariance=sub(list(range(sl.start, sl.stop))),
+            )
+        worlds.append(w)
+    return dataclasses.replace(initial, cameras=cams, edges=edges, worlds=worlds)
 
 
 @dataclass(frozen=True)
