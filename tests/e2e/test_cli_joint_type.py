@@ -226,3 +226,61 @@ def test_rigid_refuses_a_joint_file(
     assert res.returncode == 2
     assert "rigid joint has no joint point" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("jtype", ["hinge", "rigid"])
+def test_unknown_scale_with_a_hinge_or_a_rigid_mount(
+    jtype: str, request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
+    """B's trajectory in its own units (0.4 per metre, a monocular SLAM's): the scale and
+    ``T_b_a`` in B's units come out within their stds, as for a ball joint."""
+    rec, f = request.getfixturevalue(jtype)
+    T_b = rec.T_wc_c["b"].copy()
+    T_b[:, :3, 3] *= 0.4
+    scaled = tmp_path / "b_scaled.tum"
+    write_tum(scaled, rec.timestamps, T_b)
+    out = tmp_path / "relpose.yaml"
+    calibrate = () if jtype == "rigid" else ("--self-calibrate",)
+    res = acscal(
+        "relpose", *calibrate, "--unknown-scale", "--joint-type", jtype,
+        "--poses-a", f["a"], "--poses-b", scaled, "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    art = RelposeArtifact.load(out)
+    assert art.scale is not None and art.scale.phi_ba_std is not None
+    assert abs(art.scale.phi_ba - 0.4) < 4 * art.scale.phi_ba_std, art.scale
+    T_true = rec.T_cam_ref(0)["b"].copy()
+    T_true[:3, 3] *= 0.4  # B's units
+    _check_pose(art, T_true)
+    if jtype == "hinge":
+        assert art.joint is not None and art.joint.axis_in_a is not None
+
+
+@pytest.mark.parametrize("jtype", ["hinge", "rigid"])
+def test_a_clock_offset_with_a_hinge_or_a_rigid_mount(jtype: str, tmp_path: Path) -> None:
+    """B's clock 13 ms late on smooth motion: ``--estimate-time-offset`` finds it within its
+    std whatever the joint type, and the pose after it is within its stds."""
+    rec = rig_recording(
+        np.random.default_rng(3), 150, joints=(("j", ("a", "b"), jtype),), reference="a",
+        smooth=True, time_offsets={"b": 0.013}, sigma_rot_deg=SIGMA_ROT_DEG,
+        sigma_trans=SIGMA_TRANS,
+    )  # fmt: skip
+    f = {c: tmp_path / f"{c}.tum" for c in "ab"}
+    for c, path in f.items():
+        write_tum(path, rec.timestamps, rec.T_wc_c[c])
+    out = tmp_path / "relpose.yaml"
+    calibrate = () if jtype == "rigid" else ("--self-calibrate",)
+    res = acscal(
+        "relpose", *calibrate, "--joint-type", jtype, "--estimate-time-offset",
+        "--max-offset", "0.1", "--poses-a", f["a"], "--poses-b", f["b"], "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    art = RelposeArtifact.load(out)
+    offset = art.time_offset
+    assert offset is not None and offset.time_offset_s_std is not None
+    assert abs(offset.time_offset_s - 0.013) < 4 * offset.time_offset_s_std, offset
+    # the reference instant: the first of A's frames B's shifted recording covers
+    t_ref = art.relative_pose.reference_timestamp_a
+    assert t_ref is not None
+    k = int(np.argmin(np.abs(rec.timestamps - t_ref)))
+    _check_pose(art, rec.T_cam_ref(k)["b"])
