@@ -227,3 +227,48 @@ def test_a_rig_of_image_folders_calibrates_intrinsics_poses_and_rig(tmp_path: Pa
     assert all(b.rms_px < 0.1 and b.frames >= 10 for b in rig.bundle_adjustment.values())
     assert "bundle adjustment" in rig.header["method"]
     assert "bundle adjustment RMS" in res.stdout
+
+
+def test_a_rig_with_joint_priors_gets_its_bundle_adjustment(tmp_path: Path) -> None:
+    """Issue 19: board cameras (poses NPZs with their corners) and joints known beforehand,
+    a ball's centre from a fixed-joint session of cam0 and a hinge's line and axis from one
+    of cam2: the bundle adjustment fuses them with the corners (it used to be skipped)."""
+    from sample_data_gen.rig_sim import fixed_joint_motion, rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    joints = (("j01", ("cam0", "cam1"), "ball"), ("h12", ("cam1", "cam2"), "hinge"))
+    rng = np.random.default_rng(11)
+    rec = rig_corner_recording(rng, 80, joints=joints)
+    write_corner_poses(tmp_path, rec)
+    ball, hinge = rec.rig.edges["j01"], rec.rig.edges["h12"]
+    assert hinge.axis_q is not None and hinge.axis_p is not None
+    for name, T in (
+        ("fj01_cam0", fixed_joint_motion(rng, ball.o_p)),
+        ("fh12_cam2", fixed_joint_motion(rng, hinge.o_q, hinge.axis_q)),
+    ):
+        write_tum(tmp_path / f"{name}.tum", np.arange(T.shape[0]) * 0.1, T)
+    cfg = tmp_path / "rig.yaml"
+    cfg.write_text(
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.npz}\n  cam1: {poses: cam1.npz}\n  cam2: {poses: cam2.npz}\n"
+        "joints:\n"
+        "  j01: {between: [cam0, cam1], type: ball, fixed_joint: {cam0: fj01_cam0.tum}}\n"
+        "  h12: {between: [cam1, cam2], type: hinge, fixed_joint: {cam2: fh12_cam2.tum}}\n",
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "no bundle adjustment" not in res.stderr, res.stderr
+    rig = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+    assert set(rig.bundle_adjustment) == {"cam0", "cam1", "cam2"}
+    assert "bundle adjustment" in rig.header["method"]
+    assert {"fixed_joint_j01_cam0", "fixed_joint_h12_cam2"} <= set(rig.header["inputs"])
+    for name, truth in (("j01", ball), ("h12", hinge)):
+        j = rig.joints[name]
+        p, q = j.between
+        for c, o in ((p, truth.o_p), (q, truth.o_q)):
+            err = float(np.linalg.norm(j.position_in[c] - o))
+            assert err < 4 * np.linalg.norm(j.position_std_in[c]) and err < 0.005, (name, c, err)
+    u = rig.joints["h12"].axis_in["cam2"]
+    ang = np.degrees(np.arccos(min(1.0, abs(float(u @ hinge.axis_q)))))
+    assert ang < 4 * rig.joints["h12"].axis_std_deg_in["cam2"] and ang < 0.2, ang
