@@ -1019,7 +1019,8 @@ def trajectories_from_rig(
 
     Each measured pose is mapped as it is, the reference instant's too (the run's own
     ``trajectories/`` hold there the poses corrected by the joint constraints, which
-    ``T_cam_ref`` reports: they differ by the pose noise).
+    ``T_cam_ref`` reports: they differ by the pose noise; after a bundle adjustment they
+    hold its per-frame fit at every instant it adjusted, which needs the corners).
 
     Returns
     -------
