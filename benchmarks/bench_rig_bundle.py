@@ -12,12 +12,15 @@ intrinsics session would leave them. Per trial:
   all four cameras see their boards.
 
 Printed (Markdown, stdout): RMS errors over the trials of every camera's ``T_cam_ref``
-(rotation, translation), the joints, the hinge axis and the focal lengths; the RMS of the
+(rotation, translation), the joints, the hinge axis and the focal lengths, and per frame
+adjusted, of the trajectories the rig writes (every camera's pose and every joint's point in
+the reference camera's frame at the reference instant); the RMS of the
 error divided by the reported standard deviation, per component (1 for an honest std); and the
 bundle's time against frames.
 
     .venv/bin/python benchmarks/bench_rig_bundle.py              # 20 trials (~3 min here)
     .venv/bin/python benchmarks/bench_rig_bundle.py --trials 3   # a smoke run
+    .venv/bin/python benchmarks/bench_rig_bundle.py --no-timing  # the accuracy table only
 """
 
 # ruff: noqa: E402  (BLAS threads must be set before numpy is imported)
@@ -87,14 +90,49 @@ def _errors(rec: CornerRecording, est: RigEstimate, ref: int) -> dict[str, tuple
     return out
 
 
+def _trajectory_errors(
+    rec: CornerRecording, est: RigEstimate, ref: int, frames: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Per-frame errors of the trajectories the rig writes (``write_rig_trajectories``:
+    every body's and ball or hinge joint's pose in the reference camera's frame at the
+    reference instant) over ``frames``: rotation (deg) and translation (mm) of every camera,
+    and the distance (mm) of every joint's point."""
+    topo = rec.rig.topology
+    r = topo.reference
+    T_ref_w = se3.invert_transforms(est.cameras[r].poses_in_reference_world[ref])
+    T_true = se3.invert_transforms(rec.rig.T_W_c[r][ref])
+    got = {c: T_ref_w @ e.poses_in_reference_world[frames] for c, e in est.cameras.items()}
+    truth = {c: T_true @ rec.rig.T_W_c[c][frames] for c in est.cameras}
+    rot, trans, joint = [], [], []
+    for c in est.cameras:
+        d = np.swapaxes(truth[c][:, :3, :3], 1, 2) @ got[c][:, :3, :3]
+        rot.append(np.degrees(np.linalg.norm(se3.rotvec_from_matrix(d), axis=1)))
+        trans.append(1e3 * np.linalg.norm(got[c][:, :3, 3] - truth[c][:, :3, 3], axis=1))
+    for name, e in est.edges.items():
+        if not e.position_in:
+            continue
+        p = e.joint.between[0]
+        o = se3.transform_points(got[p], e.position_in[p])
+        o_true = se3.transform_points(truth[p], rec.rig.edges[name].o_p)
+        joint.append(1e3 * np.linalg.norm(o - o_true, axis=1))
+    return {
+        "trajectories, every camera: rot (deg)": np.concatenate(rot),
+        "trajectories, every camera: trans (mm)": np.concatenate(trans),
+        "trajectories, ball and hinge joints' points (mm)": np.concatenate(joint),
+    }
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--frames", type=int, default=150, help="simulated frames per trial")
+    ap.add_argument("--no-timing", action="store_true", help="skip the time table")
     args = ap.parse_args(argv)
     pose: dict[str, list] = defaultdict(list)
     bundle: dict[str, list] = defaultdict(list)
     focal: dict[str, list] = defaultdict(list)
+    traj_pose: dict[str, list] = defaultdict(list)
+    traj_bundle: dict[str, list] = defaultdict(list)
     times, used, skipped = [], [], 0
     for seed in range(args.trials):
         rec = rig_corner_recording(np.random.default_rng(1000 + seed), args.frames, joints=JOINTS)
@@ -110,6 +148,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             pose[k].append(v)
         for k, v in _errors(rec, ba.estimate, ref).items():
             bundle[k].append(v)
+        for k, v in _trajectory_errors(rec, est, ref, ba.frames).items():
+            traj_pose[k].append(v)
+        for k, v in _trajectory_errors(rec, ba.estimate, ref, ba.frames).items():
+            traj_bundle[k].append(v)
         for c in rec.rig.topology.cameras:
             focal["initial"].append(rec.intrinsics0[c][0] - rec.intrinsics[c][0])
             focal["bundle"].append(ba.intrinsics[c][0] - rec.intrinsics[c][0])
@@ -140,6 +182,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     fb = np.sqrt(np.mean(np.square(focal["bundle"])))
     fz = np.sqrt(np.mean(np.square(focal["z"])))
     print(f"| fx (px), 4 cameras | {fi:.3f} (initial) | {fb:.3f} | {fb / fi:.2f} | — | {fz:.2f} |")
+    for k in traj_bundle:
+        a = float(np.sqrt(np.mean(np.square(np.concatenate(traj_pose[k])))))
+        b = float(np.sqrt(np.mean(np.square(np.concatenate(traj_bundle[k])))))
+        print(f"| {k}, per frame | {a:.3f} | {b:.3f} | {b / a:.2f} | — | — |")
+    if args.no_timing:
+        return 0
     print("\nTime of `bundle_adjust_rig` (4 cameras, seconds, one run each):\n")
     print("| frames | seconds |\n|---|---|")
     rec = rig_corner_recording(np.random.default_rng(1000), 400, joints=JOINTS)

@@ -404,3 +404,20 @@ def rig_corner_recording(
         intr0[c] = np.array([K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], *d0])
         poses[c] = T
     return CornerRecording(rec, board, corners, valid, intr, intr0, poses)
+
+
+def fixed_joint_motion(
+    rng: np.random.Generator, o: FloatArray, axis: FloatArray | None = None, n: int = 40
+) -> FloatArray:
+    """A fixed-joint session of one camera: ``T_world_cam`` ``(n, 4, 4)`` (metres) of a
+    camera turning about a world-fixed joint at ``o`` (in the camera's frame): about every
+    axis (up to 60 deg) for a ball, about ``axis`` (camera frame, +-50 deg) for a hinge;
+    0.2 deg / 2 mm pose noise, in a random world."""
+    if axis is None:
+        R = random_rotations(rng, n, 60.0)
+    else:
+        ang = np.radians(rng.uniform(-50, 50, n))
+        R = se3.matrix_from_rotvec(ang[:, None] * axis)  # R_w_c with the world = camera 0
+    p_w = rng.uniform(-1, 1, 3)
+    T = se3.transforms_from_rt(R, p_w - np.einsum("nij,j->ni", R, o))
+    return add_pose_noise(rng, random_transform(rng) @ T, 0.2, 0.002)

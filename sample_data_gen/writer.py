@@ -41,7 +41,7 @@ from sample_data_gen.acs_sim import (
     make_rig,
     scale_translations,
 )
-from sample_data_gen.rig_sim import RigRecording, rig_recording
+from sample_data_gen.rig_sim import CornerRecording, RigRecording, rig_recording
 
 __all__ = [
     "RIG_NOISE",
@@ -453,3 +453,57 @@ def write_rig_recording(
     write_yaml_artifact(out / "truth.yaml", header, body)
     atomic_write_text(out / "config.yaml", _rig_config_text(rec))
     return rec
+
+
+def write_corner_poses(
+    out_dir: str | Path, rec: CornerRecording, drop: dict[str, list[int]] | None = None
+) -> dict[str, Path]:
+    """Write each camera of a board-camera rig (:func:`~sample_data_gen.rig_sim.
+    rig_corner_recording`) as ``acscal poses`` would: ``<camera>.npz`` (its PnP poses with
+    their corners, at the frames where it sees its board, timestamps ``frame / 30`` s) and
+    ``<camera>_intrinsics.yaml`` (the initial intrinsics the poses were solved with, 640x480,
+    pinhole), which the NPZ names by its absolute path.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Folder (existing).
+    rec : CornerRecording
+    drop : dict of camera to list of int, optional
+        Frames left out of a camera's file as well (so that rows and instants differ).
+
+    Returns
+    -------
+    dict of camera to Path
+        The NPZ files.
+    """
+    import dataclasses
+
+    from acs_cli.io.intrinsics import IntrinsicsArtifact
+    from acs_cli.io.poses import PosesArtifact
+    from acs_cli.io.trajectory import Trajectory
+
+    out_dir = Path(out_dir)
+    out = {}
+    for c in rec.rig.topology.cameras:
+        seen = rec.valid[c].all(axis=1)
+        seen[list((drop or {}).get(c, []))] = False
+        i0 = rec.intrinsics0[c]
+        K = np.array([[i0[0], 0.0, i0[2]], [0.0, i0[1], i0[3]], [0.0, 0.0, 1.0]])
+        intr = IntrinsicsArtifact(
+            model="pinhole", image_size=(640, 480), camera_matrix=K, distortion=i0[4:]
+        )
+        intr_file = (out_dir / f"{c}_intrinsics.yaml").resolve()
+        header = make_header("intrinsics", {}, "sample_data_gen (initial intrinsics)", {}, {})
+        dataclasses.replace(intr, header=header).save(intr_file)
+        idx = np.flatnonzero(seen)
+        art = PosesArtifact(
+            trajectory=Trajectory(idx / 30.0, rec.T_board_cam[c][idx], "x", "npz", True),
+            corners=rec.corners[c][idx],
+            board_points=rec.board_points,
+            header=make_header("poses", {}, "sample_data_gen (PnP poses)", {}, {})
+            | {"intrinsics_file": str(intr_file)},
+        )
+        out[c] = out_dir / f"{c}.npz"
+        art.save(out[c])
+    return out

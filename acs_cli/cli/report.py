@@ -229,6 +229,15 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
     paths = trajectories_from_rig(art, trajectories)
     marks = weak_marks(rig_file.name, art.verdict)
     warn(marks)
+    if art.bundle_adjustment:
+        warn(
+            [
+                f"{rig_file.name} was refined by a bundle adjustment: these are the measured "
+                "poses mapped by its calibration; the run's own trajectories/ hold the "
+                "bundle's per-frame fit at the instants it adjusted"
+            ],
+            prefix="note",
+        )
     written = []
     for name, (times, T) in paths.items():
         f = output / f"{name}.tum"

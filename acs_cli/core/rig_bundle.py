@@ -67,12 +67,10 @@ from acs_cli.core.rig_solve import (
     EdgeEstimate,
     EdgePrior,
     RigEstimate,
+    edge_prior_rows,
 )
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
-
-#: Std (metres) of a joint's point given without one: taken as exact.
-DEFAULT_PRIOR_STD = 1e-6
 
 __all__ = [
     "MIN_RIG_BUNDLE_FRAMES",
@@ -178,9 +176,12 @@ class RigBundle:
     ----------
     estimate : RigEstimate
         The rig with the bundle's ``T_cam_ref`` (and covariances), joints and boards'
-        frames; each camera's measured poses mapped by its refined board frame, and at the
-        reference instant the bundle's pose. The joints' ``residual_rms``, frame counts,
-        inliers and noise stay those of the pose-based solve.
+        frames. Each body's ``poses_in_reference_world`` ``(n, 4, 4)`` holds at the instants
+        adjusted (``bundle_frames``, the same as ``frames``) the bundle's per-frame fit
+        ``G[i] T_ref_c[i]``, and at the others its measured poses mapped by its refined
+        board frame (``world_to_reference_world``), as the pose-based solve maps them. The
+        joints' ``residual_rms``, frame counts, inliers and noise stay those of the
+        pose-based solve.
     intrinsics, intrinsics_std : dict of camera to ndarray (p,)
         Refined intrinsics (named by the camera's model) and their standard deviations (0
         if held).
@@ -291,8 +292,8 @@ class _Model:
     w_px: float = 1.0
     w_rot: dict[str, float] = field(default_factory=dict)
     w_trans: dict[str, float] = field(default_factory=dict)
-    # joints known beforehand (a fixed-joint session): (joint, side, point (3,) in metres,
-    # whitener (3, 3)): rows W (o_side - point) on the joint's point in that camera
+    # joints known beforehand (edge_prior_rows): (joint, at, value (3,), whitener (k, 3)):
+    # rows W (g[at : at + 3] - value) on the joint's geometry (JointModel.bundle_geometry)
     priors: list[tuple[RigJoint, int, FloatArray, FloatArray]] = field(default_factory=list)
     # the articulation unknowns of joints a frame's recording does not see: held at their
     # start by rows of unit weight (they move nothing else, or only what the frame's pose
@@ -395,11 +396,11 @@ class _Model:
         for b in self.bodies:
             w = np.array([self.w_rot[b]] * 3 + [self.w_trans[b]] * 3)
             out.append((pose[b] * w).ravel())
-        for j, side, point, Wh in self.priors:
+        for j, at, value, Wh in self.priors:
             g = joint_model(j.type).bundle_geometry(
                 x[self.L.geom[j.name]], self.R0[j.name], self.geom0[j.name]
             )
-            out.append(Wh @ (g[3 * side : 3 * side + 3] - point))
+            out.append(Wh @ (g[at : at + 3] - value))
         out.append(x[self.held])
         return np.concatenate(out)
 
@@ -408,14 +409,14 @@ class _Model:
         which no frame's unknowns touch, are filed under the first frame)."""
         rows = [np.repeat(self.obs[c][0], 2) for c in self.cams]
         rows += [np.repeat(self.meas[b][2], 6) for b in self.bodies]
-        rows += [np.zeros(3, int) for _ in self.priors]
+        rows += [np.zeros(Wh.shape[0], int) for *_, Wh in self.priors]
         rows.append((self.held - self.L.n_shared) // self.L.block)
         return np.concatenate(rows)
 
     def prior_rows(self) -> np.ndarray:
         """The joint priors' rows in :meth:`residuals` (the last ones)."""
         total = self.row_frames().size - self.held.size
-        return np.arange(total - 3 * len(self.priors), total)
+        return np.arange(total - sum(Wh.shape[0] for *_, Wh in self.priors), total)
 
     def pose_rows(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Each pose-only body's rotation and translation rows in :meth:`residuals`."""
@@ -667,9 +668,10 @@ def bundle_adjust_rig(
         The measured poses (``T_world_body`` in the body's own world, metres) of every
         body without corners (a robot's flange, a motion-capture segment, an INS).
     priors : dict of EdgePrior, optional
-        Joints known beforehand (a fixed-joint session), by joint name: their points
-        (``position_in``, metres, with ``covariance_in``; without one, a tight prior) fused
-        with the corners, as in the pose-based solve (:func:`acs_cli.core.rig_solve.estimate_rig`).
+        Joints known beforehand (a fixed-joint session, a measurement), by joint name: their
+        points (``position_in``, metres, with ``covariance_in``; without one, the pose-based
+        solve's default std), a hinge's lines and axes (``line_in``, ``axis_in``), fused
+        with the corners as in the pose-based solve (:func:`acs_cli.core.rig_solve.estimate_rig`).
     static : bool
         The reference body does not move: it is the world of a joint held still (the
         paper's fixed-joint motion, a pivot; :func:`bundle_adjust_fixed_joint`), with
@@ -684,7 +686,8 @@ def bundle_adjust_rig(
     ------
     InputError
         Views or poses that do not fit the topology or the timeline, a body with neither,
-        an unknown scale, too few frames, or frames without the reference instant.
+        an unknown scale, too few frames, frames without the reference instant, or a prior
+        that does not fit its joint.
     DegenerateMotionError
         Corners and poses that leave part of the rig undetermined.
     """
@@ -718,7 +721,7 @@ def bundle_adjust_rig(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
     model, x0 = _initial(topology, views, poses, initial, frames, rec, present, static)
-    model.priors = _bundle_priors(topology, priors or {})
+    model.priors = _bundle_priors(model, priors or {})
     L = model.L
     row_frame = model.row_frames()
 
@@ -817,32 +820,19 @@ def bundle_adjust_rig(
 
 
 def _bundle_priors(
-    topo: RigTopology, priors: dict[str, EdgePrior]
+    model: _Model, priors: dict[str, EdgePrior]
 ) -> list[tuple[RigJoint, int, FloatArray, FloatArray]]:
-    """The rows of joints known beforehand (:class:`~acs_cli.core.rig_solve.EdgePrior`,
-    points in metres); ``InputError`` for a prior the bundle cannot take."""
-    out: list[tuple[RigJoint, int, FloatArray, FloatArray]] = []
-    for name, pr in priors.items():
-        j = topo.joint(name)
-        if not joint_model(j.type).has_point:
-            raise InputError(f"joints.{name}: a {j.type} joint has no position to give")
-        if pr.units == "metre" or pr.line_in or pr.axis_in:
-            raise InputError(
-                f"joints.{name}: the bundle adjustment takes a joint's point in metres (its "
-                "lines, axes and metric priors of unknown-scale rigs only in the pose solve)"
-            )
-        for c, pos in pr.position_in.items():
-            if c not in j.between:
-                raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
-            C = np.asarray(pr.covariance_in.get(c, np.eye(3) * DEFAULT_PRIOR_STD**2), float)
-            try:
-                Wh = np.linalg.inv(np.linalg.cholesky(C))
-            except np.linalg.LinAlgError:
-                raise InputError(
-                    f"joints.{name}: the covariance given for {c} is not positive definite"
-                ) from None
-            out.append((j, j.between.index(c), np.asarray(pos, float), Wh))
-    return out
+    """The rows of joints known beforehand, as the pose-based solve takes them
+    (:func:`~acs_cli.core.rig_solve.edge_prior_rows`: points, a hinge's lines and axes, in
+    metres: every body of the bundle is metric); a point without a covariance has the
+    engine's default std, its share of the reference body's travel over the frames
+    adjusted."""
+    t = model.G0[:, :3, 3]
+    travel = float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
+    return [
+        (model.topo.joint(name), at, value, W)
+        for name, at, value, W, _c in edge_prior_rows(model.topo, priors, travel)
+    ]
 
 
 def _noise(model: _Model) -> FloatArray:
@@ -1050,6 +1040,11 @@ def _assemble(
         W0 = np.stack([model.W0.get((r, c), np.eye(4)) for r in range(len(model.present))])
         D = np.matmul(se3.transforms_from_rt(Rw, tw), se3.invert_transforms(W0))
         world = np.matmul(D[of_frame], c0.poses_in_reference_world)
+        # at the instants adjusted where its recording saw it, the bundle's own poses
+        # G[i] T_ref_c[i] (the reference instant's is the one T_cam_ref describes)
+        seen = np.array([c in model.present[r] for r in model.rec], dtype=bool)
+        R_c, t_c = poses[c]
+        world[model.frames[seen]] = se3.transforms_from_rt(R_c[seen], t_c[seen])
         if c0.T_cam_ref is None or c not in model.present[r_ref]:  # not at the reference
             cams[c] = dataclasses.replace(c0, poses_in_reference_world=world)
             continue
@@ -1064,10 +1059,7 @@ def _assemble(
             return np.concatenate([se3.rotvec_from_matrix(T0[:3, :3].T @ T[:3, :3]), T[:3, 3]])
 
         C6 = lsq.propagate(vec, x, cols, sub(cols))[1] if cols else np.zeros((6, 6))
-        # at the reference instant the bundle's pose, which T_cam_ref describes
         W = se3.transforms_from_rt(Rw[r_ref], tw[r_ref])
-        R_k, t_k = poses[c]
-        world[initial.reference_frame] = se3.transforms_from_rt(R_k[k_ref], t_k[k_ref])
         cams[c] = dataclasses.replace(
             c0,
             T_cam_ref=T0,
@@ -1142,7 +1134,9 @@ def _assemble(
                 covariance=sub(list(range(sl.start, sl.stop))),
             )
         worlds.append(w)
-    return dataclasses.replace(initial, cameras=cams, edges=edges, worlds=worlds)
+    return dataclasses.replace(
+        initial, cameras=cams, edges=edges, worlds=worlds, bundle_frames=model.frames
+    )
 
 
 @dataclass(frozen=True)

@@ -107,6 +107,9 @@ NULL_EIGENVALUE = 1e-9
 #: noiseless recording would otherwise weigh its rows beyond what differences resolve.
 NOISE_FLOOR_ROT = 1e-6
 NOISE_FLOOR_LENGTH = 1e-6
+#: A joint's point given without a covariance has this std per axis, as a share of the rig's
+#: travel (the reference camera's RMS distance from its mean position).
+PRIOR_STD_OF_TRAVEL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -248,6 +251,73 @@ def fixed_joint_prior(joint: RigJoint, camera: str, T_w_c: FloatArray, label: st
     )
 
 
+def edge_prior_rows(
+    topology: RigTopology, priors: dict[str, EdgePrior], travel: float
+) -> list[tuple[str, int, FloatArray, FloatArray, str]]:
+    """The rows of joints known beforehand: ``W (g[at : at + 3] - value)`` on each joint's
+    geometry ``g`` (:meth:`~acs_cli.core.joints.base.JointModel.geometry`'s order: the points
+    ``o_p``, ``o_q``, then a hinge's axes ``u_p``, ``u_q``), in each prior's units.
+
+    Parameters
+    ----------
+    topology : RigTopology
+    priors : dict of EdgePrior
+        By joint name.
+    travel : float
+        The rig's length scale (the reference camera's RMS distance from its mean position,
+        reference units): a point given without a covariance has the std
+        :data:`PRIOR_STD_OF_TRAVEL` times it (at least times 1 mm).
+
+    Returns
+    -------
+    list of (joint, at, value (3,), W (k, 3), camera)
+        A point gives 3 rows (``at = 3 side``, ``W`` its covariance's inverse Cholesky
+        factor); a hinge's line 2 (across it: its point at ``3 side``, ``W`` the basis
+        across its direction over its std); its axis 2 (across the direction, either sign:
+        ``at = 6 + 3 side``, over its std in radians).
+
+    Raises
+    ------
+    InputError
+        Unknown units, a joint without a point (rigid), an axis on a joint that is not a
+        hinge, a camera not on the joint, a covariance that is not positive definite.
+    """
+    out: list[tuple[str, int, FloatArray, FloatArray, str]] = []
+    for name, pr in priors.items():
+        if pr.units not in ("reference", "own", "metre"):
+            raise InputError(f"joints.{name}: unknown prior units {pr.units!r}")
+        j = topology.joint(name)
+        model = joint_model(j.type)
+        if not model.has_point:
+            raise InputError(f"joints.{name}: a {j.type} joint has no position to give")
+        if (pr.line_in or pr.axis_in) and not model.has_axis:
+            raise InputError(f"joints.{name}: an axis is given but the joint is a {j.type}")
+        for c in [*pr.line_in, *pr.axis_in]:
+            if c not in j.between:
+                raise InputError(f"joints.{name}: {c} is not on this joint")
+        for c, (point, direction, std) in pr.line_in.items():
+            B = tangent_basis(_unit(np.asarray(direction, float)))
+            out.append((name, 3 * j.between.index(c), np.asarray(point, float), B.T / std, c))
+        for c, (direction, std_rad) in pr.axis_in.items():
+            given = _unit(np.asarray(direction, float))
+            side = j.between.index(c)
+            out.append((name, 6 + 3 * side, given, tangent_basis(given).T / std_rad, c))
+        for c, pos in pr.position_in.items():
+            if c not in j.between:
+                raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
+            C = pr.covariance_in.get(c)
+            if C is None:
+                C = np.eye(3) * (PRIOR_STD_OF_TRAVEL * max(travel, 1e-3)) ** 2
+            try:
+                Wh = np.linalg.inv(np.linalg.cholesky(np.asarray(C, float)))
+            except np.linalg.LinAlgError:
+                raise InputError(
+                    f"joints.{name}: the covariance given for {c} is not positive definite"
+                ) from None
+            out.append((name, 3 * j.between.index(c), np.asarray(pos, float), Wh, c))
+    return out
+
+
 def merge_priors(first: EdgePrior, second: EdgePrior) -> EdgePrior:
     """Both priors of one joint; where both give the same part, ``first``'s."""
     if first.units != second.units and (second.position_in or second.line_in):
@@ -362,6 +432,11 @@ class RigEstimate:
     recordings: Recordings | None = None
     #: every world of every recording (see :class:`WorldEstimate`)
     worlds: list[WorldEstimate] = field(default_factory=list)
+    #: the instants (indices into the timeline, sorted) whose ``poses_in_reference_world``
+    #: are a bundle adjustment's per-frame fit on the corners
+    #: (:func:`acs_cli.core.rig_bundle.bundle_adjust_rig`) rather than measured poses mapped
+    #: into the reference world; empty for the pose-based solve
+    bundle_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
 
 # --------------------------------------------------------------------------- layout
@@ -1324,9 +1399,6 @@ def estimate_rig(
             "(its joints' other bodies are not in that recording, or the recording holds "
             "them still): choose a recording where it moves with a neighbour"
         )
-    for name, pr in priors.items():
-        if pr.units not in ("reference", "own", "metre"):
-            raise InputError(f"joints.{name}: unknown prior units {pr.units!r}")
     metre = any(pr.units == "metre" for pr in priors.values())
     L = _Layout(topology, wg.root.size, wg.root, wg.unknown_scale, wg.ref_world, with_delta, metre)
 
@@ -1367,44 +1439,17 @@ def estimate_rig(
                     den += float(np.asarray(pos, float) @ np.asarray(pos, float))
         if L.metre not in L.logs.values():  # else a metric world's scale already starts it
             x0[L.metre] = np.log(max(num / den, 1e-6)) if den > 0 and num > 0 else 0.0
-    prior_rows: list[tuple[str, int, FloatArray, FloatArray, int | None]] = []
-    for name, pr in priors.items():
+    prior_rows = [
+        (name, at, value, W, unit_column(priors[name], c) if at < 6 else None)
+        for name, at, value, W, c in edge_prior_rows(topology, priors, travel)
+    ]
+    for name, pr in priors.items():  # the given points start their joints
         j = topology.joint(name)
-        model = joint_model(j.type)
-        if not model.has_point:
-            raise InputError(f"joints.{name}: a {j.type} joint has no position to give")
-        if (pr.line_in or pr.axis_in) and not model.has_axis:
-            raise InputError(f"joints.{name}: an axis is given but the joint is a {j.type}")
-        for c in [*pr.line_in, *pr.axis_in]:
-            if c not in j.between:
-                raise InputError(f"joints.{name}: {c} is not on this joint")
-        for c, (point, direction, std) in pr.line_in.items():
-            B = tangent_basis(_unit(np.asarray(direction, float)))
-            side = j.between.index(c)
-            prior_rows.append(
-                (name, 3 * side, np.asarray(point, float), B.T / std, unit_column(pr, c))
-            )
-        for c, (direction, std_rad) in pr.axis_in.items():
-            given = _unit(np.asarray(direction, float))
-            side = j.between.index(c)
-            prior_rows.append((name, 6 + 3 * side, given, tangent_basis(given).T / std_rad, None))
         for c, pos in pr.position_in.items():
-            if c not in j.between:
-                raise InputError(f"joints.{name}.position_in.{c}: {c} is not on this joint")
-            C = pr.covariance_in.get(c)
-            if C is None:
-                C = np.eye(3) * (1e-4 * max(travel, 1e-3)) ** 2
-            try:
-                Wh = np.linalg.inv(np.linalg.cholesky(np.asarray(C, float)))
-            except np.linalg.LinAlgError:
-                raise InputError(
-                    f"joints.{name}: the covariance given for {c} is not positive definite"
-                ) from None
-            side = j.between.index(c)
             col = unit_column(pr, c)
-            prior_rows.append((name, 3 * side, np.asarray(pos, float), Wh, col))
             f0 = 1.0 if col is None else float(np.exp(x0[col]))
-            model.seed_point(x0[L.edge[name]], side, f0 * np.asarray(pos, float))
+            side = j.between.index(c)
+            joint_model(j.type).seed_point(x0[L.edge[name]], side, f0 * np.asarray(pos, float))
     st = _State(
         topo=topology,
         L=L,

@@ -458,7 +458,7 @@ def run_rig(
     has_corners = any(is_npz(p) for p, _ in files.values())
     if config.bundle and not offsets and single:
         trajectories = by_rec[config.reference_recording]
-        est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns)
+        est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns, priors)
         warnings += notes
     elif config.bundle and has_corners and not single:
         warnings.append(
@@ -911,10 +911,6 @@ def rig_synchronisation(
     return out
 
 
-def _priors_given(config: RigRunConfig) -> bool:
-    return any(j.position_in or j.fixed_joint for j in config.joints.values())
-
-
 def rig_bundle(
     config: RigRunConfig,
     files: dict[str, tuple[Path, str]],
@@ -922,6 +918,7 @@ def rig_bundle(
     index: dict[str, np.ndarray],
     est: RigEstimate,
     turned: dict[str, FloatArray] | None = None,
+    priors: dict[str, EdgePrior] | None = None,
 ) -> tuple[RigEstimate, dict[str, BundleSection], list[str]]:
     """Refine a rig on its corners when at least one camera's poses carry them (poses NPZs
     of ``acscal poses``): the estimate, each camera's bundle section, and warnings.
@@ -931,7 +928,10 @@ def rig_bundle(
 
     The other bodies (a robot's flange, a motion-capture segment, an INS: poses without
     corners) enter the bundle with their measured poses and their own fitted noise levels.
-    A rig whose bundle adjustment fails keeps the pose-based estimate, with a warning.
+    The joints known beforehand (``priors``: the config's ``position_in`` and fixed-joint
+    sessions, :func:`_priors`, in metres) are fused with the corners as the pose-based solve
+    fuses them. A rig whose bundle adjustment fails keeps the pose-based estimate, with a
+    warning.
     """
     views: dict[str, CameraViews] = {}
     without: list[str] = []
@@ -965,10 +965,6 @@ def rig_bundle(
         return est, {}, [*notes, "no bundle adjustment of the rig: camera(s) "
                          f"{', '.join(unknown)} are configured with scale: unknown, but board "
                          "corners are metric"]  # fmt: skip
-    if _priors_given(config):
-        return est, {}, [*notes, "no bundle adjustment of the rig: it does not take joint "
-                         "priors (position_in, fixed_joint) yet, so the rig is solved from "
-                         "poses with them"]  # fmt: skip
     poses: dict[str, CameraTrack] = {}  # the bodies without corners: their measured poses
     for name in without:
         rows = index[name]
@@ -990,7 +986,9 @@ def rig_bundle(
                          "reference frame among them; at least "
                          f"{MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
     try:
-        ba = bundle_adjust_rig(config.topology, views, est, np.flatnonzero(mask), poses)
+        ba = bundle_adjust_rig(
+            config.topology, views, est, np.flatnonzero(mask), poses, priors=priors
+        )
     except DegenerateMotionError as exc:
         return est, {}, [*notes, f"no bundle adjustment of the rig: {exc.message}; the "
                          "pose-based estimate is kept"]  # fmt: skip
@@ -1021,7 +1019,8 @@ def trajectories_from_rig(
 
     Each measured pose is mapped as it is, the reference instant's too (the run's own
     ``trajectories/`` hold there the poses corrected by the joint constraints, which
-    ``T_cam_ref`` reports: they differ by the pose noise).
+    ``T_cam_ref`` reports: they differ by the pose noise; after a bundle adjustment they
+    hold its per-frame fit at every instant it adjusted, which needs the corners).
 
     Returns
     -------
@@ -1070,12 +1069,31 @@ def write_rig_trajectories(
     Every pose is ``T_ref_x``: in the reference camera's frame at the reference instant
     (reference units), as ``T_world_cam`` TUM rows whose "world" is that frame. A joint's
     file holds its centre (ball) or hinge point with the orientation of the edge's first
-    camera; frames where a camera has no pose are left out.
+    camera; frames where a camera has no pose are left out. After a bundle adjustment the
+    instants it adjusted (``est.bundle_frames``) hold its per-frame fit on the corners, the
+    others the measured poses mapped by the refined calibration; a comment line under the
+    header says which rows are which.
     """
     ref = est.topology.reference
     G_ref_k = est.cameras[ref].poses_in_reference_world[est.reference_frame]
     T_ref_w = se3.invert_transforms(G_ref_k)
     written: list[Path] = []
+    fitted = np.zeros(times.size, bool)
+    fitted[est.bundle_frames] = True
+
+    def note(ok: np.ndarray) -> str | None:
+        """Which rows are the bundle's fit (None without a bundle adjustment)."""
+        if not fitted[ok].any():
+            return None
+        if fitted[ok].all():
+            return "every pose: the rig's bundle adjustment's per-frame fit on the corners"
+        return (
+            f"{int(fitted[ok].sum())} of {int(ok.sum())} poses are the rig's bundle "
+            "adjustment's per-frame fit on the corners, those at t = "
+            + " ".join(f"{t:.9f}" for t in times[ok & fitted])
+            + "; the others are measured poses mapped by the refined calibration"
+        )
+
     # the reference recording's instants: the only ones in the reference camera's frame
     recs = est.recordings
     here = (
@@ -1090,7 +1108,7 @@ def write_rig_trajectories(
         if not ok.any():
             continue
         path = folder / f"{c}.tum"
-        write_tum(path, times[ok], T_ref_w @ e.poses_in_reference_world[ok])
+        write_tum(path, times[ok], T_ref_w @ e.poses_in_reference_world[ok], note=note(ok))
         written.append(path)
     for name, edge in est.edges.items():
         if not edge.position_in:
@@ -1106,6 +1124,6 @@ def write_rig_trajectories(
         T = G.copy()
         T[:, :3, 3] = se3.transform_points(G, edge.position_in[p])
         path = folder / f"{name}.tum"
-        write_tum(path, times[ok], T_ref_w @ T)
+        write_tum(path, times[ok], T_ref_w @ T, note=note(ok))
         written.append(path)
     return written

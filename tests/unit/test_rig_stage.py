@@ -7,30 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import write_tum
 from acs_cli.stages.rig import RigRunConfig, parse_rig_config, run_rig
-from sample_data_gen.acs_sim import add_pose_noise, random_rotations, random_transform
-from sample_data_gen.rig_sim import rig_recording
+from sample_data_gen.rig_sim import fixed_joint_motion, rig_recording
 
 JOINTS = (("j01", ("cam0", "cam1"), "ball"), ("h12", ("cam1", "cam2"), "hinge"))
-
-
-def _fixed_joint(
-    rng: np.random.Generator, o: np.ndarray, axis: np.ndarray | None, n: int = 40
-) -> np.ndarray:
-    """A camera turning about a world-fixed joint at ``o`` (camera frame): about every axis
-    for a ball, about ``axis`` (camera frame) for a hinge; 0.2 deg / 2 mm noise."""
-    if axis is None:
-        R = random_rotations(rng, n, 60.0)
-    else:
-        ang = np.radians(rng.uniform(-50, 50, n))
-        R = se3.matrix_from_rotvec(ang[:, None] * axis)  # R_w_c with the world = camera 0
-    p_w = rng.uniform(-1, 1, 3)
-    T = se3.transforms_from_rt(R, p_w - np.einsum("nij,j->ni", R, o))
-    return add_pose_noise(rng, random_transform(rng) @ T, 0.2, 0.002)
 
 
 def test_fixed_joint_sessions_become_priors(tmp_path: Path, rng: np.random.Generator) -> None:
@@ -40,9 +23,9 @@ def test_fixed_joint_sessions_become_priors(tmp_path: Path, rng: np.random.Gener
     e01, h12 = rec.edges["j01"], rec.edges["h12"]
     assert h12.axis_p is not None and h12.axis_q is not None
     sessions = {
-        "fj01_cam0": _fixed_joint(rng, e01.o_p, None),
-        "fj12_cam1": _fixed_joint(rng, h12.o_p, h12.axis_p),
-        "fj12_cam2": _fixed_joint(rng, h12.o_q, h12.axis_q),
+        "fj01_cam0": fixed_joint_motion(rng, e01.o_p, None),
+        "fj12_cam1": fixed_joint_motion(rng, h12.o_p, h12.axis_p),
+        "fj12_cam2": fixed_joint_motion(rng, h12.o_q, h12.axis_q),
     }
     for name, T in sessions.items():
         write_tum(tmp_path / f"{name}.tum", np.arange(T.shape[0]) * 0.1, T)
@@ -113,43 +96,12 @@ def test_index_pairing_of_unequal_lengths_is_warned(tmp_path: Path) -> None:
 def _board_camera_files(tmp_path: Path) -> tuple[dict[str, Path], Path]:
     """Poses NPZs with corners (and their intrinsics files) of a simulated 2-camera rig,
     with a few frames dropped from one camera (so that rows and instants differ)."""
-    import dataclasses as dc
-
-    from acs_cli.io.artifacts import make_header
-    from acs_cli.io.intrinsics import IntrinsicsArtifact
-    from acs_cli.io.poses import PosesArtifact
-    from acs_cli.io.trajectory import Trajectory
     from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
 
     joints = (("j", ("cam0", "cam1"), "ball"),)
     rec = rig_corner_recording(np.random.default_rng(3), 60, joints=joints)
-    out = {}
-    for c in ("cam0", "cam1"):
-        seen = rec.valid[c].all(axis=1)
-        if c == "cam1":
-            seen[[5, 6, 20]] = False
-        K = np.array(
-            [[rec.intrinsics0[c][0], 0, rec.intrinsics0[c][2]],
-             [0, rec.intrinsics0[c][1], rec.intrinsics0[c][3]], [0, 0, 1.0]]
-        )  # fmt: skip
-        intr = IntrinsicsArtifact(
-            model="pinhole", image_size=(640, 480), camera_matrix=K,
-            distortion=rec.intrinsics0[c][4:],
-        )  # fmt: skip
-        intr = dc.replace(intr, header=make_header("intrinsics", {}, "test", {}, {}))
-        intr.save(tmp_path / f"{c}_intrinsics.yaml")
-        idx = np.flatnonzero(seen)
-        traj = Trajectory(idx / 30.0, rec.T_board_cam[c][idx], "x", "npz", True)
-        art = PosesArtifact(
-            trajectory=traj,
-            corners=rec.corners[c][idx],
-            board_points=rec.board_points,
-            header=make_header("poses", {}, "test", {}, {})
-            | {"intrinsics_file": str(tmp_path / f"{c}_intrinsics.yaml")},
-        )
-        out[c] = tmp_path / f"{c}.npz"
-        art.save(out[c])
-    return out, tmp_path
+    return write_corner_poses(tmp_path, rec, {"cam1": [5, 6, 20]}), tmp_path
 
 
 def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
@@ -172,6 +124,9 @@ def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
     assert all(b.rms_px < 0.4 for b in run.artifact.bundle_adjustment.values())
     loaded = RigArtifact.load(tmp_path / "out" / "rig.yaml")
     assert "bundle adjustment" in loaded.header["method"]
+    # the trajectories hold the bundle's per-frame fit where it adjusted, and say so
+    head = (tmp_path / "out" / "trajectories" / "j.tum").read_text().splitlines()[1]
+    assert "bundle adjustment's per-frame fit" in head, head
     # the same rig with bundle: false is solved from poses, with no section
     off = config("off.yaml", text + "bundle: false\n")
     assert not run_rig(off, output=tmp_path / "off.yaml").artifact.bundle_adjustment
@@ -188,14 +143,19 @@ def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
     back = RigArtifact.load(tmp_path / "mixed.yaml").cameras["cam1"].pose_only
     assert back is not None and back.sigma_translation == pytest.approx(po.sigma_translation)
     np.testing.assert_allclose(back.T_world_board["cam0"], po.T_world_board["cam0"], atol=1e-9)
-    # joint priors are not taken by the bundle adjustment: said so, solved from poses
-    o = run.artifact.joints["j"].position_in["cam0"]
+    # a joint prior (metres, with its std) is fused with the corners by the bundle (issue
+    # 19): a point given 5 mm off the corners' (std 2 mm) with a 0.5 mm std draws the joint
+    # to within 0.3 mm of it (the weighted mean's share), the std below the prior's
+    o = run.artifact.joints["j"].position_in["cam0"] + [0.005, 0.0, 0.0]
     prior = text.replace(
-        "type: ball}", f"type: ball, position_in: {{cam0: [{o[0]}, {o[1]}, {o[2]}]}}}}"
+        "type: ball}",
+        f"type: ball, position_in: {{cam0: [{o[0]}, {o[1]}, {o[2]}]}}, position_std: 0.0005}}",
     )
     res = run_rig(config("prior.yaml", prior), output=tmp_path / "prior.yaml.out")
-    assert not res.artifact.bundle_adjustment
-    assert any("does not take joint priors" in w for w in res.warnings), res.warnings
+    assert set(res.artifact.bundle_adjustment) == {"cam0", "cam1"}, res.warnings
+    got = res.artifact.joints["j"]
+    assert np.linalg.norm(got.position_in["cam0"] - o) < 0.0005
+    assert np.all(got.position_std_in["cam0"] < 0.0005)
 
 
 def test_rig_clock_offsets_are_estimated_and_warned_about(tmp_path: Path) -> None:
