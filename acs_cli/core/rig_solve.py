@@ -334,7 +334,7 @@ def merge_priors(first: EdgePrior, second: EdgePrior) -> EdgePrior:
     )
 
 
-def _held_priors(
+def held_priors(
     topology: RigTopology, tracks: dict[str, CameraTrack], recs: Recordings
 ) -> dict[str, EdgePrior]:
     """The priors of the joints that recordings hold still: each camera of such a joint that
@@ -1359,7 +1359,7 @@ def estimate_rig(
     recs = recordings if recordings is not None else Recordings.single(n)
     k = _check_tracks(topology, tracks, reference_frame, recs)
     priors = dict(priors or {})
-    for name, held in _held_priors(topology, tracks, recs).items():
+    for name, held in held_priors(topology, tracks, recs).items():
         priors[name] = merge_priors(priors[name], held) if name in priors else held
     frames: dict[str, np.ndarray] = {}
     for j in topology.joints:

@@ -56,6 +56,7 @@ from acs_cli.core.rig_solve import (
     RigEstimate,
     estimate_rig,
     fixed_joint_prior,
+    held_priors,
     merge_priors,
 )
 from acs_cli.core.se3 import FloatArray
@@ -427,8 +428,7 @@ def run_rig(
                 "cameras on one clock, or calibrate the offsets recording by recording)",
                 path=config.path,
             )
-        tracks, slots, recordings, warnings = tracks_of_recordings(config, by_rec, priors)
-        index = {}
+        tracks, slots, recordings, index, warnings = tracks_of_recordings(config, by_rec, priors)
     warnings += turned
     k = recording_frame(config, recordings)
     try:
@@ -456,15 +456,15 @@ def run_rig(
             )
     sections: dict[str, BundleSection] = {}
     has_corners = any(is_npz(p) for p, _ in files.values())
-    if config.bundle and not offsets and single:
-        trajectories = by_rec[config.reference_recording]
-        est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns, priors)
+    if config.bundle and not offsets and has_corners:
+        trajectories = {label(config, r, c): t for r, got in by_rec.items() for c, t in got.items()}
+        # a recording's joints held still enter as their Algorithm II priors (as in the
+        # pose-based solve), and its frames stay out of the bundle
+        held = held_priors(config.topology, tracks, recordings)
+        both = {j: merge_priors(priors[j], held[j]) if j in held else priors[j] for j in priors}
+        both |= {j: p for j, p in held.items() if j not in priors}
+        est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns, both)
         warnings += notes
-    elif config.bundle and has_corners and not single:
-        warnings.append(
-            "no bundle adjustment of the rig: it takes a config of one recording yet, so a "
-            "rig of several recordings is solved from poses"
-        )
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
@@ -718,14 +718,18 @@ def tracks_of_recordings(
     config: RigRunConfig,
     by_rec: dict[str, dict[str, Trajectory]],
     priors: dict[str, EdgePrior],
-) -> tuple[dict[str, CameraTrack], np.ndarray, Recordings, list[str]]:
+) -> tuple[dict[str, CameraTrack], np.ndarray, Recordings, dict[str, np.ndarray], list[str]]:
     """Every recording's cameras on its own timeline (as :func:`tracks_on_timeline`), the
-    timelines one after the other: the rig's tracks, times, recordings and warnings."""
+    timelines one after the other: the rig's tracks, times, recordings, each camera's row
+    of its trajectory at every instant by :func:`label` (-1 outside its recording) and
+    warnings."""
     parts: list[tuple[dict[str, CameraTrack], np.ndarray]] = []
+    rows: list[tuple[str, dict[str, np.ndarray]]] = []
     warnings: list[str] = []
     for rname, rec in config.recordings.items():
         trajs = by_rec[rname]
-        tr, slots, _, notes = tracks_on_timeline(config, trajs, rec)
+        tr, slots, idx, notes = tracks_on_timeline(config, trajs, rec)
+        rows.append((rname, idx))
         warnings += [f"recording {rname}: {w}" for w in notes]
         warnings += [
             f"recording {rname}: {w}" for w in rig_synchronisation(config, trajs, priors, rec)
@@ -744,7 +748,15 @@ def tracks_of_recordings(
             at += slots.size
         tracks[c] = CameraTrack(T, valid, spec.unknown_scale)
     recordings = recordings_of(config, [slots.size for _, slots in parts])
-    return tracks, np.concatenate([slots for _, slots in parts]), recordings, warnings
+    index: dict[str, np.ndarray] = {}
+    at = 0
+    for (rname, idx), (_, slots) in zip(rows, parts, strict=True):
+        for c, r in idx.items():
+            index[label(config, rname, c)] = np.full(n, -1)
+            index[label(config, rname, c)][at : at + slots.size] = r
+        at += slots.size
+    times = np.concatenate([slots for _, slots in parts])
+    return tracks, times, recordings, index, warnings
 
 
 def recordings_of(config: RigRunConfig, sizes: list[int]) -> Recordings:
@@ -937,27 +949,48 @@ def rig_bundle(
     without: list[str] = []
     notes: list[str] = []
     sources: dict[str, CornerViews] = {}
-    n = index[config.reference_camera].size
-    for name, (path, _fmt) in files.items():
-        try:
-            got, warning = corner_views(path, len(trajectories[name]))
-        except InputError as exc:  # unreadable corners or intrinsics: the poses still serve
-            got, warning = None, f"its corners cannot be used ({exc})"
-        if warning:
-            notes.append(f"camera {name}: {warning}")
-        if got is None:
+    n = est.cameras[config.reference_camera].poses_in_reference_world.shape[0]
+    labels: dict[str, list[str]] = {}  # each body's labels, one per recording that saw it
+    for r, rec in config.recordings.items():
+        for c in rec.cameras:
+            labels.setdefault(c, []).append(label(config, r, c))
+    for name, labs in labels.items():
+        got: dict[str, CornerViews] = {}
+        for lab in labs:
+            try:
+                one, warning = corner_views(files[lab][0], len(trajectories[lab]))
+            except InputError as exc:  # unreadable corners or intrinsics: the poses serve
+                one, warning = None, f"its corners cannot be used ({exc})"
+            if warning:
+                notes.append(f"camera {lab}: {warning}")
+            if one is not None:
+                got[lab] = one
+        if len(got) < len(labs):
+            if got:
+                notes.append(
+                    f"camera {name}: corners in some recordings only; its poses enter the bundle"
+                )
             without.append(name)
             continue
-        rows = index[name]
-        valid = rows >= 0
-        corners = np.full((n, *got.corners.shape[1:]), np.nan)  # NaN: not seen
-        corners[valid] = got.corners[rows[valid]]
+        boards = [
+            se3.transform_points(turned[lab], g.board_points)
+            if turned and lab in turned
+            else g.board_points
+            for lab, g in got.items()
+        ]
+        first = next(iter(got.values()))
+        if any(b.shape != boards[0].shape or not np.allclose(b, boards[0]) for b in boards):
+            return est, {}, [*notes, "no bundle adjustment of the rig: camera "
+                             f"{name} saw different boards (or board orders) in its "
+                             "recordings"]  # fmt: skip
+        corners = np.full((n, *first.corners.shape[1:]), np.nan)  # NaN: not seen
+        for lab, g in got.items():
+            rows = index[lab]
+            valid = rows >= 0
+            corners[valid] = g.corners[rows[valid]]
         ok = np.asarray(np.isfinite(corners).all(axis=2))
-        X = got.board_points
-        if turned and name in turned:
-            X = se3.transform_points(turned[name], X)
-        views[name] = CameraViews(corners, ok, X, got.intrinsics, got.model)
-        sources[name] = got
+        views[name] = CameraViews(corners, ok, boards[0], first.intrinsics, first.model)
+        sources[name] = first
     if not views:
         return est, {}, notes
     unknown = [c for c in config.topology.cameras if config.cameras[c].unknown_scale]
@@ -967,16 +1000,28 @@ def rig_bundle(
                          "corners are metric"]  # fmt: skip
     poses: dict[str, CameraTrack] = {}  # the bodies without corners: their measured poses
     for name in without:
-        rows = index[name]
-        valid = rows >= 0
         T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-        T[valid] = trajectories[name].T_world_cam[rows[valid]]
+        valid = np.zeros(n, bool)
+        for lab in labels[name]:
+            rows = index[lab]
+            at = rows >= 0
+            T[at] = trajectories[lab].T_world_cam[rows[at]]
+            valid |= at
         poses[name] = CameraTrack(T, valid)
+    # the frames every joint its recording moves kept (a recording that holds a joint still
+    # gives it its prior, and no frames)
+    recs = est.recordings
+    of = np.zeros(n, int) if recs is None else recs.of_frame
     use = np.ones(n, bool)
-    for e in est.edges.values():
-        inl = np.zeros(n, bool)
-        inl[e.inliers] = True
-        use &= inl
+    for i, spec in enumerate(config.recordings.values()):
+        here = of == i
+        if spec.fixed_joints:
+            use &= ~here
+        for e in est.edges.values():
+            if set(e.joint.between) <= set(spec.cameras):
+                inl = np.zeros(n, bool)
+                inl[e.inliers] = True
+                use &= inl | ~here
     mask, thinned = bundle_frames(use, est.reference_frame)
     if thinned:
         notes.append(thinned)
@@ -1001,7 +1046,7 @@ def rig_bundle(
         )
     sections = {
         c: bundle_section(sources[c], ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c],
-                          ba.sigma_px, int(ba.frames.size))
+                          ba.sigma_px, int(views[c].valid[ba.frames].any(axis=1).sum()))
         for c in config.topology.cameras if c in views
     }  # fmt: skip
     return ba.estimate, sections, notes

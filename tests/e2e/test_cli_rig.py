@@ -294,3 +294,45 @@ def test_a_rig_with_joint_priors_gets_its_bundle_adjustment(tmp_path: Path) -> N
         err = [np.sqrt(np.mean(np.sum((T[:, :3, 3] - o) ** 2, 1))) for T in (mine, theirs)]
         # 2-3 mm RMS against 19-22 mm (seed 11)
         assert err[0] < 0.3 * err[1], (c, err)
+
+
+def test_a_chain_from_two_recordings_gets_one_bundle_adjustment(tmp_path: Path) -> None:
+    """Issue 19: cam0 -ball- cam1 -hinge- cam2 from a hip trial (cam0, cam1) and a knee
+    trial (cam1, cam2), every camera's poses with their corners: one bundle adjustment over
+    both recordings puts both joints within their stds (it used to solve them from poses)."""
+    from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    n = 160
+    rec = rig_corner_recording(np.random.default_rng(5), n, joints=joints)
+    halves = {"hip": range(n // 2, n), "knee": range(n // 2)}
+    for name, out in halves.items():
+        (tmp_path / name).mkdir()
+        write_corner_poses(
+            tmp_path / name, rec, drop={c: list(out) for c in rec.rig.topology.cameras}
+        )
+    cfg = tmp_path / "rig.yaml"
+    cfg.write_text(
+        "schema_version: 2\noutput: out\n"
+        "reference: {camera: cam0, recording: hip, frame: 0}\n"
+        "recordings:\n"
+        "  hip:\n    cameras: {cam0: {poses: hip/cam0.npz}, cam1: {poses: hip/cam1.npz}}\n"
+        "  knee:\n    cameras: {cam1: {poses: knee/cam1.npz}, cam2: {poses: knee/cam2.npz}}\n"
+        "joints:\n"
+        "  hip: {between: [cam0, cam1], type: ball}\n"
+        "  knee: {between: [cam1, cam2], type: hinge}\n",
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "no bundle adjustment" not in res.stderr, res.stderr
+    rig = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+    assert set(rig.bundle_adjustment) == {"cam0", "cam1", "cam2"}
+    for name, _, _ in joints:
+        truth = rec.rig.edges[name]
+        j = rig.joints[name]
+        p, q = j.between
+        for c, o in ((p, truth.o_p), (q, truth.o_q)):
+            err = float(np.linalg.norm(j.position_in[c] - o))
+            assert err < 4 * np.linalg.norm(j.position_std_in[c]) and err < 0.005, (name, c, err)
