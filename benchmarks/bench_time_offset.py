@@ -22,11 +22,14 @@ Rig (``--rig``). :func:`sample_data_gen.rig_sim.rig_recording` (smooth, 300 fram
 and cam2's 19 ms ahead of cam0's; :func:`acs_cli.core.rig_solve.estimate_rig` on the tracks of
 ``run_rig``'s branches: sync (``tracks_on_timeline``), known offset and estimated
 (``tracks_with_offsets``, the latter with ``rig_time_offsets``, ``max_offset`` 0.1 s). Every
-track starts at frame 0, so all runs report ``T_cam_ref`` at the same instant.
+track starts at frame 0, so all runs report ``T_cam_ref`` at the same instant (frame 0, or
+``--reference-frame``). ``--known-only`` skips the offset's search and its run (about 1 s a
+trial instead of 30): the interpolation's cost alone, over many trials.
 
     .venv/bin/python benchmarks/bench_time_offset.py --trials 40        # ~4 min, loaded
     .venv/bin/python benchmarks/bench_time_offset.py --rig --trials 40  # ~25 min, loaded
     .venv/bin/python benchmarks/bench_time_offset.py --trials 3         # a smoke run
+    .venv/bin/python benchmarks/bench_time_offset.py --rig --known-only --trials 200
 """
 
 # ruff: noqa: E402  (BLAS threads must be set before numpy is imported)
@@ -110,9 +113,11 @@ def pair_trial(seed: int, offset: float, errs: Errors) -> tuple[float, float]:
     return off.offset_s - offset, off.std_s
 
 
-def rig_trial(seed: int, errs: Errors) -> dict[str, tuple[float, float]]:
-    """One rig recording; appends each run's errors, returns each camera's offset error and
-    std (s)."""
+def rig_trial(
+    seed: int, errs: Errors, known_only: bool = False, k: int = 0
+) -> dict[str, tuple[float, float]]:
+    """One rig recording; appends each run's errors (``T_cam_ref`` at frame ``k``), returns
+    each camera's offset error and std (s), or nothing with ``known_only``."""
     import yaml
 
     from acs_cli.core.rig_solve import estimate_rig
@@ -143,12 +148,12 @@ def rig_trial(seed: int, errs: Errors) -> dict[str, tuple[float, float]]:
                 rec.T_wc_c.items()}  # fmt: skip
 
     def record(run: str, tracks) -> None:
-        est = estimate_rig(config.topology, tracks, reference_frame=0)
+        est = estimate_rig(config.topology, tracks, reference_frame=k)
         e, o = est.edges["j01"], sync.edges["j01"]
         for c, o_c in (("cam0", o.o_p), ("cam1", o.o_q)):
             err = 1e3 * float(np.linalg.norm(e.position_in[c] - o_c))
             errs[run][f"j01 in {c} (mm)"].append(err)
-        truth = sync.T_cam_ref(0)
+        truth = sync.T_cam_ref(k)
         for c in ("cam1", "cam2"):
             T = est.cameras[c].T_cam_ref
             if T is None:
@@ -163,8 +168,9 @@ def rig_trial(seed: int, errs: Errors) -> dict[str, tuple[float, float]]:
     record("sync", tracks)
     late_traj = trajectories(late)
     known = {"cam0": (0.0, 0.0)} | {c: (v, 0.0) for c, v in RIG_OFFSETS.items()}
-    offsets, _ = stage.rig_time_offsets(config, late_traj, {})
-    for run, given in (("known offset", known), ("estimated", offsets)):
+    offsets = {} if known_only else stage.rig_time_offsets(config, late_traj, {})[0]
+    runs = [("known offset", known)] + ([] if known_only else [("estimated", offsets)])
+    for run, given in runs:
         tracks, slots, _ = stage.tracks_with_offsets(config, late_traj, given)
         if slots[0] != late.timestamps[0]:  # T_cam_ref at another instant than sync's
             raise RuntimeError(f"seed {seed}: the {run} timeline starts at {slots[0]} s")
@@ -173,7 +179,7 @@ def rig_trial(seed: int, errs: Errors) -> dict[str, tuple[float, float]]:
     same = {c: Trajectory(t.timestamps[:n], t.T_world_cam[:n], t.source, "tum", True) for c, t
             in trajectories(sync).items()}  # fmt: skip
     record("sync, same frames", stage.tracks_on_timeline(config, same)[0])
-    return {c: (offsets[c][0] - v, offsets[c][1]) for c, v in RIG_OFFSETS.items()}
+    return {c: (offsets[c][0] - v, offsets[c][1]) for c, v in RIG_OFFSETS.items() if offsets}
 
 
 def _rms(x: np.ndarray) -> np.ndarray:
@@ -217,6 +223,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--trials", type=int, default=40)
     ap.add_argument("--offset", type=float, default=OFFSET, help="B's clock ahead (seconds)")
     ap.add_argument("--rig", action="store_true", help="the rig (three cameras) instead")
+    ap.add_argument(
+        "--known-only",
+        action="store_true",
+        help="rig: no offset search, the known offset's runs only",
+    )
+    ap.add_argument("--reference-frame", type=int, default=0, help="rig: T_cam_ref's frame")
     args = ap.parse_args(argv)
     errs: Errors = defaultdict(lambda: defaultdict(list))
     offs: dict[str, list[tuple[float, float]]] = defaultdict(list)
@@ -224,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for seed in range(args.trials):
         t0 = time.perf_counter()
         if args.rig:
-            for c, got in rig_trial(seed, errs).items():
+            for c, got in rig_trial(seed, errs, args.known_only, args.reference_frame).items():
                 offs[c].append(got)
         else:
             offs["B"].append(pair_trial(seed, args.offset, errs))
@@ -234,7 +246,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)  # fmt: skip
     what = (
         f"rig, cam1 {1e3 * RIG_OFFSETS['cam1']:g} ms and cam2 {1e3 * RIG_OFFSETS['cam2']:g} ms "
-        "ahead of cam0"
+        f"ahead of cam0, T_cam_ref at frame {args.reference_frame}"
+        + (", known offset only" if args.known_only else "")
         if args.rig
         else f"pair, true offset {1e3 * args.offset:g} ms"
     )

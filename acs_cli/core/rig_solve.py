@@ -36,6 +36,10 @@ fits the joints and is not the noisy measured pose.
 Weights: the point residual of a ball or hinge has covariance ``theta_t I + theta_r L_i``
 with ``L_i`` the lever shapes of both cameras (as in :mod:`acs_cli.core.estimation`), the
 noise levels fitted per edge; axis and rigid residuals have one fitted variance each. The
+weights are fitted in the reference world and units and held while the rig is solved, in a
+frame and units that follow the edge's two cameras' worlds halfway (:func:`_edge_frame`):
+held in the reference world they would turn with the reference camera's world only, and
+which camera is the reference would move the estimate. The
 solve alternates the one least-squares engine (:func:`acs_cli.core.lsq.solve`:
 Levenberg-Marquardt on the normal equations of the analytic sparse Jacobian) with
 refitting the noise levels, and rejects per edge the frames whose externally studentised
@@ -547,6 +551,12 @@ class _State:
     # unknowns the estimate fits (the reference instant's corrections held apart): the
     # degrees of freedom the noise levels are corrected for
     n_free: int = 0
+    # the edges' residual frames (:func:`_edge_frame`), anchored with each refit of the
+    # weights: per world, its rotation unknowns, the map of their increments to the world's
+    # rotation increment in the reference world (``R_X Jr(w)``), and its log-scale
+    frame_w: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    frame_A: FloatArray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    frame_l: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def frames_of(self, c: str) -> np.ndarray:
         """``(n,)`` bool: the instants where camera ``c`` is on an edge."""
@@ -612,8 +622,10 @@ def _poses(
     return np.matmul(RX, R), W.s[wi, None] * np.einsum("nij,nj->ni", RX, t) + W.t[wi]
 
 
-def _all_poses(st: _State, x: FloatArray) -> dict[str, tuple[FloatArray, FloatArray]]:
-    W = _worlds(st, x)
+def _all_poses(
+    st: _State, x: FloatArray, W: _Worlds | None = None
+) -> dict[str, tuple[FloatArray, FloatArray]]:
+    W = W if W is not None else _worlds(st, x)
     return {c: _poses(st, x, c, W) for c in st.topo.cameras}
 
 
@@ -648,19 +660,63 @@ def _edge_blocks(st: _State, x: FloatArray, j: RigJoint, G: dict) -> dict[str, F
     return model.residual_blocks(x[st.L.edge[j.name]], st.anchor[j.name], Rp, tp, Rq, tq)
 
 
+def _anchor_frames(st: _State, x: FloatArray) -> None:
+    """Anchor the edges' residual frames (:func:`_edge_frame`) at ``x``, where the weights
+    are fitted: there every edge's frame is the reference world and units."""
+    W = _worlds(st, x)
+    n = st.R0X.shape[0]
+    st.frame_w, st.frame_A, st.frame_l = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros(n)
+    for w, sl in st.L.rot.items():
+        st.frame_w[w], st.frame_A[w] = x[sl], W.R[w] @ W.Jw[w]
+    for w, col in st.L.logs.items():
+        st.frame_l[w] = x[col]
+
+
+def _frame_motion(st: _State, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Every world's rotation (a rotation vector in the reference world, ``(W, 3)``, to first
+    order) and log-scale ``(W,)`` since the frames were anchored (:func:`_anchor_frames`)."""
+    b, dl = np.zeros_like(st.frame_w), np.zeros_like(st.frame_l)
+    for w, sl in st.L.rot.items():
+        b[w] = st.frame_A[w] @ (x[sl] - st.frame_w[w])
+    for w, col in st.L.logs.items():
+        dl[w] = x[col] - st.frame_l[w]
+    return b, dl
+
+
+def _edge_frame(
+    st: _State, j: RigJoint, motion: tuple[FloatArray, FloatArray]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The frame and units edge ``j``'s point and translation rows are whitened in, per frame
+    of the edge: ``f F^T`` ``(m, 3, 3)``, ``f`` ``(m,)`` and ``c`` ``(m, 3)`` with
+    ``F = Exp(c)``: turned by half of each of its two cameras' worlds' rotations since the
+    weights were fitted (``c``), scaled by the geometric mean of their scales' changes
+    (``f``). Held in the reference world, the weights (anisotropic: the lever arms) would turn
+    with the reference camera's world alone, and which camera is the reference would move the
+    estimate; in this frame it does not, nor does the order of ``between``."""
+    p, q = j.between
+    f = st.frames[j.name]
+    b, dl = motion
+    wp, wq = st.widx[p][f], st.widx[q][f]
+    c = 0.5 * (b[wp] + b[wq])
+    s = np.exp(-0.5 * (dl[wp] + dl[wq]))
+    return s[:, None, None] * se3.matrix_from_rotvec(-c), s, c
+
+
 def _residuals(st: _State, x: FloatArray) -> FloatArray:
     G = _all_poses(st, x)
+    motion = _frame_motion(st, x)
     parts: list[FloatArray] = []
     for j in st.topo.joints:
         m = (st.mask[j.name] * st.gain[j.name])[:, None]
         b = _edge_blocks(st, x, j, G)
+        Ft, s, _ = _edge_frame(st, j, motion)
         if "pos" in b:
-            w = np.matmul(st.whiten_pos[j.name], b["pos"][:, :, None])[:, :, 0]
+            w = np.matmul(st.whiten_pos[j.name] @ Ft, b["pos"][:, :, None])[:, :, 0]
             parts.append((w * m).ravel())
         if "rot" in b:
             parts.append((b["rot"] * st.w_rot[j.name] * m).ravel())
         if "trans" in b:
-            parts.append((b["trans"] * st.w_trans[j.name] * m).ravel())
+            parts.append((b["trans"] * (st.w_trans[j.name] * s)[:, None] * m).ravel())
     for c in st.L.delta:
         parts.append(x[st.L.delta[c]] * st.w_delta[c])
     for name, at, value, W, col in st.priors:
@@ -699,6 +755,7 @@ class _EdgeJacobian:
         wk: dict[str, int],
         out: tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]],
         row0: int,
+        frame: tuple[FloatArray, FloatArray, FloatArray],
     ) -> None:
         L, k = st.L, st.ref_frame
         self.st, self.L, self.W, self.meas, self.Jd, self.wk, self.k = st, L, W, meas, Jd, wk, k
@@ -717,9 +774,10 @@ class _EdgeJacobian:
         self.RGq = np.matmul(W.R[st.widx[q][f]], self.Rq)
         self.sp_tp = W.s[st.widx[p][f], None] * meas[p][1][f]
         self.sq_tq = W.s[st.widx[q][f], None] * meas[q][1][f]
-        self.whiten_pos = st.whiten_pos[j.name]
+        # the weights in the edge's frame (_edge_frame)
+        self.whiten_pos: FloatArray = st.whiten_pos[j.name] @ frame[0]
         self.w_rot = st.w_rot[j.name]
-        self.w_trans = st.w_trans[j.name]
+        self.w_trans = st.w_trans[j.name] * frame[1][:, None, None]
 
     def put(
         self, block: FloatArray, cols: list[int] | None = None, at: np.ndarray | None = None
@@ -771,6 +829,45 @@ class _EdgeJacobian:
         self.row0 += 3 * self.m
 
 
+def _frame_jacobian(
+    st: _State,
+    j: RigJoint,
+    frame: tuple[FloatArray, FloatArray, FloatArray],
+    blocks: dict[str, FloatArray],
+    row0: int,
+    put: Callable[..., None],
+) -> None:
+    """Put the derivatives of edge ``j``'s point and translation rows (from ``row0``) through
+    its frame (:func:`_edge_frame`) by its worlds' unknowns: ``d(f F^T r) = f F^T [r]x Jr(-c)
+    dc - f F^T r dlog(f)`` with ``dc = (A_p dw_p + A_q dw_q) / 2`` and
+    ``dlog(f) = -(dl_p + dl_q) / 2``; ``blocks`` are the raw residuals (:func:`_edge_blocks`)."""
+    Ft, s, c = frame
+    L, f = st.L, st.frames[j.name]
+    gain = (st.mask[j.name] * st.gain[j.name])[:, None, None]
+    kinds = joint_model(j.type).residual_kinds
+    for kind in ("pos", "trans"):
+        if kind not in blocks:
+            continue
+        r = blocks[kind]
+        first = row0 + 3 * f.size * kinds.index(kind)
+        D: FloatArray | None = None
+        if kind == "pos":
+            Wt = gain * (st.whiten_pos[j.name] @ Ft)
+            D = 0.5 * Wt @ se3.skew(r) @ right_jacobians(-c)
+        else:
+            Wt = gain * st.w_trans[j.name] * s[:, None, None] * np.eye(3)
+        Wr = -0.5 * Wt @ r[:, :, None]
+        for cam in j.between:
+            wi = st.widx[cam][f]
+            for w in np.unique(wi).tolist():
+                at = np.flatnonzero(wi == w)
+                if D is not None and w in L.rot:
+                    put(D[at] @ st.frame_A[w], list(range(L.rot[w].start, L.rot[w].stop)),
+                        first, at)  # fmt: skip
+                if w in L.logs:
+                    put(Wr[at], [L.logs[w]], first, at)
+
+
 def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
     """The Jacobian of :func:`_residuals` (analytic; rotations perturbed on the right).
 
@@ -785,18 +882,25 @@ def _jacobian(st: _State, x: FloatArray) -> csr_matrix:
     vals: list[np.ndarray] = []
     row0 = 0
 
-    def put(block: FloatArray, cols: list[int], first_row: int) -> None:
-        # block (m, 3, len(cols)) for rows first_row + 3 i + a
+    def put(
+        block: FloatArray, cols: list[int], first_row: int, at: np.ndarray | None = None
+    ) -> None:
+        # block (m, 3, len(cols)) for rows first_row + 3 at[i] + a (at: 0..m-1 by default)
         m = block.shape[0]
-        r = (first_row + 3 * np.arange(m)[:, None] + np.arange(3)).reshape(-1)
+        at = np.arange(m) if at is None else at
+        r = (first_row + 3 * at[:, None] + np.arange(3)).reshape(-1)
         rows_i.append(np.repeat(r, len(cols)))
         cols_i.append(np.tile(np.asarray(cols), 3 * m))
         vals.append(block.reshape(-1))
 
     wk = {c: int(st.widx[c][k]) for c in st.topo.cameras}
+    G = _all_poses(st, x, W)
+    motion = _frame_motion(st, x)
     for j in st.topo.joints:
-        jc = _EdgeJacobian(st, x, j, W, meas, Jd, wk, (rows_i, cols_i, vals), row0)
+        frame = _edge_frame(st, j, motion)
+        jc = _EdgeJacobian(st, x, j, W, meas, Jd, wk, (rows_i, cols_i, vals), row0, frame)
         joint_model(j.type).jacobian(jc)
+        _frame_jacobian(st, j, frame, _edge_blocks(st, x, j, G), row0, put)
         row0 = jc.row0
     for c in L.delta:
         D = np.diag(st.w_delta[c])  # the correction is its own unknown
@@ -933,6 +1037,7 @@ def _chol_whiteners(S: FloatArray) -> FloatArray:
 
 def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[str, float]]:
     """Per-edge noise levels from the current residuals; updates the weights in ``st``."""
+    _anchor_frames(st, x)  # the weights below are fitted in the reference world at x
     G = _all_poses(st, x)
     noise: dict[str, dict[str, float]] = {}
     cam_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
@@ -1473,6 +1578,7 @@ def estimate_rig(
         length=max(travel, 1e-9),
         n_free=L.size - 6 * len(L.delta),
     )
+    _anchor_frames(st, x0)
 
     def fun(x: FloatArray) -> FloatArray:
         return _residuals(st, x)

@@ -117,9 +117,9 @@ class EdgeJacobian(Protocol):
     mask: FloatArray  # (m, 1, 1) inlier mask times the reference instant's gain
     kk: np.ndarray  # the reference instant's row in the edge, if any (0 or 1 entries)
     k: int  # the reference instant
-    whiten_pos: FloatArray  # (m, 3, 3) whiteners of the point rows
+    whiten_pos: FloatArray  # (m, 3, 3) whiteners of the point rows (in the edge's frame)
     w_rot: float  # 1 / sigma of the rotation (axis or rigid) rows
-    w_trans: float  # 1 / sigma of the rigid translation rows
+    w_trans: FloatArray  # (m, 1, 1) 1 / sigma of the rigid translation rows (edge's units)
     W: Any  # every world's similarity (R (W, 3, 3), s (W,), Jw (W, 3, 3))
     L: Any  # the solve's layout (world rotation columns: L.rot)
     wk: dict[str, int]  # per camera: its world at the reference instant
