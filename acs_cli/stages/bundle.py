@@ -10,8 +10,10 @@ a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
 
 Each camera keeps the model its intrinsics file was calibrated with (pinhole, rational or
 fisheye); a corner a frame did not see is NaN, so a partial view of a target counts. A
-refined distortion the corners do not determine is warned about
-(:func:`acs_cli.core.intrinsics.degenerate_distortion`). The fixed-joint adjustment judges
+refined distortion the corners do not determine
+(:func:`acs_cli.core.intrinsics.degenerate_distortion`) is warned about (fixed joint) or held
+(the two-body rig's bundle holds both cameras' intrinsics, :func:`held_note`). The
+fixed-joint adjustment judges
 again, on their corners, the frames the pose-based fit rejected (:func:`readmit_frames`).
 """
 
