@@ -18,7 +18,7 @@ Protocol:
    (a subprocess; retried with ``--accept-weak`` if it exits 3, and counted). It gives the
    per-camera intrinsics (``cam_*/intrinsics.yaml``, each camera calibrated on its training
    images alone), ``T_right_left`` (``rig.yaml``: the pose-based solve, then the rig's bundle
-   adjustment when at least 6 frames) and the bundle-refined intrinsics.
+   adjustment, intrinsics refined from 3 pairs on) and the bundle's intrinsics.
 3. ``cv2.stereoCalibrate`` on the same training corners (default termination criteria):
    ``FIX_INTRINSIC`` with acscal's per-camera intrinsics of that training set (the issue's
    "same intrinsics"); flags ``0`` (OpenCV calibrates each camera itself, k3 free, then
@@ -30,9 +30,8 @@ Protocol:
    against the right camera's detected corners (px).
 
 Methods: ``acscal run (rig.yaml T, bundle K)`` (what ``acscal run`` gives: rig.yaml's
-``T_right_left`` and its ``bundle_adjustment`` intrinsics; with fewer than 6 training pairs
-the rig has no bundle adjustment, and this is ``T`` from the pose-based solve with the
-per-camera intrinsics); ``acscal rig.yaml T, per-camera K`` (the same ``T`` with
+``T_right_left`` and its ``bundle_adjustment`` intrinsics, refined, or the per-camera ones
+where it held them); ``acscal rig.yaml T, per-camera K`` (the same ``T`` with
 intrinsics.yaml's K, a diagnostic: that ``T`` was fitted with the bundle's intrinsics);
 ``acscal bundle: false, per-camera K`` (the rig stage alone again on the same poses NPZs
 with ``bundle: false``: the pose-based solve, predicted with the per-camera intrinsics it was

@@ -45,6 +45,20 @@ sparse Jacobian differenced in groups (:func:`acs_cli.core.lsq.block_jacobian`: 
 unknowns of different frames never share a row). Covariances come from the inverse of the
 information, scaled by the fitted corner noise (with pose-only bodies: of the whitened
 residuals at the fitted noise levels).
+
+Intrinsics and frames: the bundle refines every camera's intrinsics when it has at least
+:data:`MIN_INTRINSICS_FRAMES` frames (what a camera's own calibration needs,
+:data:`acs_cli.core.intrinsics.MIN_VIEWS`) and the corners determine them (the information
+is not singular and no refined distortion is degenerate,
+:func:`acs_cli.core.intrinsics.degenerate_distortion`); otherwise it holds them and still
+fits the rig on the corners (OpenCV's ``stereoCalibrate`` with ``CALIB_FIX_INTRINSIC`` for
+a stereo pair). It takes no fixed number of frames: it refuses (``DegenerateMotionError``)
+when its information is singular, an unknown whose information the others explain but a
+share :data:`UNDETERMINED_SHARE` (a Cholesky pivot of the information scaled to a unit
+diagonal; measured: at most 6e-13 where a ball's centre is undetermined, at least 2e-4 on
+the determined rigs of the tests). So a rigid pair seeing one board needs 1 frame, a
+hinge 2 and a ball 3 (a joint's articulation at every frame leaves fewer rows for its
+centre); in separate worlds each camera's board adds 6 unknowns.
 """
 
 from __future__ import annotations
@@ -59,6 +73,7 @@ import scipy.sparse
 from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import check_frame_corners, information, observed
 from acs_cli.core.camera_models import camera_model
+from acs_cli.core.intrinsics import MIN_VIEWS, degenerate_distortion
 from acs_cli.core.joints import JointModel, joint_model
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_solve import (
@@ -73,7 +88,7 @@ from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
 __all__ = [
-    "MIN_RIG_BUNDLE_FRAMES",
+    "MIN_INTRINSICS_FRAMES",
     "PIVOT_RIG",
     "CameraViews",
     "FixedJointBundle",
@@ -85,8 +100,9 @@ __all__ = [
     "bundle_adjust_rig",
 ]
 
-#: Fewest frames (every camera seeing its board) a rig's bundle adjustment takes.
-MIN_RIG_BUNDLE_FRAMES = 6
+#: Fewest frames on which the bundle refines the cameras' intrinsics (as many as a camera's
+#: own calibration needs); on fewer it holds them.
+MIN_INTRINSICS_FRAMES = MIN_VIEWS
 #: Noise-level refits (each followed by a solve) with pose-only bodies, at most.
 NOISE_ROUNDS = 30
 #: The refit noise levels are final when none moves by more than this share (in its log).
@@ -95,6 +111,10 @@ NOISE_SETTLED = 1e-5
 #: noiseless poses would otherwise weigh their rows beyond what differences resolve.
 NOISE_FLOOR_ROT = 1e-7
 NOISE_FLOOR_LENGTH = 1e-7
+#: An unknown is undetermined when at most this share of its information at the start is its
+#: own (the rest explained by the unknowns before it: a Cholesky pivot of the information
+#: scaled to a unit diagonal).
+UNDETERMINED_SHARE = 1e-8
 
 
 @dataclass(frozen=True)
@@ -199,6 +219,9 @@ class RigBundle:
         The bodies that had poses only (empty when every body has corners).
     per_frame_rms_px : dict of camera to ndarray (len(frames),)
         Each camera's reprojection RMS per adjusted frame.
+    intrinsics_held : str or None
+        Why every camera's intrinsics were held (``intrinsics`` are then the views' own, their
+        std and covariance 0), or None when they were refined.
     """
 
     estimate: RigEstimate
@@ -211,6 +234,7 @@ class RigBundle:
     success: bool
     pose_bodies: dict[str, PoseBodyFit] = field(default_factory=dict)
     per_frame_rms_px: dict[str, FloatArray] = field(default_factory=dict)
+    intrinsics_held: str | None = None
 
 
 class _Layout:
@@ -546,10 +570,12 @@ def _initial(
     frames: np.ndarray,
     rec: np.ndarray,
     present: list[frozenset[str]],
+    hold_intrinsics: bool,
     static: bool = False,
 ) -> tuple[_Model, FloatArray]:
-    """The model and its starting unknowns, from the pose-based estimate (a static
-    reference body: the world of a joint held still, whose bodies' boards are that world).
+    """The model and its starting unknowns, from the pose-based estimate (every camera's
+    intrinsics held, or its model's default free ones refined; a static reference body: the
+    world of a joint held still, whose bodies' boards are that world).
 
     Each recording's boards are fixed up to one rigid motion with its frames' poses: the
     gauge holds the reference's world (and the bodies sharing it) in its recording, and in
@@ -571,7 +597,7 @@ def _initial(
     L = _Layout(
         topo,
         frames.size,
-        {c: camera_model(v.model).free() for c, v in views.items()},
+        {c: [] if hold_intrinsics else camera_model(v.model).free() for c, v in views.items()},
         [(r, c) for r, here in enumerate(present) for c in topo.cameras if c in here - gauge[r]],
         static,
     )
@@ -648,6 +674,7 @@ def bundle_adjust_rig(
     poses: dict[str, CameraTrack] | None = None,
     priors: dict[str, EdgePrior] | None = None,
     static: bool = False,
+    hold_intrinsics: bool | None = None,
 ) -> RigBundle:
     """Maximum-likelihood calibration of a rig from its cameras' board corners and the
     measured poses of its pose-only bodies (and joints known beforehand).
@@ -677,6 +704,11 @@ def bundle_adjust_rig(
         paper's fixed-joint motion, a pivot; :func:`bundle_adjust_fixed_joint`), with
         neither corners nor poses, its pose held at ``initial``'s, and every other body's
         board in it.
+    hold_intrinsics : bool, optional
+        Hold every camera's intrinsics (the rig's geometry, boards and poses fitted on the
+        corners: OpenCV's ``stereoCalibrate`` with ``CALIB_FIX_INTRINSIC``) or refine them;
+        by default refined on at least :data:`MIN_INTRINSICS_FRAMES` frames when the corners
+        determine them, held otherwise (``RigBundle.intrinsics_held`` says why).
 
     Returns
     -------
@@ -686,19 +718,16 @@ def bundle_adjust_rig(
     ------
     InputError
         Views or poses that do not fit the topology or the timeline, a body with neither,
-        an unknown scale, too few frames, frames without the reference instant, or a prior
-        that does not fit its joint.
+        an unknown scale, frames without the reference instant, or a prior that does not
+        fit its joint.
     DegenerateMotionError
-        Corners and poses that leave part of the rig undetermined.
+        Corners and poses that leave part of the rig undetermined (too few frames, or
+        motion that does not show a joint: a rigid pair in one world needs 1 frame, a
+        hinge 2, a ball 3; separate worlds more).
     """
     poses = dict(poses or {})
     n_total = _check(topology, views, poses, initial, static)
     frames = np.unique(np.asarray(frames, dtype=int))
-    if frames.size < MIN_RIG_BUNDLE_FRAMES:
-        raise InputError(
-            f"{frames.size} frames where every camera sees its board; the rig's bundle "
-            f"adjustment needs at least {MIN_RIG_BUNDLE_FRAMES}"
-        )
     if frames[0] < 0 or frames[-1] >= n_total or initial.reference_frame not in frames:
         raise InputError("the frames must be on the timeline and include the reference instant")
     for c, v in views.items():  # (the messages name the board's corners)
@@ -720,7 +749,48 @@ def bundle_adjust_rig(
         raise InputError(
             f"camera(s) {', '.join(unknown)} have an unknown scale; corners are metric"
         )
-    model, x0 = _initial(topology, views, poses, initial, frames, rec, present, static)
+    args = (topology, views, poses, initial, frames, priors, rec, present, static)
+    if hold_intrinsics is not None:
+        return _adjust(*args, hold_intrinsics)
+    why: str | None = f"{frames.size} frames, fewer than a camera's calibration needs"
+    if frames.size >= MIN_INTRINSICS_FRAMES:
+        try:
+            ba = _adjust(*args, False)
+            why = _undetermined(views, ba)
+        except DegenerateMotionError:  # the rig itself may be undetermined: held, again
+            why = "the corners do not determine them"
+        if why is None:
+            return ba
+    return dataclasses.replace(_adjust(*args, True), intrinsics_held=why)
+
+
+def _undetermined(views: dict[str, CameraViews], ba: RigBundle) -> str | None:
+    """Why the corners do not determine the intrinsics refined by ``ba``: the first camera
+    whose refined distortion is degenerate
+    (:func:`acs_cli.core.intrinsics.degenerate_distortion`), or None."""
+    for c, v in views.items():
+        p = ba.intrinsics_covariance[c]
+        found = degenerate_distortion(v.model, ba.intrinsics[c][4:], p[4:, 4:])
+        if found:
+            return f"camera {c}: {found}"
+    return None
+
+
+def _adjust(
+    topology: RigTopology,
+    views: dict[str, CameraViews],
+    poses: dict[str, CameraTrack],
+    initial: RigEstimate,
+    frames: np.ndarray,
+    priors: dict[str, EdgePrior] | None,
+    rec: np.ndarray,
+    present: list[frozenset[str]],
+    static: bool,
+    hold: bool,
+) -> RigBundle:
+    """:func:`bundle_adjust_rig` on checked input, every camera's intrinsics ``hold`` or
+    refined."""
+    model, x0 = _initial(topology, views, poses, initial, frames, rec, present, hold, static)
     model.priors = _bundle_priors(model, priors or {})
     L = model.L
     row_frame = model.row_frames()
@@ -741,6 +811,8 @@ def bundle_adjust_rig(
 
     if model.bodies or model.priors:  # weights of known and fitted noise levels together
         _start_noise(model, x0)
+    _factor(jac(x0), UNDETERMINED_SHARE)  # the frames determine every unknown, or refused
+    if model.bodies or model.priors:
         x = x0
         # the refits are a fixed-point iteration s -> F(s) on the log noise levels, which
         # converges slowly where a body's pose noise and the corners' depth noise trade
@@ -806,17 +878,9 @@ def bundle_adjust_rig(
         cams[b] = PoseBodyEstimate(**fields, pose_fit=fit)
     est = dataclasses.replace(est, cameras=cams)
     return RigBundle(
-        est,
-        intr,
-        std,
-        icov,
-        rms,
-        float(np.sqrt(sigma2)),
-        frames,
-        bool(sol.success),
-        bodies,
-        per_frame,
-    )
+        est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success), bodies,
+        per_frame, "held as asked" if hold else None,
+    )  # fmt: skip
 
 
 def _bundle_priors(
@@ -888,15 +952,7 @@ def _refit_noise(model: _Model, x: FloatArray, J: object) -> None:
     """One variance-component refit (Förstner): each group's squared residuals over its
     redundancy ``n_k - tr(H^-1 J_k^T J_k)`` (``H`` the whitened information); the pixel
     rows take what the pose rows leave of the unknowns (the traces add up to their number)."""
-    H = information(J)
-    d = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
-    try:
-        cf = scipy.linalg.cho_factor(H * np.outer(d, d))
-    except np.linalg.LinAlgError:
-        raise DegenerateMotionError(
-            "the corners and poses do not determine the rig (its information matrix is "
-            "singular: a joint, a board or a body's world that the motion cannot see)",
-        ) from None
+    cf, d = _factor(J)
     Js = scipy.sparse.csr_array(J) @ scipy.sparse.diags_array(d)
     px, pose = model.raw(x)
     taken = 0.0
@@ -988,22 +1044,40 @@ def _relative(
     return T_q_ref @ se3.invert_transforms(T_p_ref)
 
 
+def _factor(J: object, share: float = 0.0) -> tuple[tuple[FloatArray, bool], FloatArray]:
+    """The Cholesky factor of the information ``J^T J`` scaled to a unit diagonal (far better
+    conditioned), and the scales ``d`` ``(p,)`` (``H = D^-1 F D^-1``, ``D = diag(d)``).
+
+    Raises
+    ------
+    DegenerateMotionError
+        When the information is singular: not positive definite, or an unknown with at most
+        ``share`` of its information not explained by the unknowns before it (a joint, a
+        board or a body's world the frames do not determine).
+    """
+    H = information(J)
+    d = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
+    try:
+        cf = scipy.linalg.cho_factor(H * np.outer(d, d))
+        least = float(np.min(np.diag(cf[0]))) ** 2
+    except np.linalg.LinAlgError:
+        least = 0.0
+    if not least > share:
+        raise DegenerateMotionError(
+            "the corners and poses do not determine the rig (its information matrix is "
+            "singular: a joint, a board or a body's world that the frames cannot see)",
+        )
+    return cf, d
+
+
 def _inverse_columns(J: object, cols: list[int]) -> FloatArray:
     """``(J^T J)^-1`` restricted to ``cols`` (rows and columns), by a Cholesky solve of the
     column-scaled information for those columns only; ``DegenerateMotionError`` when the
     information is singular."""
-    H = information(J)
-    d = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))  # unit diagonal: far better conditioned
-    E = np.zeros((H.shape[0], len(cols)))
+    cf, d = _factor(J)
+    E = np.zeros((d.size, len(cols)))
     E[cols, np.arange(len(cols))] = d[cols]
-    try:
-        X = d[:, None] * scipy.linalg.cho_solve(scipy.linalg.cho_factor(H * np.outer(d, d)), E)
-    except np.linalg.LinAlgError:
-        raise DegenerateMotionError(
-            "the corners do not determine the rig (its information matrix is singular: a "
-            "joint or a board that the motion cannot see)",
-        ) from None
-    return np.asarray(X[cols])
+    return np.asarray((d[:, None] * scipy.linalg.cho_solve(cf, E))[cols])
 
 
 def _assemble(
@@ -1284,7 +1358,9 @@ def bundle_adjust_fixed_joint(
     size = camera_model(model).size
     if views.intrinsics.shape != (size,):
         raise InputError(f"the {model} model takes {size} intrinsics, got {views.intrinsics.shape}")
-    ba = bundle_adjust_rig(PIVOT_RIG, {"camera": views}, start, np.arange(n), static=True)
+    ba = bundle_adjust_rig(
+        PIVOT_RIG, {"camera": views}, start, np.arange(n), static=True, hold_intrinsics=False
+    )
     e = ba.estimate.edges["joint"]
     return FixedJointBundle(
         model=model,

@@ -273,6 +273,9 @@ class BundleSection:
         One sigma of ``fx fy cx cy`` and the coefficients, by name.
     model : str
         The camera model (``pinhole`` when the file does not say).
+    intrinsics_held : bool
+        The intrinsics were held, not refined: ``camera_matrix`` and ``distortion`` are the
+        file's, with its std (none when it gives none).
     """
 
     intrinsics_file: str
@@ -283,6 +286,7 @@ class BundleSection:
     distortion: FloatArray
     intrinsics_std: dict[str, float] = field(default_factory=dict)
     model: str = "pinhole"
+    intrinsics_held: bool = False
 
     @classmethod
     def parse(cls, value: Any, key: str, path: Source) -> BundleSection:
@@ -307,6 +311,7 @@ class BundleSection:
                 for k, v in std.items()
             },
             model,
+            as_bool(d.get("intrinsics_held", False), f"{key}.intrinsics_held", path),
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -319,6 +324,7 @@ class BundleSection:
             "distortion": self.distortion,
             "intrinsics_std": dict(self.intrinsics_std),
             "model": self.model,
+            "intrinsics_held": self.intrinsics_held,
         }
 
     def values(self) -> dict[str, float]:

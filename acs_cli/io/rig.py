@@ -38,7 +38,7 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         frames_rejected: int
     bundle_adjustment:                  # when every camera's poses carried board corners
       <name>: {intrinsics_file, rms_px, sigma_px, frames, camera_matrix, distortion,
-               intrinsics_std}          # as joint.yaml's quality.bundle_adjustment.<cam>
+               intrinsics_std, intrinsics_held}  # as joint.yaml's quality.bundle_adjustment
     recordings:                         # each recording of the rig and its worlds
       <name>:
         world: shared | separate        # one world for every body, or one per body
@@ -372,7 +372,9 @@ class RigArtifact(YamlArtifact):
         if self.bundle_adjustment:
             b = next(iter(self.bundle_adjustment.values()))
             lines.append(
-                f"  bundle adjustment on the corners of {b.frames} frames: RMS "
+                f"  bundle adjustment on the corners of {b.frames} frames"
+                + (" (intrinsics held)" if b.intrinsics_held else "")
+                + ": RMS "
                 + ", ".join(f"{c} {v.rms_px:.3f}" for c, v in self.bundle_adjustment.items())
                 + " px"
             )

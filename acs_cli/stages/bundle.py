@@ -10,8 +10,10 @@ a trajectory without corners (TUM, KITTI, COLMAP) is simply not refined.
 
 Each camera keeps the model its intrinsics file was calibrated with (pinhole, rational or
 fisheye); a corner a frame did not see is NaN, so a partial view of a target counts. A
-refined distortion the corners do not determine is warned about
-(:func:`acs_cli.core.intrinsics.degenerate_distortion`). The fixed-joint adjustment judges
+refined distortion the corners do not determine
+(:func:`acs_cli.core.intrinsics.degenerate_distortion`) is warned about (fixed joint) or held
+(the two-body rig's bundle holds both cameras' intrinsics, :func:`held_note`). The
+fixed-joint adjustment judges
 again, on their corners, the frames the pose-based fit rejected (:func:`readmit_frames`).
 """
 
@@ -37,9 +39,9 @@ from acs_cli.core.relpose import (
 )
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
 from acs_cli.core.rig_bundle import (
-    MIN_RIG_BUNDLE_FRAMES,
     CameraViews,
     FixedJointBundle,
+    RigBundle,
     bundle_adjust_fixed_joint,
     bundle_adjust_rig,
 )
@@ -67,7 +69,9 @@ __all__ = [
     "bundle_section",
     "corner_views",
     "degenerate_warning",
+    "held_note",
     "readmit_frames",
+    "rig_sections",
     "shared_board_flip",
 ]
 
@@ -109,6 +113,8 @@ class CornerViews:
     intrinsics_file : Path
     model : str
         The intrinsics file's camera model.
+    intrinsics_std : ndarray, shape (p,), or None
+        The file's one-sigma intrinsics (named as ``intrinsics``), when it gives them all.
     """
 
     corners: np.ndarray
@@ -116,6 +122,7 @@ class CornerViews:
     intrinsics: np.ndarray
     intrinsics_file: Path
     model: str = "pinhole"
+    intrinsics_std: np.ndarray | None = None
 
 
 def _resolve(recorded: str, poses: Path) -> Path | None:
@@ -142,14 +149,25 @@ def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | N
         return None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
     intr = IntrinsicsArtifact.load(path)
     vec = intrinsics_vector(intr.camera_matrix, intr.distortion, intr.model)
-    return CornerViews(obs.corners, obs.board_points, vec, path, intr.model), None
+    sd = intr.std or {}
+    std = [sd.get(k) for k in ("fx", "fy", "cx", "cy")] + list(sd.get("distortion") or [])
+    ok = len(std) == vec.size and all(isinstance(v, (int, float)) for v in std)
+    given = np.asarray(std, dtype=float) if ok else None
+    return CornerViews(obs.corners, obs.board_points, vec, path, intr.model, given), None
 
 
 def bundle_section(
-    views: CornerViews, intr: np.ndarray, std: np.ndarray, rms: float, sigma: float, n: int
+    views: CornerViews,
+    intr: np.ndarray,
+    std: np.ndarray,
+    rms: float,
+    sigma: float,
+    n: int,
+    held: bool = False,
 ) -> BundleSection:
     """The artifact's section of one camera's bundle adjustment (parameters named by its
-    model)."""
+    model); ``held``: the intrinsics were held, and the std reported is the file's (or none)."""
+    sd = views.intrinsics_std if held else std
     return BundleSection(
         intrinsics_file=str(views.intrinsics_file),
         rms_px=float(rms),
@@ -157,9 +175,30 @@ def bundle_section(
         frames=n,
         camera_matrix=camera_matrix(intr),
         distortion=np.asarray(intr[4:], dtype=float),
-        intrinsics_std=dict(zip(camera_model(views.model).names, std.tolist(), strict=True)),
+        intrinsics_std={}
+        if sd is None
+        else dict(zip(camera_model(views.model).names, sd.tolist(), strict=True)),
         model=views.model,
+        intrinsics_held=held,
     )
+
+
+def rig_sections(views: dict[str, CornerViews], ba: RigBundle) -> dict[str, BundleSection]:
+    """Each camera's section of a rig's bundle adjustment ``ba``, in ``views``' order."""
+    held = ba.intrinsics_held is not None
+    return {  # each camera's frames: those its recordings saw it in
+        c: bundle_section(v, ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c], ba.sigma_px,
+                          int(np.count_nonzero(ba.per_frame_rms_px[c])), held)
+        for c, v in views.items()
+    }  # fmt: skip
+
+
+def held_note(ba: RigBundle, what: str) -> list[str]:
+    """``[note]`` when the rig's bundle adjustment ``ba`` held every camera's intrinsics."""
+    if ba.intrinsics_held is None:
+        return []
+    return [f"{what} held every camera's intrinsics ({ba.intrinsics_held}): the rig is fitted "
+            "on the corners with each camera's own calibration"]  # fmt: skip
 
 
 def degenerate_warning(
@@ -386,9 +425,6 @@ def _two_body_bundle(
                            "bundle adjustment"]  # fmt: skip
     frames, thinned = bundle_frames(used, est.reference_frame)
     warnings = [*warnings, thinned] if thinned else list(warnings)
-    if frames.sum() < MIN_RIG_BUNDLE_FRAMES:
-        return est, None, [*warnings, f"no bundle adjustment: {int(frames.sum())} frames "
-                           f"(at least {MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
     cams = {
         c: CameraViews(v.corners, np.isfinite(v.corners).all(axis=2), v.board_points,
                        v.intrinsics, v.model)
@@ -402,16 +438,8 @@ def _two_body_bundle(
     if not ba.success:
         return est, None, [*warnings, "the bundle adjustment did not converge; the pose-based "
                            "estimate is kept"]  # fmt: skip
-    n = int(frames.sum())
-    sections = {}
-    for c, v in zip(("a", "b"), views, strict=True):
-        warnings += degenerate_warning(
-            c.upper(), v.model, ba.intrinsics[c], ba.intrinsics_covariance[c]
-        )
-        sections[c] = bundle_section(
-            v, ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c], ba.sigma_px, n
-        )
-    return ba.estimate, sections, warnings
+    sections = rig_sections(dict(zip(("a", "b"), views, strict=True)), ba)
+    return ba.estimate, sections, [*warnings, *held_note(ba, "the bundle adjustment")]
 
 
 def bundle_general(

@@ -42,7 +42,6 @@ from acs_cli.core.quality import (
 )
 from acs_cli.core.rig import RigJoint, rig_topology
 from acs_cli.core.rig_bundle import (
-    MIN_RIG_BUNDLE_FRAMES,
     CameraViews,
     PoseBodyEstimate,
     RigidEdgeEstimate,
@@ -87,9 +86,9 @@ from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
     CornerViews,
     bundle_frames,
-    bundle_section,
     corner_views,
-    degenerate_warning,
+    held_note,
+    rig_sections,
 )
 
 RIG_FILE = "rig.yaml"
@@ -1025,11 +1024,9 @@ def rig_bundle(
     mask, thinned = bundle_frames(use, est.reference_frame)
     if thinned:
         notes.append(thinned)
-    if not mask[est.reference_frame] or mask.sum() < MIN_RIG_BUNDLE_FRAMES:
-        return est, {}, [*notes, f"no bundle adjustment of the rig: {int(mask.sum())} frames "
-                         "where every camera sees its board and no joint rejected it (the "
-                         "reference frame among them; at least "
-                         f"{MIN_RIG_BUNDLE_FRAMES} needed)"]  # fmt: skip
+    if not mask[est.reference_frame]:
+        return est, {}, [*notes, "no bundle adjustment of the rig: every camera must see its "
+                         "board at the reference instant, and no joint reject it"]  # fmt: skip
     try:
         ba = bundle_adjust_rig(
             config.topology, views, est, np.flatnonzero(mask), poses, priors=priors
@@ -1040,16 +1037,8 @@ def rig_bundle(
     if not ba.success:
         return est, {}, [*notes, "the rig's bundle adjustment did not converge; the "
                          "pose-based estimate is kept"]  # fmt: skip
-    for c in views:
-        notes += degenerate_warning(
-            c, views[c].model, ba.intrinsics[c], ba.intrinsics_covariance[c]
-        )
-    sections = {
-        c: bundle_section(sources[c], ba.intrinsics[c], ba.intrinsics_std[c], ba.rms_px[c],
-                          ba.sigma_px, int(views[c].valid[ba.frames].any(axis=1).sum()))
-        for c in config.topology.cameras if c in views
-    }  # fmt: skip
-    return ba.estimate, sections, notes
+    sections = rig_sections({c: sources[c] for c in config.topology.cameras if c in views}, ba)
+    return ba.estimate, sections, [*notes, *held_note(ba, "the rig's bundle adjustment")]
 
 
 #: Folder (beside rig.yaml) of every camera's and joint's trajectory in one frame.

@@ -22,7 +22,8 @@ from acs_cli.core.relpose import (
     two_body_rig,
 )
 from acs_cli.core.rig_bundle import CameraViews, bundle_adjust_rig
-from acs_cli.errors import InputError
+from acs_cli.core.rig_solve import CameraTrack
+from acs_cli.errors import DegenerateMotionError, InputError
 
 W, H = 1024, 768
 BOARD = np.array([[c * 0.04, r * 0.04, 0.0] for r in range(6) for c in range(9)])
@@ -355,3 +356,71 @@ def test_long_recordings_are_thinned_evenly() -> None:
     assert note is not None and f"{MAX_BUNDLE_FRAMES} of {used.sum()}" in note
     short = np.ones(30, bool)
     assert bundle_frames(short)[1] is None and bundle_frames(short)[0].all()
+
+
+def _one_board_rig(seed: int, n: int, joint: str) -> tuple[dict, Any, dict[str, CameraViews]]:
+    """A pair seeing one board (``n`` frames, 0.3 px), its pose-based rig (from poses a
+    little off, as PnP gives them) and its views with the true intrinsics."""
+    from acs_cli.core.rig import rig_topology
+    from acs_cli.core.rig_solve import Recordings, estimate_rig
+
+    rng = np.random.default_rng(seed)
+    s = _scene(rng, True, sigma_px=0.3, n=n, joint=joint)
+    est = estimate_rig(
+        rig_topology(["a", "b"], [("j", ["a", "b"], joint)], "a"),
+        {c: CameraTrack(_perturb(s[f"T_w{c}_{c}"], rng, 0.002, 0.001), np.ones(n, bool))
+         for c in ("a", "b")},
+        reference_frame=0,
+        recordings=Recordings.single(n, shared_world=True),
+        accept_weak=True,
+    )  # fmt: skip
+    views = {
+        c: CameraViews(s[f"c{c}"], np.isfinite(s[f"c{c}"]).all(axis=2), BOARD, s[f"i{c}"])
+        for c in ("a", "b")
+    }
+    return s, est, views
+
+
+def _pose_z(T: np.ndarray, C: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Errors of ``T`` (rotation, then translation) over their stds from ``C`` ``(6, 6)``."""
+    e_rot = se3.rotvec_from_matrix((truth[:3, :3].T @ T[:3, :3])[None])[0]
+    return np.concatenate([e_rot, T[:3, 3] - truth[:3, 3]]) / np.sqrt(np.diag(C))
+
+
+def test_a_rigid_pair_from_three_frames_with_its_intrinsics_held() -> None:
+    """Stereo calibration with the intrinsics held (``stereoCalibrate``'s FIX_INTRINSIC):
+    from 3 frames of one board, ``T_b_a`` within its reported std (unit spread over seeded
+    trials), the intrinsics as given."""
+    z = []
+    for seed in range(12):
+        s, est, views = _one_board_rig(seed, 3, "rigid")
+        ba = bundle_adjust_rig(est.topology, views, est, np.arange(3), hold_intrinsics=True)
+        assert ba.success and ba.intrinsics_held == "held as asked"
+        for c in ("a", "b"):
+            np.testing.assert_array_equal(ba.intrinsics[c], s[f"i{c}"])
+            assert not ba.intrinsics_std[c].any()
+        cam = ba.estimate.cameras["b"]
+        z.append(_pose_z(cam.T_cam_ref, cam.covariance, s["T_b_a"][0]))
+    spread = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.6 < spread < 1.5, spread
+
+
+@pytest.mark.parametrize(("joint", "fewest"), [("rigid", 1), ("hinge", 2), ("ball", 3)])
+def test_the_frames_a_pair_seeing_one_board_needs(joint: str, fewest: int) -> None:
+    """The bundle takes as few frames as the unknowns need, and refuses fewer: a rigid pair
+    is seen whole in 1 frame; a hinge's angle at every frame leaves its axis and point to 2;
+    a ball's rotation leaves 3 rows a frame for its two points (6), and frames that turn
+    about one axis do not fix them along it: 3. Under 3 frames the intrinsics are held."""
+    s, est, views = _one_board_rig(4, 8, joint)
+    for n in range(1, 4):
+        if n < fewest:
+            with pytest.raises(DegenerateMotionError, match="do not determine the rig"):
+                bundle_adjust_rig(est.topology, views, est, np.arange(n))
+            continue
+        ba = bundle_adjust_rig(est.topology, views, est, np.arange(n))
+        assert ba.success
+        assert (ba.intrinsics_held is not None) == (n < 3), ba.intrinsics_held
+        if ba.intrinsics_held is None:
+            continue
+        cam = ba.estimate.cameras["b"]
+        assert np.abs(_pose_z(cam.T_cam_ref, cam.covariance, s["T_b_a"][0])).max() < 4
