@@ -74,9 +74,7 @@ def input_files(inputs: Mapping[str, Path | PosesArtifact]) -> list[Path]:
 def pair_loaded(
     a: Trajectory, b: Trajectory, pair_by: str = "auto", max_dt: float | None = None
 ) -> PairedTrajectories:
-    """Two trajectories reduced to their paired samples (see
-    :func:`acs_cli.core.pairing.pair_trajectories`), with a warning when some have no
-    partner."""
+    """Two trajectories reduced to their paired samples, and a warning for the others."""
     pairing = pair_trajectories(a, b, pair_by, max_dt)
     warnings = []
     if pairing.unpaired_a or pairing.unpaired_b:

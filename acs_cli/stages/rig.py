@@ -240,10 +240,10 @@ def _priors(config: RigRunConfig) -> tuple[dict[str, EdgePrior], dict[str, Poses
         for cam, path in j.fixed_joint.items():
             key = f"joints.{name}.fixed_joint.{cam}"
             try:
-                sessions[f"fixed_joint_{name}_{cam}"] = PosesArtifact.load(path)
+                sessions[f"fixed_joint_{name}_{cam}"] = got = PosesArtifact.load(path)
             except InputError as exc:
                 raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
-            T = sessions[f"fixed_joint_{name}_{cam}"].trajectory.T_world_cam
+            T = got.trajectory.T_world_cam
             prior = merge_priors(prior, fixed_joint_prior(joint, cam, T, f"{key} (camera {cam})"))
         if prior.position_in or prior.line_in or prior.axis_in:
             out[name] = prior
