@@ -35,7 +35,6 @@ from acs_cli.errors import InputError
 from acs_cli.io.base import Artifact
 from acs_cli.io.intrinsics import check_camera
 from acs_cli.io.trajectory import (
-    BoardObservations,
     Trajectory,
     npz_arrays_from_bytes,
     parse_npz_header,
@@ -350,13 +349,6 @@ class PosesArtifact(Artifact):
         return None if intr is None else str(intr)
 
     @property
-    def observations(self) -> BoardObservations | None:
-        """The corners and board points (for a bundle adjustment), or None without them."""
-        if self.corners is None or self.board_points is None:
-            return None
-        return BoardObservations(self.corners, self.board_points, self.intrinsics_file)
-
-    @property
     def front_end(self) -> str:
         """``"sfm"`` (structure from motion), ``"board"`` (with corners) or ``"trajectory"``."""
         if self.sfm is not None:
@@ -422,15 +414,15 @@ class PosesArtifact(Artifact):
         arrays = npz_arrays_from_bytes(data, p)
         traj = parse_npz_poses(arrays, p)
         header = parse_npz_header(arrays, p)
-        obs = parse_npz_observations(arrays, p, header)
+        obs = parse_npz_observations(arrays, p)
         rms, skipped = parse_npz_quality(arrays, p)
         sfm = SfmSummary.parse(arrays, p)
         art = cls(
             trajectory=traj,
             reprojection_rms=rms,
             skipped_images=tuple(skipped),
-            corners=None if obs is None else obs.corners,
-            board_points=None if obs is None else obs.board_points,
+            corners=None if obs is None else obs[0],
+            board_points=None if obs is None else obs[1],
             metric_scale=_metric_scale(arrays, p),
             sfm=sfm,
             header=header,

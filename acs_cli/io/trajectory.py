@@ -821,38 +821,18 @@ def parse_npz_header(arrays: Mapping[str, np.ndarray], p: Path) -> dict[str, Any
     return header
 
 
-@dataclass(frozen=True)
-class BoardObservations:
-    """The corner observations an ``acscal/poses`` NPZ carries (for bundle adjustment).
-
-    Attributes
-    ----------
-    corners : ndarray, shape (n, m, 2)
-        Detected corners (pixels) of the ``n`` posed images, in board-point order.
-    board_points : ndarray, shape (m, 3)
-        The corners in the board's frame (metres).
-    intrinsics_file : str or None
-        The intrinsics artifact the poses were solved with (as recorded).
-    """
-
-    corners: FloatArray
-    board_points: FloatArray
-    intrinsics_file: str | None
-
-
 def parse_npz_observations(
-    arrays: Mapping[str, np.ndarray], p: Path, header: Mapping[str, Any]
-) -> BoardObservations | None:
-    """The corners stored by ``acscal poses`` in an NPZ's arrays, or ``None`` without them.
-
-    ``corners`` ``(n, m, 2)`` holds NaN where a view did not see the target's corner ``j``
-    (``board_points`` ``(m, 3)`` holds every corner of the target).
+    arrays: Mapping[str, np.ndarray], p: Path
+) -> tuple[FloatArray, FloatArray] | None:
+    """The corners ``(n, m, 2)`` (pixels; NaN where a view did not see the target's corner
+    ``j``) and board points ``(m, 3)`` (metres, every corner of the target) stored by
+    ``acscal poses`` in an NPZ's arrays, or ``None`` without them.
 
     Raises
     ------
     InputError
-        Corners or board points of the wrong shape, infinite corners, or board points
-        that are not finite.
+        Infinite corners, board points that are not finite, or absurd magnitudes (their
+        shapes are :meth:`acs_cli.io.poses.PosesArtifact.validate`'s to check).
     """
     if "corners" not in arrays or "board_points" not in arrays:
         return None
@@ -863,14 +843,7 @@ def parse_npz_observations(
         raise InputError("'corners' contain inf, or 'board_points' NaN or inf", path=p)
     check_magnitude(corners, "corners", p)  # pixels
     check_magnitude(board, "board_points", p)  # metres
-    if corners.ndim != 3 or corners.shape[2] != 2 or board.shape != (corners.shape[1], 3):
-        raise InputError(
-            f"'corners' {corners.shape} and 'board_points' {board.shape} do not match "
-            "(expected (n, m, 2) and (m, 3))",
-            path=p,
-        )
-    intr = header.get("intrinsics_file")
-    return BoardObservations(corners, board, None if intr is None else str(intr))
+    return corners, board
 
 
 def parse_npz_quality(arrays: Mapping[str, np.ndarray], p: Path) -> tuple[np.ndarray, list[str]]:

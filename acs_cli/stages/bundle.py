@@ -133,18 +133,18 @@ def corner_views(poses: PosesArtifact, n_poses: int) -> tuple[CornerViews | None
     Returns ``(views, None)``, ``(None, warning)`` or ``(None, None)`` for poses without
     corners (a trajectory format that never carries them).
     """
-    obs = poses.observations
-    if obs is None:
+    corners, board, recorded = poses.corners, poses.board_points, poses.intrinsics_file
+    if corners is None or board is None:
         return None, None
     where = Path(poses.source or "poses")
-    if obs.corners.shape[0] != n_poses:
+    if corners.shape[0] != n_poses:
         return None, f"{where.name}: corners and poses disagree; no bundle adjustment"
-    path = None if obs.intrinsics_file is None else _resolve(obs.intrinsics_file, where)
+    path = None if recorded is None else _resolve(recorded, where)
     if path is None:
         return None, f"{where.name}: its intrinsics file was not found; no bundle adjustment"
     intr = IntrinsicsArtifact.load(path)
     vec = intrinsics_vector(intr.camera_matrix, intr.distortion, intr.model)
-    return CornerViews(obs.corners, obs.board_points, vec, path, intr.model), None
+    return CornerViews(corners, board, vec, path, intr.model), None
 
 
 def bundle_section(
@@ -277,14 +277,11 @@ def shared_board_flip(poses: tuple[PosesArtifact, PosesArtifact]) -> np.ndarray 
     :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both poses carry the
     corners of the same, symmetric checkerboard (a target's corners are identified).
     """
-    obs = [p.observations for p in poses]
-    if obs[0] is None or obs[1] is None:
+    X, Y = poses[0].board_points, poses[1].board_points  # None: no corners
+    if X is None or Y is None or X.shape != Y.shape or not np.allclose(X, Y):
         return None
     if any("target" in p.header for p in poses):
         return None  # an AprilGrid or ChArUco: every corner identified, one labelling only
-    X = obs[0].board_points
-    if X.shape != obs[1].board_points.shape or not np.allclose(X, obs[1].board_points):
-        return None
     F = np.diag([-1.0, -1.0, 1.0, 1.0])
     F[:3, 3] = X[0] + X[-1]
     if not np.allclose(X @ F[:3, :3].T + F[:3, 3], X[::-1], atol=1e-9):

@@ -464,7 +464,7 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    has_corners = any(p.observations is not None for p in files.values())
+    has_corners = any(p.corners is not None for p in files.values())
     if config.bundle and not offsets and single:
         trajectories = by_rec[config.reference_recording]
         est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns)
