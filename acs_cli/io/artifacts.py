@@ -13,7 +13,7 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import yaml
@@ -25,6 +25,7 @@ from acs_cli.io.validate import short_repr
 
 __all__ = [
     "SCHEMA_VERSION",
+    "ReadInput",
     "check_yaml_artifact",
     "get_path",
     "load_yaml_file",
@@ -94,9 +95,20 @@ def sha256_of(path: str | Path, *, exclude: Iterable[str | Path] = ()) -> str:
         raise InputError(f"cannot read ({exc.strerror or exc})", path=p) from exc
 
 
+class ReadInput(Protocol):
+    """An input read already (:class:`acs_cli.io.poses.PosesArtifact`): its file and the
+    SHA-256 of the bytes read."""
+
+    @property
+    def source(self) -> str | None: ...
+
+    @property
+    def sha256(self) -> str | None: ...
+
+
 def make_header(
     kind: str,
-    inputs: Mapping[str, str | Path],
+    inputs: Mapping[str, str | Path | ReadInput],
     method: str,
     units: Mapping[str, Any],
     frames: Mapping[str, Any],
@@ -107,9 +119,10 @@ def make_header(
     ----------
     kind : str
         The artifact's kind, e.g. ``"joint"``; the schema is ``"acscal/<kind>"``.
-    inputs : mapping of str to path
+    inputs : mapping of str to path or ReadInput
         The files (or folders) the artifact derives from, by role (``"traj_a"``, ...);
-        each is recorded with its path and SHA-256.
+        each is recorded with its path and SHA-256 (of the bytes already read, for an
+        input read so, as :class:`~acs_cli.io.poses.PosesArtifact`).
     method : str
         The estimator and its options, in words.
     units : mapping
@@ -134,8 +147,10 @@ def make_header(
         "tool": {"name": "acscal", "version": acs_cli.__version__},
         "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "inputs": {
-            str(name): {"path": str(path), "sha256": sha256_of(path)}
-            for name, path in inputs.items()
+            str(name): {"path": str(p), "sha256": sha256_of(p)}
+            if isinstance(p, (str, Path))
+            else {"path": str(p.source), "sha256": p.sha256 or sha256_of(str(p.source))}
+            for name, p in inputs.items()
         },
         "method": method,
         "units": to_plain(dict(units)),

@@ -13,10 +13,11 @@ carry ``metric_scale`` (False: translations in SfM units, an unknown scale) and 
 sparse model's size and quality, the intrinsics used), and ``header_json`` has an ``sfm``
 section (method, matching, options, timings).
 
-:meth:`PosesArtifact.load` opens the file once, hashes its bytes (:attr:`sha256`) and
-parses every array from memory, with the checks of
-:func:`acs_cli.io.trajectory.read_npz_poses`, ``read_npz_observations`` and
-``read_npz_quality``.
+:meth:`PosesArtifact.load` reads any camera's poses input, a poses NPZ or a trajectory of
+another format, in one read of its bytes: it hashes them (:attr:`sha256`) and parses every
+array from memory (:func:`acs_cli.io.trajectory.parse_npz_poses`, ``parse_npz_observations``
+and ``parse_npz_quality``). The stages read each poses input so, once, and hand the artifact
+down.
 """
 
 from __future__ import annotations
@@ -34,13 +35,14 @@ from acs_cli.errors import InputError
 from acs_cli.io.base import Artifact
 from acs_cli.io.intrinsics import check_camera
 from acs_cli.io.trajectory import (
-    BoardObservations,
     Trajectory,
-    load_npz,
+    npz_arrays_from_bytes,
     parse_npz_header,
     parse_npz_observations,
     parse_npz_poses,
     parse_npz_quality,
+    parse_trajectory,
+    read_input,
     write_npz_poses,
 )
 from acs_cli.io.validate import FloatArray
@@ -291,7 +293,8 @@ def _metric_scale(arrays: Mapping[str, np.ndarray], p: Path) -> bool | None:
 @dataclass(frozen=True, eq=False)
 class PosesArtifact(Artifact):
     """A camera's poses, one per posed image (``acscal/poses`` NPZ): board poses, or the
-    registered images of a structure-from-motion reconstruction.
+    registered images of a structure-from-motion reconstruction; or, read from a trajectory
+    of another format (TUM, KITTI, COLMAP), its poses alone.
 
     Attributes
     ----------
@@ -315,11 +318,12 @@ class PosesArtifact(Artifact):
     sfm : SfmSummary or None
         The structure-from-motion summary, for poses made by ``acscal poses --sfm``.
     header : dict
-        The artifact header (``{}`` for a plain NPZ).
+        The artifact header (``{}`` for a plain NPZ or another format).
     source : str or None
-        The file it was read from.
+        The file (or COLMAP folder) it was read from, as given.
     sha256 : str or None
-        SHA-256 of the file's bytes, when read from a file.
+        SHA-256 of the bytes read (a COLMAP folder's ``images.txt``), when read from a
+        file; artifact headers record it as the input's hash.
     """
 
     KIND: ClassVar[str] = "poses"
@@ -343,13 +347,6 @@ class PosesArtifact(Artifact):
         """The intrinsics artifact the poses were solved with, as recorded."""
         intr = self.header.get("intrinsics_file")
         return None if intr is None else str(intr)
-
-    @property
-    def observations(self) -> BoardObservations | None:
-        """The corners and board points (for a bundle adjustment), or None without them."""
-        if self.corners is None or self.board_points is None:
-            return None
-        return BoardObservations(self.corners, self.board_points, self.intrinsics_file)
 
     @property
     def front_end(self) -> str:
@@ -396,33 +393,41 @@ class PosesArtifact(Artifact):
                 )
 
     @classmethod
-    def load(cls, path: str | Path) -> PosesArtifact:
-        """Read a poses NPZ (one read of the file), parse and validate every array.
+    def load(cls, path: str | Path, fmt: str = "auto") -> PosesArtifact:
+        """Read a camera's poses input (``path`` and ``fmt`` as
+        :func:`acs_cli.io.trajectory.read_trajectory` takes them) in one read of its bytes:
+        a poses NPZ, every array parsed and validated, or a trajectory of another format
+        (TUM, KITTI, COLMAP: ``trajectory``, ``source`` and ``sha256`` alone).
 
         Raises
         ------
         InputError
             A missing, truncated or corrupt file, another artifact's schema, a newer
-            schema_version, or an array of the wrong shape, dtype or value.
+            schema_version, or an array of the wrong shape, dtype or value; a trajectory
+            reader's error.
         """
-        p = Path(path)
-        arrays, data = load_npz(p)
+        p, data, fmt = read_input(path, fmt)
+        sha256 = hashlib.sha256(data).hexdigest()
+        if fmt != "npz":
+            traj = parse_trajectory(p, data, fmt)
+            return cls(trajectory=traj, source=str(path), sha256=sha256)
+        arrays = npz_arrays_from_bytes(data, p)
         traj = parse_npz_poses(arrays, p)
         header = parse_npz_header(arrays, p)
-        obs = parse_npz_observations(arrays, p, header)
+        obs = parse_npz_observations(arrays, p)
         rms, skipped = parse_npz_quality(arrays, p)
         sfm = SfmSummary.parse(arrays, p)
         art = cls(
             trajectory=traj,
             reprojection_rms=rms,
             skipped_images=tuple(skipped),
-            corners=None if obs is None else obs.corners,
-            board_points=None if obs is None else obs.board_points,
+            corners=None if obs is None else obs[0],
+            board_points=None if obs is None else obs[1],
             metric_scale=_metric_scale(arrays, p),
             sfm=sfm,
             header=header,
-            source=str(p),
-            sha256=hashlib.sha256(data).hexdigest(),
+            source=str(path),
+            sha256=sha256,
         )
         art.validate()
         return art

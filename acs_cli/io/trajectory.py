@@ -44,9 +44,10 @@ __all__ = [
     "TIME_UNITS",
     "Trajectory",
     "check_npz_members",
+    "parse_trajectory",
     "read_colmap",
+    "read_input",
     "read_kitti",
-    "read_npz_header",
     "read_npz_poses",
     "read_trajectory",
     "read_tum",
@@ -207,9 +208,8 @@ class Trajectory:
 # text helpers
 
 
-def _read_text(path: Path) -> str:
-    """The file's text (UTF-8, optional BOM); every failure is an InputError."""
-    data = read_input_bytes(path, "a trajectory file", MAX_TEXT_BYTES)
+def _decode_text(data: bytes, path: Path) -> str:
+    """A file's text (UTF-8, optional BOM) from its bytes; every failure is an InputError."""
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -344,8 +344,10 @@ def read_tum(path: str | Path) -> Trajectory:
         that is not a number, NaN/inf, a quaternion norm off 1 by more than ``1e-3``, or a
         timestamp not after the previous one (the message names the line).
     """
-    p = Path(path)
-    text = _read_text(p)
+    return read_trajectory(path, "tum")
+
+
+def _parse_tum(text: str, p: Path) -> Trajectory:
     lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty TUM file)", path=p)
@@ -466,8 +468,11 @@ def read_kitti(path: str | Path) -> Trajectory:
         Missing/unreadable/empty file; a line without 12 numbers, a non-number, NaN/inf,
         or a rotation block that is not orthonormal within ``1e-4`` (naming the line).
     """
-    p = Path(path)
-    lines, numbers = _data_lines(_read_text(p))
+    return read_trajectory(path, "kitti")
+
+
+def _parse_kitti(text: str, p: Path) -> Trajectory:
+    lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty KITTI file)", path=p)
     table = _parse_table(lines, numbers, 12, "the row-major top 3x4 of T_world_cam", p)
@@ -547,8 +552,10 @@ def read_colmap(path: str | Path) -> Trajectory:
         a bad quaternion or a repeated image name; a POINTS2D line that is not triples;
         no images.
     """
-    p = _colmap_file(Path(path))
-    text = _read_text(p)
+    return read_trajectory(path, "colmap")
+
+
+def _parse_colmap(text: str, p: Path) -> Trajectory:
     entries: list[tuple[str, int]] = []
     values: list[list[float]] = []
     raw_lines = text.split("\n")
@@ -637,11 +644,6 @@ def read_colmap(path: str | Path) -> Trajectory:
 # NPZ
 
 
-def _read_bytes_npz(path: Path) -> bytes:
-    """The bytes of an NPZ file; a missing file or a folder is an InputError."""
-    return read_input_bytes(path, "an NPZ file", MAX_NPZ_BYTES)
-
-
 def check_npz_members(z: np.lib.npyio.NpzFile, path: Path) -> None:
     """Refuse an archive whose arrays declare more than :data:`MAX_NPZ_MEMBER_BYTES` each
     (read from each ``.npy`` header, before any array is loaded)."""
@@ -681,17 +683,6 @@ def npz_arrays_from_bytes(data: bytes, path: Path) -> dict[str, np.ndarray]:
         raise InputError(
             f"not a readable NPZ file (truncated or corrupt?): {type(exc).__name__}", path=path
         ) from exc
-
-
-def load_npz(path: Path) -> tuple[dict[str, np.ndarray], bytes]:
-    """All arrays of an NPZ file and the file's bytes (read once); failures are InputErrors."""
-    data = _read_bytes_npz(path)
-    return npz_arrays_from_bytes(data, path), data
-
-
-def _load_npz(path: Path) -> dict[str, np.ndarray]:
-    """All arrays of an NPZ archive; any failure is an InputError."""
-    return load_npz(path)[0]
 
 
 def _npz_scalar_str(arrays: Mapping[str, np.ndarray], key: str, path: Path) -> str:
@@ -753,8 +744,7 @@ def read_npz_poses(path: str | Path) -> Trajectory:
         schema_version; missing ``T_world_cam``; wrong shapes or dtypes; non-finite values;
         rotation blocks not orthonormal within ``1e-4``.
     """
-    p = Path(path)
-    return parse_npz_poses(_load_npz(p), p)
+    return read_trajectory(path, "npz")
 
 
 def parse_npz_poses(arrays: Mapping[str, np.ndarray], p: Path) -> Trajectory:
@@ -818,12 +808,6 @@ def parse_npz_poses(arrays: Mapping[str, np.ndarray], p: Path) -> Trajectory:
     )
 
 
-def read_npz_header(path: str | Path) -> dict[str, Any]:
-    """The artifact header (see ``artifacts.make_header``) stored in an NPZ, or ``{}``."""
-    p = Path(path)
-    return parse_npz_header(_load_npz(p), p)
-
-
 def parse_npz_header(arrays: Mapping[str, np.ndarray], p: Path) -> dict[str, Any]:
     """The header stored in an NPZ's arrays (``header_json``), or ``{}``."""
     if "header_json" not in arrays:
@@ -837,46 +821,19 @@ def parse_npz_header(arrays: Mapping[str, np.ndarray], p: Path) -> dict[str, Any
     return header
 
 
-@dataclass(frozen=True)
-class BoardObservations:
-    """The corner observations an ``acscal/poses`` NPZ carries (for bundle adjustment).
-
-    Attributes
-    ----------
-    corners : ndarray, shape (n, m, 2)
-        Detected corners (pixels) of the ``n`` posed images, in board-point order.
-    board_points : ndarray, shape (m, 3)
-        The corners in the board's frame (metres).
-    intrinsics_file : str or None
-        The intrinsics artifact the poses were solved with (as recorded).
-    """
-
-    corners: FloatArray
-    board_points: FloatArray
-    intrinsics_file: str | None
-
-
-def read_npz_observations(path: str | Path) -> BoardObservations | None:
-    """The corners stored by ``acscal poses``, or ``None`` for an NPZ without them.
-
-    ``corners`` ``(n, m, 2)`` holds NaN where a view did not see the target's corner ``j``
-    (``board_points`` ``(m, 3)`` holds every corner of the target).
+def parse_npz_observations(
+    arrays: Mapping[str, np.ndarray], p: Path
+) -> tuple[FloatArray, FloatArray] | None:
+    """The corners ``(n, m, 2)`` (pixels; NaN where a view did not see the target's corner
+    ``j``) and board points ``(m, 3)`` (metres, every corner of the target) stored by
+    ``acscal poses`` in an NPZ's arrays, or ``None`` without them.
 
     Raises
     ------
     InputError
-        Corners or board points of the wrong shape, infinite corners, or board points
-        that are not finite.
+        Infinite corners, board points that are not finite, or absurd magnitudes (their
+        shapes are :meth:`acs_cli.io.poses.PosesArtifact.validate`'s to check).
     """
-    p = Path(path)
-    arrays = _load_npz(p)
-    return parse_npz_observations(arrays, p, parse_npz_header(arrays, p))
-
-
-def parse_npz_observations(
-    arrays: Mapping[str, np.ndarray], p: Path, header: Mapping[str, Any]
-) -> BoardObservations | None:
-    """The corners of an NPZ's arrays (see :func:`read_npz_observations`)."""
     if "corners" not in arrays or "board_points" not in arrays:
         return None
     corners = _npz_numeric(arrays, "corners", p)
@@ -886,31 +843,18 @@ def parse_npz_observations(
         raise InputError("'corners' contain inf, or 'board_points' NaN or inf", path=p)
     check_magnitude(corners, "corners", p)  # pixels
     check_magnitude(board, "board_points", p)  # metres
-    if corners.ndim != 3 or corners.shape[2] != 2 or board.shape != (corners.shape[1], 3):
-        raise InputError(
-            f"'corners' {corners.shape} and 'board_points' {board.shape} do not match "
-            "(expected (n, m, 2) and (m, 3))",
-            path=p,
-        )
-    intr = header.get("intrinsics_file")
-    return BoardObservations(corners, board, None if intr is None else str(intr))
+    return corners, board
 
 
-def read_npz_quality(path: str | Path) -> tuple[np.ndarray, list[str]]:
+def parse_npz_quality(arrays: Mapping[str, np.ndarray], p: Path) -> tuple[np.ndarray, list[str]]:
     """Per-pose reprojection RMS (px, ``(n,)``; empty when absent) and the names of the
-    images without a pose, as ``acscal poses`` stores them.
+    images without a pose, as ``acscal poses`` stores them in an NPZ's arrays.
 
     Raises
     ------
     InputError
-        An unreadable NPZ or a non-numeric ``reprojection_rms``.
+        A non-numeric ``reprojection_rms``.
     """
-    p = Path(path)
-    return parse_npz_quality(_load_npz(p), p)
-
-
-def parse_npz_quality(arrays: Mapping[str, np.ndarray], p: Path) -> tuple[np.ndarray, list[str]]:
-    """Reprojection RMS and skipped images of an NPZ's arrays (see :func:`read_npz_quality`)."""
     rms = (
         _npz_numeric(arrays, "reprojection_rms", p).reshape(-1)
         if "reprojection_rms" in arrays
@@ -980,38 +924,63 @@ def write_npz_poses(
 # --------------------------------------------------------------------------------------
 # dispatch
 
-_READERS: dict[str, Callable[[str | Path], Trajectory]] = {
-    "tum": read_tum,
-    "kitti": read_kitti,
-    "colmap": read_colmap,
-    "npz": read_npz_poses,
+_PARSERS: dict[str, Callable[[str, Path], Trajectory]] = {
+    "tum": _parse_tum,
+    "kitti": _parse_kitti,
+    "colmap": _parse_colmap,
 }
 
 
 _SCHEMA_LINE = re.compile(r"^schema:\s*['\"]?(acscal/[\w.-]+)")
 
 
-def is_npz(path: str | Path) -> bool:
-    """Whether ``path`` is an NPZ archive, by its suffix or, under another name, by its
-    content (a zip archive), as the readers take it."""
+def read_input(path: str | Path, fmt: str = "auto") -> tuple[Path, bytes, str]:
+    """The file a trajectory input names (a COLMAP folder's ``images.txt``), its bytes (the
+    one read) and its format (for :func:`read_trajectory`'s ``path`` and ``fmt``): an NPZ
+    by its ``.npz`` suffix or its content (a zip archive); ``"auto"`` left for a text file
+    whose first data line tells (:func:`parse_trajectory`).
+
+    Raises
+    ------
+    InputError
+        An unknown ``fmt``; a missing, unreadable or too large file; a folder without
+        ``images.txt``.
+    """
     p = Path(path)
-    if p.suffix.lower() == ".npz":
-        return True
-    try:
-        if p.is_file():  # not a FIFO or a device: opening one may block
-            with open(p, "rb") as fh:
-                return fh.read(4) == b"PK\x03\x04"
-    except OSError:
-        pass
-    return False
+    if fmt not in FORMATS:
+        raise InputError(f"unknown trajectory format {fmt!r}; use one of {', '.join(FORMATS)}")
+    if fmt == "colmap" or (fmt == "auto" and (p.is_dir() or p.name == "images.txt")):
+        p, fmt = _colmap_file(p), "colmap"
+    npz = fmt == "npz" or (fmt == "auto" and p.suffix.lower() == ".npz")
+    data = read_input_bytes(
+        p, "an NPZ file" if npz else "a trajectory file", max(MAX_NPZ_BYTES, MAX_TEXT_BYTES)
+    )
+    if fmt == "auto" and (npz or data[:4] == b"PK\x03\x04"):  # a zip archive: an NPZ
+        fmt = "npz"
+    if fmt != "npz" and len(data) > MAX_TEXT_BYTES:
+        raise InputError(
+            f"is larger than the {MAX_TEXT_BYTES >> 30} GiB acscal reads as a trajectory file",
+            path=p,
+        )
+    return p, data, fmt
 
 
-def _sniff(path: Path) -> str:
-    if is_npz(path):  # by suffix, or a zip archive under another name
-        return "npz"
-    if path.is_dir() or path.name == "images.txt":
-        return "colmap"
-    lines, numbers = _data_lines(_read_text(path))
+def parse_trajectory(p: Path, data: bytes, fmt: str) -> Trajectory:
+    """The trajectory in the bytes :func:`read_input` read from ``p`` (format ``fmt``).
+
+    Raises
+    ------
+    InputError
+        An undecidable format, or the format's reader's error.
+    """
+    if fmt == "npz":
+        return parse_npz_poses(npz_arrays_from_bytes(data, p), p)
+    text = _decode_text(data, p)
+    return _PARSERS[_sniff(text, p) if fmt == "auto" else fmt](text, p)
+
+
+def _sniff(text: str, path: Path) -> str:
+    lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty file)", path=path)
     schema = _SCHEMA_LINE.match(lines[0])
@@ -1043,15 +1012,15 @@ def _sniff(path: Path) -> str:
 
 
 def read_trajectory(path: str | Path, fmt: str = "auto") -> Trajectory:
-    """Read a trajectory in any supported format.
+    """Read a trajectory in any supported format (in one read of its bytes).
 
     Parameters
     ----------
     path : str or Path
         A TUM or KITTI text file, a COLMAP ``images.txt`` or its folder, or an NPZ.
     fmt : {"auto", "tum", "kitti", "colmap", "npz"}
-        ``"auto"``: ``.npz`` is NPZ; a folder or ``images.txt`` is COLMAP; otherwise the
-        first data line decides: 8 numbers TUM, 12 KITTI.
+        ``"auto"``: ``.npz`` or a zip archive is NPZ; a folder or ``images.txt`` is COLMAP;
+        otherwise the first data line decides: 8 numbers TUM, 12 KITTI.
 
     Returns
     -------
@@ -1062,10 +1031,4 @@ def read_trajectory(path: str | Path, fmt: str = "auto") -> Trajectory:
     InputError
         A missing file, an unknown ``fmt``, an undecidable format, or a reader's error.
     """
-    p = Path(path)
-    if fmt not in FORMATS:
-        raise InputError(f"unknown trajectory format {fmt!r}; use one of {', '.join(FORMATS)}")
-    if not p.exists() and not p.is_symlink():  # a symlink loop: the reader says so
-        raise InputError("no such file or folder", path=p)
-    kind = _sniff(p) if fmt == "auto" else fmt
-    return _READERS[kind](p)
+    return parse_trajectory(*read_input(path, fmt))

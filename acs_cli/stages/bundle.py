@@ -56,7 +56,7 @@ from acs_cli.core.rig_solve import (
 from acs_cli.errors import DegenerateMotionError, InputError
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
-from acs_cli.io.trajectory import is_npz, read_npz_header, read_npz_observations
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.stages.common import PairedTrajectories
 
 __all__ = [
@@ -133,27 +133,29 @@ def _resolve(recorded: str, poses: Path) -> Path | None:
     return None
 
 
-def corner_views(poses: Path, n_poses: int) -> tuple[CornerViews | None, str | None]:
-    """Read the corners behind a trajectory, or say why there are none usable.
+def corner_views(poses: PosesArtifact, n_poses: int) -> tuple[CornerViews | None, str | None]:
+    """The corners behind a trajectory with the intrinsics they were posed with (the
+    intrinsics file read), or why there are none usable.
 
-    Returns ``(views, None)``, ``(None, warning)`` or ``(None, None)`` for a trajectory
-    format that never carries corners.
+    Returns ``(views, None)``, ``(None, warning)`` or ``(None, None)`` for poses without
+    corners (a trajectory format that never carries them).
     """
-    obs = read_npz_observations(poses) if is_npz(poses) else None
-    if obs is None:
+    corners, board, recorded = poses.corners, poses.board_points, poses.intrinsics_file
+    if corners is None or board is None:
         return None, None
-    if obs.corners.shape[0] != n_poses:
-        return None, f"{poses.name}: corners and poses disagree; no bundle adjustment"
-    path = None if obs.intrinsics_file is None else _resolve(obs.intrinsics_file, poses)
+    where = Path(poses.source or "poses")
+    if corners.shape[0] != n_poses:
+        return None, f"{where.name}: corners and poses disagree; no bundle adjustment"
+    path = None if recorded is None else _resolve(recorded, where)
     if path is None:
-        return None, f"{poses.name}: its intrinsics file was not found; no bundle adjustment"
+        return None, f"{where.name}: its intrinsics file was not found; no bundle adjustment"
     intr = IntrinsicsArtifact.load(path)
     vec = intrinsics_vector(intr.camera_matrix, intr.distortion, intr.model)
     sd = intr.std or {}
     std = [sd.get(k) for k in ("fx", "fy", "cx", "cy")] + list(sd.get("distortion") or [])
     ok = len(std) == vec.size and all(isinstance(v, (int, float)) for v in std)
     given = np.asarray(std, dtype=float) if ok else None
-    return CornerViews(obs.corners, obs.board_points, vec, path, intr.model, given), None
+    return CornerViews(corners, board, vec, path, intr.model, given), None
 
 
 def bundle_section(
@@ -212,7 +214,7 @@ def degenerate_warning(
 
 
 def bundle_fixed_joint(
-    poses: Path, T_w_c: np.ndarray, est: JointEstimate, cam: str
+    poses: PosesArtifact, T_w_c: np.ndarray, est: JointEstimate, cam: str
 ) -> tuple[JointEstimate, BundleSection | None, list[str]]:
     """Refine camera ``cam``'s joint (and intrinsics) on its corners, when they are there."""
     views, warning = corner_views(poses, T_w_c.shape[0])
@@ -305,23 +307,20 @@ def readmit_frames(
     return (again, used | back) if again.success else (ba, used)
 
 
-def shared_board_flip(poses: tuple[Path, Path]) -> np.ndarray | None:
+def shared_board_flip(poses: tuple[PosesArtifact, PosesArtifact]) -> np.ndarray | None:
     """``T_w1_w2`` between the two corner orders of one board both cameras saw, or None.
 
     A board that looks the same turned by 180 degrees about its normal (any checkerboard)
     can be labelled in two orders; two cameras that see it at very different rolls may
     pick different ones, and then their "one world" differs by this transform (see
-    :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both files are poses
-    NPZs of the same, symmetric checkerboard (a target's corners are identified).
+    :func:`acs_cli.core.pnp.reversed_order_transform`). None unless both poses carry the
+    corners of the same, symmetric checkerboard (a target's corners are identified).
     """
-    obs = [read_npz_observations(p) if is_npz(p) else None for p in poses]
-    if obs[0] is None or obs[1] is None:
+    X, Y = poses[0].board_points, poses[1].board_points  # None: no corners
+    if X is None or Y is None or X.shape != Y.shape or not np.allclose(X, Y):
         return None
-    if any("target" in read_npz_header(p) for p in poses):
+    if any("target" in p.header for p in poses):
         return None  # an AprilGrid or ChArUco: every corner identified, one labelling only
-    X = obs[0].board_points
-    if X.shape != obs[1].board_points.shape or not np.allclose(X, obs[1].board_points):
-        return None
     F = np.diag([-1.0, -1.0, 1.0, 1.0])
     F[:3, 3] = X[0] + X[-1]
     if not np.allclose(X @ F[:3, :3].T + F[:3, 3], X[::-1], atol=1e-9):
@@ -366,7 +365,7 @@ def board_order_residuals(
 
 
 def _pair_views(
-    poses: tuple[Path, Path], pair: PairedTrajectories, reverse_b: bool = False
+    poses: tuple[PosesArtifact, PosesArtifact], pair: PairedTrajectories, reverse_b: bool = False
 ) -> tuple[tuple[CornerViews, CornerViews] | None, list[str]]:
     """Both cameras' corners, reduced to the paired frames (B's in reversed order when its
     board labelling was turned round to A's)."""
@@ -385,7 +384,7 @@ def _pair_views(
 
 
 def bundle_overlap(
-    poses: tuple[Path, Path],
+    poses: tuple[PosesArtifact, PosesArtifact],
     pair: PairedTrajectories,
     est: RigEstimate,
     reverse_b: bool = False,
@@ -443,7 +442,7 @@ def _two_body_bundle(
 
 
 def bundle_general(
-    poses: tuple[Path, Path],
+    poses: tuple[PosesArtifact, PosesArtifact],
     pair: PairedTrajectories,
     est: RelposeEstimate,
     prior: JointPrior | None,

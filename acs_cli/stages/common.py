@@ -1,29 +1,28 @@
-"""What the stages share: loading and pairing trajectories, the pairing section."""
+"""What the stages share: pairing trajectories, the pairing section."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 from acs_cli.core.pairing import PairingResult, pair_trajectories
 from acs_cli.io.joint import Pairing
-from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.trajectory import Trajectory
 from acs_cli.io.validate import TIME_TOL
 
 __all__ = [
     "PAIR_BY",
     "TIME_TOL",
-    "TRAJECTORY_FORMATS",
     "PairedTrajectories",
     "StageRun",
-    "load_pair",
-    "load_trajectory",
+    "input_files",
+    "load_poses",
     "pair_loaded",
     "pairing_section",
 ]
-
-TRAJECTORY_FORMATS = ("auto", "tum", "kitti", "colmap", "npz")
 
 E = TypeVar("E")
 
@@ -60,29 +59,22 @@ class PairedTrajectories:
     warnings: list[str] = field(default_factory=list)
 
 
-def load_trajectory(path: Path, fmt: str = "auto") -> Trajectory:
-    """Read a trajectory file (see :func:`acs_cli.io.trajectory.read_trajectory`)."""
-    return read_trajectory(path, fmt)
+def load_poses(poses: Path | PosesArtifact, fmt: str = "auto") -> PosesArtifact:
+    """A camera's poses input: read once from its file (:meth:`PosesArtifact.load`), or as
+    a caller that read it already (``acscal run``, which hashed it) hands it down."""
+    return poses if isinstance(poses, PosesArtifact) else PosesArtifact.load(poses, fmt)
 
 
-def load_pair(
-    path_a: Path,
-    path_b: Path,
-    fmt_a: str = "auto",
-    fmt_b: str = "auto",
-    pair_by: str = "auto",
-    max_dt: float | None = None,
-) -> PairedTrajectories:
-    """Read two trajectories and keep their paired samples."""
-    return pair_loaded(
-        read_trajectory(path_a, fmt_a), read_trajectory(path_b, fmt_b), pair_by, max_dt
-    )
+def input_files(inputs: Mapping[str, Path | PosesArtifact]) -> list[Path]:
+    """The files of a stage's inputs (poses made in memory have none)."""
+    files = [p if isinstance(p, Path) else p.source for p in inputs.values()]
+    return [Path(p) for p in files if p is not None]
 
 
 def pair_loaded(
     a: Trajectory, b: Trajectory, pair_by: str = "auto", max_dt: float | None = None
 ) -> PairedTrajectories:
-    """Pair two trajectories already read (see :func:`load_pair`)."""
+    """Two trajectories reduced to their paired samples, and a warning for the others."""
     pairing = pair_trajectories(a, b, pair_by, max_dt)
     warnings = []
     if pairing.unpaired_a or pairing.unpaired_b:

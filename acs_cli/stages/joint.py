@@ -49,6 +49,7 @@ from acs_cli.io.joint import (
     Pairing,
     PoseNoise,
 )
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact, load_joint_artifact, load_joint_section
 from acs_cli.io.trajectory import Trajectory
 from acs_cli.io.verdict import VerdictSection
@@ -61,8 +62,9 @@ from acs_cli.stages.bundle import (
 from acs_cli.stages.common import (
     PairedTrajectories,
     StageRun,
-    load_pair,
-    load_trajectory,
+    input_files,
+    load_poses,
+    pair_loaded,
     pairing_section,
 )
 
@@ -174,8 +176,14 @@ def _in_one_board_order(
     return pair, False
 
 
-def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointConfig) -> JointRun:
-    """Read the trajectories, estimate the joint and write ``joint.yaml`` atomically.
+def run_joint(
+    poses_a: Path | PosesArtifact,
+    poses_b: Path | PosesArtifact | None,
+    output: Path,
+    config: JointConfig,
+) -> JointRun:
+    """Read the trajectories (each once, unless given read), estimate the joint and write
+    ``joint.yaml`` atomically.
 
     Raises
     ------
@@ -192,8 +200,10 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
             "locates a ball joint (a pivot)"
         )
     check_overlap_joint_type(config.joint_type, config.method)
-    inputs = {"poses_a": poses_a} | ({"poses_b": poses_b} if poses_b is not None else {})
-    check_distinct_output(output, inputs.values())
+    pa = load_poses(poses_a, config.format_a)
+    pb = None if poses_b is None else load_poses(poses_b, config.format_b)
+    inputs = {"poses_a": pa} | ({"poses_b": pb} if pb is not None else {})
+    check_distinct_output(output, input_files(inputs))
     check_writable(output)
     warnings: list[str] = []
     bundles: dict[str, BundleSection] = {}
@@ -202,13 +212,11 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
     in_world: dict[str, np.ndarray] = {}
     poses_by_key: dict[str, np.ndarray] = {}
     if config.scenario == "overlap":
-        if poses_b is None:
+        if pb is None:
             raise InputError("--overlap needs both --poses-a and --poses-b")
-        pair = load_pair(
-            poses_a, poses_b, config.format_a, config.format_b, config.pair_by, config.max_dt
-        )
+        pair = pair_loaded(pa.trajectory, pb.trajectory, config.pair_by, config.max_dt)
         warnings += pair.warnings
-        pair, turned = _in_one_board_order(pair, shared_board_flip((poses_a, poses_b)))
+        pair, turned = _in_one_board_order(pair, shared_board_flip((pa, pb)))
         if turned:
             warnings.append(
                 "the two cameras labelled the shared board in opposite orders (their rolls "
@@ -220,7 +228,7 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         else:
             rig = estimate_overlap_rig(Ta, Tb, joint_type=config.joint_type)
             if config.bundle:
-                rig, sections, notes = bundle_overlap((poses_a, poses_b), pair, rig, turned)
+                rig, sections, notes = bundle_overlap((pa, pb), pair, rig, turned)
                 warnings += notes
                 bundles = sections or {}
             est = joint_of_rig(rig, Ta.shape[0])
@@ -229,15 +237,16 @@ def run_joint(poses_a: Path, poses_b: Path | None, output: Path, config: JointCo
         # B's poses in A's frame: the articulation, whose travel sets the overlap's scale
         poses_by_key["ab"] = np.linalg.solve(pair.a.T_world_cam, pair.b.T_world_cam)
     else:
-        ta = load_trajectory(poses_a, config.format_a)
-        tb = None if poses_b is None else load_trajectory(poses_b, config.format_b)
+        ta, tb = pa.trajectory, None if pb is None else pb.trajectory
         fixed = algorithm_2_fixed_joint if config.method == "paper" else estimate_joint_fixed
         est = fixed(ta.T_world_cam, None if tb is None else tb.T_world_cam)
         if config.method == "refined" and config.bundle:
-            for cam, path, traj in (("a", poses_a, ta), ("b", poses_b, tb)):
-                if path is None or traj is None:
+            for cam, poses in (("a", pa), ("b", pb)):
+                if poses is None:
                     continue
-                est, section, notes = bundle_fixed_joint(path, traj.T_world_cam, est, cam)
+                est, section, notes = bundle_fixed_joint(
+                    poses, poses.trajectory.T_world_cam, est, cam
+                )
                 if section is not None:
                     bundles[cam] = section
                 warnings += notes
@@ -445,7 +454,7 @@ def read_joint_in_units(
     *,
     unknown_scale: bool = False,
     metric: bool = False,
-    poses: tuple[Path, Path] | None = None,
+    poses: tuple[PosesArtifact, PosesArtifact] | None = None,
 ) -> tuple[JointSection, list[str]]:
     """The joint of a ``joint.yaml`` or ``relpose.yaml`` in the unit the trajectories need,
     and the warnings of a conversion.
@@ -464,7 +473,6 @@ def read_joint_in_units(
     InputError
         The joint file is malformed, or its unit cannot be converted to the one needed.
     """
-    from acs_cli.io.artifacts import sha256_of
     from acs_cli.io.export import METRES_PER_UNIT
 
     art = load_joint_artifact(path)
@@ -473,7 +481,7 @@ def read_joint_in_units(
         raise InputError("missing key 'joint.position_in_a'", path=path)
     if isinstance(art, RelposeArtifact) and art.unknown_scale:
         same = poses is not None and all(
-            isinstance(rec := art.inputs.get(role), dict) and rec.get("sha256") == sha256_of(given)
+            isinstance(rec := art.inputs.get(role), dict) and rec.get("sha256") == given.sha256
             for role, given in zip(("poses_a", "poses_b"), poses, strict=True)
         )
         if same and not metric:

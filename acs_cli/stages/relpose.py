@@ -38,6 +38,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.joint import FramesUsed, JointSection, PoseNoise
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import (
     RelativePose,
     RelposeArtifact,
@@ -45,10 +46,17 @@ from acs_cli.io.relpose import (
     Scale,
     TimeOffsetSection,
 )
-from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.trajectory import Trajectory
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import bundle_general
-from acs_cli.stages.common import PairedTrajectories, StageRun, pair_loaded, pairing_section
+from acs_cli.stages.common import (
+    PairedTrajectories,
+    StageRun,
+    input_files,
+    load_poses,
+    pair_loaded,
+    pairing_section,
+)
 from acs_cli.stages.joint import (
     QUATERNION_FORMATS,
     paper_misfit,
@@ -121,7 +129,7 @@ def load_prior(
     *,
     length_unit: str = "m",
     unknown_scale: bool = False,
-    poses: tuple[Path, Path] | None = None,
+    poses: tuple[PosesArtifact, PosesArtifact] | None = None,
     warnings: list[str] | None = None,
 ) -> JointPrior:
     """A :class:`JointPrior` from a ``joint.yaml`` (or a ``relpose.yaml``'s joint), in the
@@ -156,13 +164,14 @@ def _units(config: RelposeConfig) -> dict[str, str]:
 
 
 def run_relpose(
-    poses_a: Path,
-    poses_b: Path,
+    poses_a: Path | PosesArtifact,
+    poses_b: Path | PosesArtifact,
     joint: Path | None,
     output: Path,
     config: RelposeConfig,
 ) -> RelposeRun:
-    """Read the trajectories (and joint), estimate the relative pose, write ``relpose.yaml``.
+    """Read the trajectories (each once, unless given read) and the joint, estimate the
+    relative pose, write ``relpose.yaml``.
 
     Raises
     ------
@@ -187,10 +196,11 @@ def run_relpose(
         )
     if config.joint_metric and not config.unknown_scale:
         raise InputError("--joint-metric only makes sense with --unknown-scale")
-    inputs: dict[str, Path] = {"poses_a": poses_a, "poses_b": poses_b}
+    pa, pb = load_poses(poses_a, config.format_a), load_poses(poses_b, config.format_b)
+    inputs: dict[str, Path | PosesArtifact] = {"poses_a": pa, "poses_b": pb}
     if joint is not None:
         inputs["joint"] = joint
-    check_distinct_output(output, inputs.values())
+    check_distinct_output(output, input_files(inputs))
     check_writable(output)
     joint_notes: list[str] = []
     prior = (
@@ -201,12 +211,11 @@ def run_relpose(
             config.joint_metric,
             length_unit=config.length_unit,
             unknown_scale=config.unknown_scale,
-            poses=(poses_a, poses_b),
+            poses=(pa, pb),
             warnings=joint_notes,
         )
     )
-    traj_a = read_trajectory(poses_a, config.format_a)
-    traj_b = read_trajectory(poses_b, config.format_b)
+    traj_a, traj_b = pa.trajectory, pb.trajectory
 
     def fit(Ta: FloatArray, Tb: FloatArray) -> FloatArray:
         """The joint residuals of the refined estimate on one pairing (for the time offset)."""
@@ -246,7 +255,7 @@ def run_relpose(
         )
     bundle_section = None
     if config.method == "refined" and config.bundle and offset is None:
-        est, bundle_section, notes = bundle_general((poses_a, poses_b), pair, est, prior)
+        est, bundle_section, notes = bundle_general((pa, pb), pair, est, prior)
         warnings += notes
     rpy_std, t_std = paper_pose_std(est.T_b_a, est.covariance)
     rel = RelativePose(

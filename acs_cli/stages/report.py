@@ -32,7 +32,6 @@ from acs_cli.core.acs_trajectory import (
 )
 from acs_cli.core.quality import largest_std
 from acs_cli.errors import AcsError, InputError
-from acs_cli.io.artifacts import sha256_of
 from acs_cli.io.atomic import (
     atomic_write_bytes,
     atomic_write_text,
@@ -141,9 +140,9 @@ class _Found:
     notes: list[str] = field(default_factory=list)
     warnings: list[tuple[str, str]] = field(default_factory=list)
     any_file: bool = False
-    #: Trajectory files read so far, by resolved path: a poses NPZ (read once, whole) or
-    #: a trajectory of another format; an exception for one that could not be read.
-    loaded: dict[Path, PosesArtifact | Trajectory | AcsError] = field(default_factory=dict)
+    #: Trajectory files read so far (each once, whole), by resolved path; an exception for
+    #: one that could not be read.
+    loaded: dict[Path, PosesArtifact | AcsError] = field(default_factory=dict)
 
     def warn(self, source: str, text: str) -> None:
         if (source, text) not in self.warnings:
@@ -152,14 +151,12 @@ class _Found:
     def rel(self, path: Path | str | None) -> str:
         return _rel(Path(str(path)), self.run_dir)
 
-    def load(self, path: Path) -> PosesArtifact | Trajectory:
-        """A trajectory file, read at most once (poses NPZs as :class:`PosesArtifact`)."""
+    def load(self, path: Path) -> PosesArtifact:
+        """A trajectory file, read at most once."""
         key = path.resolve()
         if key not in self.loaded:
             try:
-                self.loaded[key] = (
-                    PosesArtifact.load(path) if _is_npz(path) else read_trajectory(path)
-                )
+                self.loaded[key] = PosesArtifact.load(path)
             except AcsError as exc:
                 self.loaded[key] = exc
         got = self.loaded[key]
@@ -168,14 +165,7 @@ class _Found:
         return got
 
     def trajectory(self, path: Path) -> Trajectory:
-        got = self.load(path)
-        return got.trajectory if isinstance(got, PosesArtifact) else got
-
-    def sha256(self, path: Path) -> str:
-        got = self.loaded.get(path.resolve())
-        if isinstance(got, PosesArtifact) and got.sha256 is not None:
-            return got.sha256
-        return sha256_of(path)
+        return self.load(path).trajectory
 
 
 def _rel(path: Path, base: Path) -> str:
@@ -183,10 +173,6 @@ def _rel(path: Path, base: Path) -> str:
         return path.relative_to(base).as_posix()
     except ValueError:
         return str(path)
-
-
-def _is_npz(path: Path) -> bool:
-    return path.suffix.lower() == ".npz"
 
 
 def _is_poses_npz(path: Path) -> bool:
@@ -317,11 +303,9 @@ def _poses_of(found: _Found, cam: str) -> list[tuple[Path, PosesArtifact]]:
     out = []
     for p in found.poses.get(cam, []):
         try:
-            got = found.load(p)
+            out.append((p, found.load(p)))
         except AcsError:
             continue
-        if isinstance(got, PosesArtifact):
-            out.append((p, got))
     return out
 
 
@@ -343,8 +327,7 @@ def _resolve_input(
     ]
     for c in candidates:
         if c.is_file():
-            found.load(c)  # read once; its bytes give the SHA-256 of a poses NPZ
-            if rec.get("sha256") and rec["sha256"] != found.sha256(c):
+            if rec.get("sha256") and rec["sha256"] != found.load(c).sha256:
                 found.warn(
                     "report",
                     f"{_rel(c, found.run_dir)} changed since {artifact.name} was made from it",
@@ -964,7 +947,7 @@ def _artifact_rows(found: _Found) -> list[ArtifactRow]:
             except AcsError as exc:
                 found.notes.append(f"{found.rel(p)} could not be read: {exc}")
                 got = None
-            h = got.header if isinstance(got, PosesArtifact) else {}
+            h = got.header if got is not None else {}
             rows.append(
                 ArtifactRow(
                     found.rel(p),

@@ -23,6 +23,7 @@ whole rig (:func:`acs_cli.core.rig_solve.estimate_rig`) and writes ``rig.yaml``
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -73,6 +74,7 @@ from acs_cli.io.config import RigRecordingSpec, RigRunConfig
 from acs_cli.io.config import is_rig_config as is_rig_config
 from acs_cli.io.config import parse_rig_config as parse_rig_config
 from acs_cli.io.joint import BundleSection
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import (
     PoseOnlySection,
     RigArtifact,
@@ -81,7 +83,7 @@ from acs_cli.io.rig import (
     RigRecordingResult,
     RigWorldResult,
 )
-from acs_cli.io.trajectory import Trajectory, is_npz, read_trajectory, write_tum
+from acs_cli.io.trajectory import Trajectory, write_tum
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
     CornerViews,
@@ -90,6 +92,7 @@ from acs_cli.stages.bundle import (
     held_note,
     rig_sections,
 )
+from acs_cli.stages.common import load_poses
 
 RIG_FILE = "rig.yaml"
 
@@ -218,13 +221,15 @@ def check_prior_units(config: RigRunConfig) -> None:
                 )
 
 
-def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
+def _priors(config: RigRunConfig) -> tuple[dict[str, EdgePrior], dict[str, PosesArtifact]]:
     """Joint priors: positions given in the config, and fixed-joint session files
-    (``joints.<j>.fixed_joint``: Algorithm II, :func:`~acs_cli.core.rig_solve.fixed_joint_prior`).
+    (``joints.<j>.fixed_joint``: Algorithm II, :func:`~acs_cli.core.rig_solve.fixed_joint_prior`),
+    and the session files read, by their role in the header (``fixed_joint_<j>_<cam>``).
     Recordings that hold a joint still (``recordings.<r>.fixed_joints``) are the engine's
     (:class:`~acs_cli.core.rig_solve.Recordings`)."""
     check_prior_units(config)
     out = {}
+    sessions: dict[str, PosesArtifact] = {}
     for name, j in config.joints.items():
         cov = None if j.position_std is None else np.eye(3) * j.position_std**2
         prior = EdgePrior(
@@ -235,13 +240,14 @@ def _priors(config: RigRunConfig) -> dict[str, EdgePrior]:
         for cam, path in j.fixed_joint.items():
             key = f"joints.{name}.fixed_joint.{cam}"
             try:
-                T = read_trajectory(path).T_world_cam
+                sessions[f"fixed_joint_{name}_{cam}"] = got = PosesArtifact.load(path)
             except InputError as exc:
                 raise InputError(f"{key}: {exc.message}", path=exc.path, line=exc.line) from None
+            T = got.trajectory.T_world_cam
             prior = merge_priors(prior, fixed_joint_prior(joint, cam, T, f"{key} (camera {cam})"))
         if prior.position_in or prior.line_in or prior.axis_in:
             out[name] = prior
-    return out
+    return out, sessions
 
 
 def rig_artifact(
@@ -386,21 +392,24 @@ def rig_verdict_measures(est: RigEstimate, reference: CameraTrack) -> list[Measu
 
 
 def run_rig(
-    config: RigRunConfig, poses: dict[str, Path] | None = None, output: Path | None = None
+    config: RigRunConfig,
+    poses: Mapping[str, Path | PosesArtifact] | None = None,
+    output: Path | None = None,
 ) -> RigRun:
-    """Read every camera's trajectory, solve the rig, write ``rig.yaml`` atomically.
+    """Read every camera's trajectory (each file once), solve the rig, write ``rig.yaml``
+    atomically.
 
     Parameters
     ----------
     config : RigRunConfig
-    poses : dict of str to Path, optional
-        Trajectory files of cameras configured with ``images`` (written by the poses stage).
+    poses : dict of str to Path or PosesArtifact, optional
+        By camera label (:func:`label`): the trajectory files of cameras configured with
+        ``images`` (written by the poses stage), and any camera's poses already read.
     output : Path, optional
         Where to write (default ``config.output / "rig.yaml"``).
     """
-    poses = dict(poses or {})
-    priors = _priors(config)
-    files, by_rec = read_recordings(config, poses)
+    priors, sessions = _priors(config)
+    files, by_rec = read_recordings(config, poses or {})
     turned, turns = shared_board_orders(config, files, by_rec)
     offsets: dict[str, tuple[float, float]] = {}
     single = config.single
@@ -454,7 +463,7 @@ def run_rig(
                 "frames rejected as outliers"
             )
     sections: dict[str, BundleSection] = {}
-    has_corners = any(is_npz(p) for p, _ in files.values())
+    has_corners = any(p.corners is not None for p in files.values())
     if config.bundle and not offsets and has_corners:
         trajectories = {label(config, r, c): t for r, got in by_rec.items() for c, t in got.items()}
         # a recording's joints held still enter as their Algorithm II priors (as in the
@@ -489,15 +498,10 @@ def run_rig(
     }
     art = dataclasses.replace(art, cameras=cams)
     out = output if output is not None else config.output / RIG_FILE
-    fixed = {
-        f"fixed_joint_{jn}_{c}": p
-        for jn, j in config.joints.items()
-        for c, p in j.fixed_joint.items()
-    }
     header = make_header(
         "rig",
-        {f"poses_{n.replace('/', '_')}": p for n, (p, _) in files.items()}
-        | fixed
+        {f"poses_{n.replace('/', '_')}": p for n, p in files.items()}
+        | sessions
         | {"config": config.path},
         "one maximum-likelihood solve over every joint (acs_cli.core.rig_solve.estimate_rig): "
         "ball, hinge and rigid constraints on each camera's trajectory, per-camera "
@@ -540,41 +544,39 @@ def camera_key(config: RigRunConfig, recording: str, camera: str) -> str:
 
 
 def read_recordings(
-    config: RigRunConfig, poses: dict[str, Path]
-) -> tuple[dict[str, tuple[Path, str]], dict[str, dict[str, Trajectory]]]:
-    """Every camera's trajectory in every recording, each read once.
+    config: RigRunConfig, poses: Mapping[str, Path | PosesArtifact]
+) -> tuple[dict[str, PosesArtifact], dict[str, dict[str, Trajectory]]]:
+    """Every camera's poses in every recording, each read once.
 
-    ``poses`` holds the poses stage's files of cameras given as ``images`` (by
-    :func:`label`). Returns the files by label and the trajectories by recording and camera.
+    ``poses`` holds, by :func:`label`, the poses stage's files of cameras given as
+    ``images``, and any camera's poses already read (``acscal run`` hashed them). Returns
+    the poses by label and the trajectories (``invert`` applied) by recording and camera.
     """
-    files: dict[str, tuple[Path, str]] = {}
+    files: dict[str, PosesArtifact] = {}
     by_rec: dict[str, dict[str, Trajectory]] = {}
     for rname, rec in config.recordings.items():
         by_rec[rname] = {}
         for name, spec in rec.cameras.items():
             lab = label(config, rname, name)
             key = camera_key(config, rname, name)
-            if spec.poses is not None:
-                files[lab] = (spec.poses, spec.format)
-            elif lab in poses:
-                files[lab] = (poses[lab], "npz")
-            else:
+            given = poses.get(lab, spec.poses)
+            if given is None:
                 raise InputError(f"{key}: no poses (run its poses stage first)")
-            path, fmt = files[lab]
             try:
-                t = read_trajectory(path, fmt)
-                if spec.invert:  # the file holds T_cam_world
-                    t = dataclasses.replace(t, T_world_cam=se3.invert_transforms(t.T_world_cam))
-                by_rec[rname][name] = t
+                files[lab] = load_poses(given, spec.format if spec.poses is not None else "npz")
             except InputError as exc:  # name the config key with the file
                 where = f"{key}.poses" if spec.poses is not None else f"poses of {lab}"
                 raise InputError(f"{where}: {exc.message}", path=exc.path, line=exc.line) from None
+            t = files[lab].trajectory
+            if spec.invert:  # the file holds T_cam_world
+                t = dataclasses.replace(t, T_world_cam=se3.invert_transforms(t.T_world_cam))
+            by_rec[rname][name] = t
     return files, by_rec
 
 
 def shared_board_orders(
     config: RigRunConfig,
-    files: dict[str, tuple[Path, str]],
+    files: dict[str, PosesArtifact],
     by_rec: dict[str, dict[str, Trajectory]],
 ) -> tuple[list[str], dict[str, FloatArray]]:
     """Bring every camera of a shared world to one labelling of a symmetric checkerboard.
@@ -602,8 +604,7 @@ def shared_board_orders(
             a, b = step.source, step.target
             if a not in trajs or b not in trajs or b in settled or j.name in rec.fixed_joints:
                 continue
-            pa, pb = files[label(config, rname, a)][0], files[label(config, rname, b)][0]
-            F = shared_board_flip((pa, pb)) if is_npz(pa) and is_npz(pb) else None
+            F = shared_board_flip((files[label(config, rname, a)], files[label(config, rname, b)]))
             settled.add(b)
             if F is None:
                 continue
@@ -924,7 +925,7 @@ def rig_synchronisation(
 
 def rig_bundle(
     config: RigRunConfig,
-    files: dict[str, tuple[Path, str]],
+    files: dict[str, PosesArtifact],
     trajectories: dict[str, Trajectory],
     index: dict[str, np.ndarray],
     est: RigEstimate,
@@ -957,7 +958,7 @@ def rig_bundle(
         got: dict[str, CornerViews] = {}
         for lab in labs:
             try:
-                one, warning = corner_views(files[lab][0], len(trajectories[lab]))
+                one, warning = corner_views(files[lab], len(trajectories[lab]))
             except InputError as exc:  # unreadable corners or intrinsics: the poses serve
                 one, warning = None, f"its corners cannot be used ({exc})"
             if warning:

@@ -14,6 +14,7 @@ propagates downstream through the outputs' content hashes.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -43,6 +44,7 @@ from acs_cli.io.config import (
     parse_run_config,
 )
 from acs_cli.io.images import list_images
+from acs_cli.io.poses import PosesArtifact
 
 if TYPE_CHECKING:
     from acs_cli.core.targets import MarkerTarget
@@ -112,7 +114,11 @@ class _Stage:
     inputs: dict[str, Path]
     options: dict[str, Any]
     outputs: list[Path]
-    action: Callable[[], list[str]]
+    #: runs the stage, given its trajectory inputs already read (by role)
+    action: Callable[[Mapping[str, PosesArtifact]], list[str]]
+    #: the inputs that are trajectories (role: format): each is read once, for the stamp's
+    #: hash and for the stage
+    poses: dict[str, str] = field(default_factory=dict)
 
 
 def _stamp(stage: _Stage, input_hashes: Mapping[str, str]) -> str:
@@ -283,7 +289,7 @@ def _poses_stage(
         target=target,
     )
 
-    def do_poses() -> list[str]:
+    def do_poses(_read: Mapping[str, PosesArtifact]) -> list[str]:
         return run_poses(images, intrinsics, npz, pcfg).warnings
 
     inputs = {"images": images, "intrinsics": intrinsics}
@@ -339,6 +345,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         )
 
         def do_intrinsics(
+            _read: Mapping[str, PosesArtifact],
             folders: dict[str, Path] = folders,
             cam_dir: Path = cam_dir,
             intr_out: Path = intr_out,
@@ -402,8 +409,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         pa, pb = poses["a"], poses.get("b")
         jout = joint_file
 
-        def do_joint() -> list[str]:
-            return run_joint(pa, pb, jout, jcfg).warnings
+        def do_joint(read: Mapping[str, PosesArtifact]) -> list[str]:
+            return run_joint(read.get("poses_a", pa), read.get("poses_b", pb), jout, jcfg).warnings
 
         stages.append(
             _Stage(
@@ -420,6 +427,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 | ({"joint_type": jspec.joint_type} if jspec.joint_type != "ball" else {}),
                 [joint_file],
                 do_joint,
+                dict.fromkeys(["poses_a"] + (["poses_b"] if pb is not None else []), "auto"),
             )
         )
 
@@ -437,8 +445,9 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         ga, gb = general["a"], general["b"]
         jf = joint_file
 
-        def do_relpose() -> list[str]:
-            return run_relpose(ga, gb, jf, rout, rcfg).warnings
+        def do_relpose(read: Mapping[str, PosesArtifact]) -> list[str]:
+            pa, pb = read.get("poses_a", ga), read.get("poses_b", gb)
+            return run_relpose(pa, pb, jf, rout, rcfg).warnings
 
         stages.append(
             _Stage(
@@ -456,6 +465,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 | ({"joint_type": rel.joint_type} if rel.joint_type != "ball" else {}),
                 [rout],
                 do_relpose,
+                dict.fromkeys(["poses_a", "poses_b"], "auto"),
             )
         )
     return stages, intrinsics
@@ -484,7 +494,7 @@ def _sfm_stage(
         **config.sfm,
     )
 
-    def do_sfm() -> list[str]:
+    def do_sfm(_read: Mapping[str, PosesArtifact]) -> list[str]:
         return run_sfm_poses(images, intrinsics, npz, cfg).warnings
 
     inputs: dict[str, Path] = {"images": images}
@@ -512,18 +522,21 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             _plan_rig_camera(config, name, cam_name, cam, out, stages, intrinsics, poses)
     out = config.output
     rig_out = out / RIG_FILE
-    inputs = {
-        f"poses_{label(config, r, n).replace('/', '_')}": c.poses
+    # every camera's trajectory file (by label, with its format), by its role in the header
+    files = {
+        label(config, r, n): (c.poses, c.format)
         for r, rec in config.recordings.items()
         for n, c in rec.cameras.items()
         if c.poses is not None
-    }
-    inputs |= {f"poses_{n.replace('/', '_')}": p for n, p in poses.items()}
+    } | {n: (p, "npz") for n, p in poses.items()}
+    role = {n: f"poses_{n.replace('/', '_')}" for n in files}
+    inputs = {role[n]: p for n, (p, _) in files.items()}
     for jname, js in config.joints.items():
         inputs |= {f"fixed_joint_{jname}_{c}": p for c, p in js.fixed_joint.items()}
 
-    def do_rig() -> list[str]:
-        return run_rig(config, poses, rig_out).warnings
+    def do_rig(read: Mapping[str, PosesArtifact]) -> list[str]:
+        given = {n: read.get(role[n], p) for n, (p, _) in files.items()}
+        return run_rig(config, given, rig_out).warnings
 
     traj = out / TRAJECTORY_DIR
     seen = config.recordings[config.reference_recording].cameras
@@ -549,6 +562,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             },
             [rig_out, *traj_files],
             do_rig,
+            {role[n]: fmt for n, (_, fmt) in files.items()},
         )
     )
     return stages, intrinsics
@@ -593,7 +607,10 @@ def _plan_rig_camera(
     images = cam.images
 
     def do_intrinsics(
-        images: Path = images, intr_out: Path = intr_out, icfg: IntrinsicsConfig = icfg
+        _read: Mapping[str, PosesArtifact],
+        images: Path = images,
+        intr_out: Path = intr_out,
+        icfg: IntrinsicsConfig = icfg,
     ) -> list[str]:
         return run_intrinsics(images, intr_out, icfg).warnings
 
@@ -693,8 +710,15 @@ def run_pipeline(
                 )
             report(StageResult(stage.stage, "not selected", stage.outputs))
             continue
+        read = {}  # a file that cannot be read is left to the stage: it says why, in its words
+        for role, fmt in stage.poses.items():
+            with contextlib.suppress(InputError):
+                read[role] = PosesArtifact.load(stage.inputs[role], fmt)
         # the output folder may lie inside an image folder: its files are not inputs
-        hashes = {role: sha256_of(p, exclude=[out]) for role, p in stage.inputs.items()}
+        hashes = {
+            role: (read[role].sha256 if role in read else None) or sha256_of(p, exclude=[out])
+            for role, p in stage.inputs.items()
+        }
         stamp = _stamp(stage, hashes)
         if not force and _up_to_date(state.get(stage.stage), stamp, stage, out):
             report(
@@ -705,7 +729,7 @@ def run_pipeline(
             continue
         ts = time.perf_counter()
         try:
-            warnings = stage.action()
+            warnings = stage.action(read)
         except DegenerateMotionError as exc:  # the report shows what ran, and why this failed
             if out.is_dir() and any(out.iterdir()):
                 write_run_report(out, report, [f"{stage.stage} failed: {exc.one_line()}"])

@@ -18,13 +18,20 @@ import numpy as np
 
 from acs_cli.core.acs_trajectory import AcsTrajectory, recover_trajectory
 from acs_cli.errors import InputError
-from acs_cli.io.artifacts import make_header, sha256_of, write_yaml_artifact
+from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, write_tum
 from acs_cli.io.validate import TIME_TOL
 from acs_cli.io.verdict import weak_marks
-from acs_cli.stages.common import PairedTrajectories, StageRun, load_pair, pairing_section
+from acs_cli.stages.common import (
+    PairedTrajectories,
+    StageRun,
+    input_files,
+    pair_loaded,
+    pairing_section,
+)
 from acs_cli.stages.joint import read_joint
 
 __all__ = [
@@ -197,14 +204,16 @@ def recover_from_relpose(
     return RecoveredTrajectory(traj, pair, rejected, source, o_a, o_b, length_unit, mu_a)
 
 
-def _check_inputs_match(relpose: RelposeArtifact, poses_a: Path, poses_b: Path) -> list[str]:
+def _check_inputs_match(
+    relpose: RelposeArtifact, poses: tuple[PosesArtifact, PosesArtifact]
+) -> list[str]:
     """Warnings when the trajectories are not the ones ``relpose.yaml`` was made from."""
     warnings: list[str] = []
-    for role, given in (("poses_a", poses_a), ("poses_b", poses_b)):
+    for role, given in zip(("poses_a", "poses_b"), poses, strict=True):
         rec = relpose.inputs.get(role)
-        if isinstance(rec, dict) and rec.get("sha256") and rec["sha256"] != sha256_of(given):
+        if isinstance(rec, dict) and rec.get("sha256") and rec["sha256"] != given.sha256:
             warnings.append(
-                f"{given} differs from the {role} relpose.yaml was estimated from "
+                f"{given.source} differs from the {role} relpose.yaml was estimated from "
                 f"({rec.get('path')})"
             )
     return warnings
@@ -230,12 +239,13 @@ def run_trajectory(
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("is a file; -o takes a folder for the trajectory files", path=out_dir)
-    inputs: dict[str, Path] = {"relpose": relpose, "poses_a": poses_a, "poses_b": poses_b}
+    pa, pb = PosesArtifact.load(poses_a, cfg.format_a), PosesArtifact.load(poses_b, cfg.format_b)
+    inputs: dict[str, Path | PosesArtifact] = {"relpose": relpose, "poses_a": pa, "poses_b": pb}
     if joint is not None:
         inputs["joint"] = joint
     outputs = {key: out_dir / name for key, name in OUTPUT_NAMES.items()}
     for out in outputs.values():
-        check_distinct_output(out, inputs.values())
+        check_distinct_output(out, input_files(inputs))
     for out in outputs.values():  # all of them before the first is replaced
         check_writable(out)
     art = read_relpose(relpose)
@@ -243,9 +253,9 @@ def run_trajectory(
     recorded = art.quality.pairing
     if pair_by == "auto" and max_dt is None and recorded is not None:
         pair_by, max_dt = recorded.pair_by, recorded.max_dt_s
-    pair = load_pair(poses_a, poses_b, cfg.format_a, cfg.format_b, pair_by, max_dt)
+    pair = pair_loaded(pa.trajectory, pb.trajectory, pair_by, max_dt)
     rec = recover_from_relpose(art, pair, joint)
-    warnings = list(pair.warnings) + _check_inputs_match(art, poses_a, poses_b)
+    warnings = list(pair.warnings) + _check_inputs_match(art, (pa, pb))
     traj = rec.trajectory
     n_rej = int(rec.rejected.sum())
     if n_rej:

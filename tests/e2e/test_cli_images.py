@@ -11,7 +11,8 @@ import pytest
 import yaml
 from cli_runner import acscal
 
-from acs_cli.io.trajectory import read_npz_header, read_trajectory
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.trajectory import read_trajectory
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "opencv_chessboard"
 
@@ -99,7 +100,7 @@ def test_poses_on_real_photos(calibrated: dict[str, Path]) -> None:
     with np.load(calibrated["left_poses"]) as z:
         assert z["reprojection_rms"].shape == (13,) and z["reprojection_rms"].max() < 0.5
         assert z["skipped_images"].shape == (0,)
-    header = read_npz_header(calibrated["left_poses"])
+    header = PosesArtifact.load(calibrated["left_poses"]).header
     assert header["schema"] == "acscal/poses"
     assert header["board"]["square"] == 0.025
     tum = read_trajectory(calibrated["dir"] / "left_poses.txt")

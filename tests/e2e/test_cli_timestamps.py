@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 from cli_runner import acscal
 
-from acs_cli.io.trajectory import read_npz_header, read_trajectory
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.trajectory import read_trajectory
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "opencv_chessboard"
 #: EuRoC-like names (nanoseconds, 50 ms apart with odd digits at the end)
@@ -61,7 +62,7 @@ def test_nanosecond_names_keep_every_digit(left: dict[str, Path]) -> None:
     traj = file_interface.read_tum_trajectory_file(str(tum))
     assert traj.num_poses == 6
     assert traj.timestamps[1] - traj.timestamps[0] == pytest.approx(0.050000017, abs=1e-6)
-    header = read_npz_header(out)
+    header = PosesArtifact.load(out).header
     assert header["timestamps_from"] == "file names (nanoseconds)"
     assert read_trajectory(out).timestamps_ns[0] == NS0
     res, _, _ = _poses(left, "ns", "ns_fps", "--fps", "20")
@@ -74,7 +75,7 @@ def test_frame_numbers_are_said_to_be_frame_numbers(left: dict[str, Path]) -> No
     assert "frame numbers" in res.stderr and "--fps" in res.stderr  # the warning
     assert "# times are frame numbers" in tum.read_text()
     assert read_trajectory(tum).time_unit == "frame"
-    assert read_npz_header(out)["units"]["timestamps"].startswith("frame number")
+    assert PosesArtifact.load(out).header["units"]["timestamps"].startswith("frame number")
 
 
 def test_fps_and_a_timestamps_file_give_seconds(left: dict[str, Path]) -> None:

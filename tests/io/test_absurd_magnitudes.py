@@ -26,10 +26,11 @@ from acs_cli.errors import InputError
 from acs_cli.io.detections import read_detections
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import JointArtifact
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.target import parse_target_short, read_target_yaml
-from acs_cli.io.trajectory import read_npz_observations, read_tum
+from acs_cli.io.trajectory import read_tum
 from acs_cli.io.validate import as_covariance3
 from acs_cli.stages.joint import read_joint
 from acs_cli.stages.relpose import load_prior
@@ -148,7 +149,7 @@ def test_poses_npz_with_absurd_corners_or_board_points_is_refused(tmp_path: Path
         bad[key].flat[3] = value
         path = tmp_path / f"{key}.npz"
         np.savez(path, **bad)  # type: ignore[arg-type]
-        _refused(read_npz_observations, path, f"'{key}'")
+        _refused(PosesArtifact.load, path, f"'{key}'")
 
 
 def test_a_detections_cache_entry_with_absurd_corners_is_dropped(tmp_path: Path) -> None:

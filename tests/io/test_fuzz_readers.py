@@ -34,13 +34,12 @@ from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.detections import Detection, read_detections, write_detections
 from acs_cli.io.export import read_opencv_yaml, write_opencv_yaml
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
     Trajectory,
     read_colmap,
     read_kitti,
-    read_npz_header,
-    read_npz_observations,
     read_npz_poses,
     read_trajectory,
     read_tum,
@@ -328,8 +327,7 @@ READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
     ("colmap", "images.txt", read_trajectory),
     ("npz", "poses.npz", read_npz_poses),
     ("npz", "poses.npz", read_trajectory),
-    ("npz", "poses.npz", read_npz_header),
-    ("npz", "poses.npz", read_npz_observations),
+    ("npz", "poses.npz", PosesArtifact.load),
     ("detections", "x.detections.npz", _read_detections),
     ("run_config", "run.yaml", _run_config),
     ("run_state", STATE_FILE, _check_state),

@@ -332,10 +332,10 @@ def test_poses_round_trip(tmp_path: Path, with_corners: bool) -> None:
     assert loaded.intrinsics_file == "intrinsics.yaml"
     assert loaded.sha256 is not None and len(loaded.sha256) == 64
     if with_corners:
-        assert loaded.observations is not None
-        np.testing.assert_array_equal(loaded.observations.corners, art.corners)
+        assert loaded.corners is not None and loaded.front_end == "board"
+        np.testing.assert_array_equal(loaded.corners, art.corners)
     else:
-        assert loaded.observations is None
+        assert loaded.corners is None and loaded.board_points is None
     # the same file through the trajectory reader
     np.testing.assert_allclose(read_npz_poses(p).T_world_cam, loaded.trajectory.T_world_cam)
     assert "6 posed images" in loaded.summary()
@@ -345,7 +345,7 @@ def test_poses_plain_npz_and_bad_corners(tmp_path: Path) -> None:
     p = tmp_path / "plain.npz"
     np.savez(p, T_world_cam=_poses(3))
     art = PosesArtifact.load(p)
-    assert len(art) == 3 and art.header == {} and art.observations is None
+    assert len(art) == 3 and art.header == {} and art.corners is None
     assert not art.trajectory.has_timestamps
     np.savez(p, T_world_cam=_poses(3), corners=np.zeros((3, 4, 2)), board_points=np.zeros((5, 3)))
     with pytest.raises(InputError, match="do not match"):

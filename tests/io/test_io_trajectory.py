@@ -15,11 +15,11 @@ from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.trajectory import (
     Trajectory,
     read_colmap,
     read_kitti,
-    read_npz_header,
     read_npz_poses,
     read_trajectory,
     read_tum,
@@ -335,7 +335,7 @@ def test_npz_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
     assert back.format == "npz" and back.has_timestamps and back.names == names
     np.testing.assert_allclose(back.T_world_cam, T, atol=1e-14)
     np.testing.assert_array_equal(back.timestamps, t)
-    assert read_npz_header(path) == header
+    assert PosesArtifact.load(path).header == header
     with np.load(path) as z:
         assert str(z["schema"]) == "acscal/poses"
         assert int(z["schema_version"]) == 1
@@ -348,7 +348,7 @@ def test_npz_index_trajectory_round_trip(tmp_path: Path, rng: np.random.Generato
     write_npz_poses(path, traj)
     back = read_npz_poses(path)
     assert not back.has_timestamps and back.names == ()
-    assert read_npz_header(path) == {}
+    assert PosesArtifact.load(path).header == {}
     assert [p.name for p in tmp_path.iterdir()] == ["p.out"]
 
 
@@ -515,7 +515,7 @@ def test_readers_raise_only_input_error(data: bytes | str) -> None:
 
 def test_npz_quality_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
     """Reprojection RMS and skipped images as `acscal poses` stores them; absent -> empty."""
-    from acs_cli.io.trajectory import Trajectory, read_npz_quality, write_npz_poses
+    from acs_cli.io.trajectory import Trajectory, write_npz_poses
 
     T = Rotation.random(4, random_state=rng).as_matrix()
     poses = np.tile(np.eye(4), (4, 1, 1))
@@ -525,15 +525,15 @@ def test_npz_quality_round_trip(tmp_path: Path, rng: np.random.Generator) -> Non
     write_npz_poses(
         full, traj, {"reprojection_rms": np.full(4, 0.2), "skipped_images": np.array(["x.png"])}
     )
-    rms, skipped = read_npz_quality(full)
-    np.testing.assert_allclose(rms, 0.2)
-    assert skipped == ["x.png"]
+    got = PosesArtifact.load(full)
+    np.testing.assert_allclose(got.reprojection_rms, 0.2)
+    assert got.skipped_images == ("x.png",)
     bare = tmp_path / "bare.npz"
     write_npz_poses(bare, traj)
-    rms, skipped = read_npz_quality(bare)
-    assert rms.size == 0 and skipped == []
+    got = PosesArtifact.load(bare)
+    assert got.reprojection_rms.size == 0 and got.skipped_images == ()
     with pytest.raises(InputError):
-        read_npz_quality(tmp_path / "missing.npz")
+        PosesArtifact.load(tmp_path / "missing.npz")
 
 
 def test_colmap_names_of_several_words_and_missing_points_lines(tmp_path: Path) -> None:

@@ -75,7 +75,7 @@ def test_sfm_poses_round_trip(tmp_path: Path) -> None:
     assert {"metric_scale", *SFM_KEYS} <= keys
     assert not {"corners", "board_points"} & keys
     got = PosesArtifact.load(p)
-    assert got.front_end == "sfm" and got.metric_scale is False and got.observations is None
+    assert got.front_end == "sfm" and got.metric_scale is False and got.corners is None
     s, s0 = got.sfm, art.sfm
     assert s is not None and s0 is not None
     assert s.images == s0.images and s.dropped_images == s0.dropped_images

@@ -202,7 +202,8 @@ def test_the_stage_refines_a_fisheye_camera_on_partial_views(
         | {"intrinsics_file": str(tmp_path / "intrinsics.yaml")},
     ).save(tmp_path / "poses.npz")
     est = estimate_joint_fixed(T)
-    refined, section, notes = bundle_fixed_joint(tmp_path / "poses.npz", T, est, "a")
+    poses = PosesArtifact.load(tmp_path / "poses.npz")
+    refined, section, notes = bundle_fixed_joint(poses, T, est, "a")
     assert section is not None and not notes
     err = np.linalg.norm(refined.position_in_a - s["o"])
     assert err < 4 * np.linalg.norm(refined.std_a) and err < 0.002, err
@@ -246,11 +247,11 @@ def test_an_identified_target_is_never_relabelled(tmp_path: Path) -> None:
     T[:, 2, 3] = 1.0
     traj = Trajectory(np.arange(3.0), T, "x", "npz", True)
 
-    def save(name: str, X: np.ndarray, header: dict) -> Path:
+    def save(name: str, X: np.ndarray, header: dict) -> PosesArtifact:
         path = tmp_path / name
         corners = np.zeros((3, X.shape[0], 2))
         write_npz_poses(path, traj, {"corners": corners, "board_points": X}, header=header)
-        return path
+        return PosesArtifact.load(path)
 
     X = board_points(4, 4, 0.03)
     board = (save("a.npz", X, {}), save("b.npz", X, {}))
@@ -292,7 +293,8 @@ def test_frames_rejected_on_their_poses_are_judged_again_on_their_corners(
     rejected = np.zeros(len(T), dtype=bool)
     rejected[[0, 2, 6, 10, moved]] = True  # partial views (even frames) and the moved one
     est = dataclasses.replace(est, inliers={"a": ~rejected})
-    refined, section, notes = bundle_fixed_joint(tmp_path / "poses.npz", T, est, "a")
+    poses = PosesArtifact.load(tmp_path / "poses.npz")
+    refined, section, notes = bundle_fixed_joint(poses, T, est, "a")
     assert section is not None and not notes
     expected = np.ones(len(T), dtype=bool)
     expected[moved] = False

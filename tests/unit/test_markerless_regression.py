@@ -11,7 +11,8 @@ import pytest
 
 from acs_cli.core.relpose import estimate_relpose
 from acs_cli.errors import DegenerateMotionError
-from acs_cli.stages.common import load_pair
+from acs_cli.io.trajectory import read_trajectory
+from acs_cli.stages.common import pair_loaded
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "markerless_wrong_minimum"
 #: mu_b / mu_a of the rendered truth (SfM units: each camera's mean step between frames)
@@ -19,7 +20,7 @@ PHI_TRUE = 0.9352
 
 
 def test_self_calibration_finds_the_scale_or_refuses() -> None:
-    pair = load_pair(DATA / "poses_a.npz", DATA / "poses_b.npz")
+    pair = pair_loaded(read_trajectory(DATA / "poses_a.npz"), read_trajectory(DATA / "poses_b.npz"))
     try:
         est = estimate_relpose(pair.a.T_world_cam, pair.b.T_world_cam, unknown_scale=True)
     except DegenerateMotionError:
