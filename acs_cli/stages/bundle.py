@@ -454,8 +454,9 @@ def bundle_general(
     Each camera sees its own board; the world-A-to-world-B transform is one more unknown.
     A joint from a fixed-joint session (``prior``, metric) is fused with the corners.
     """
-    if est.unknown_scale:
-        return est, None, ["no bundle adjustment under unknown scale (corners are metric)"]
+    if est.unknown_scale:  # said only where there are corners to adjust
+        has = all(p.corners is not None for p in poses)
+        return est, None, ["no bundle adjustment under unknown scale (corners are metric)"] * has
     if est.rig is None:
         return est, None, []
     views, warnings = _pair_views(poses, pair)

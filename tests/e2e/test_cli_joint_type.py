@@ -246,6 +246,7 @@ def test_unknown_scale_with_a_hinge_or_a_rigid_mount(
         "--poses-a", f["a"], "--poses-b", scaled, "-o", out,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
+    assert "bundle adjustment" not in res.stderr  # TUM files: no corners to speak of
     art = RelposeArtifact.load(out)
     assert art.scale is not None and art.scale.phi_ba_std is not None
     assert abs(art.scale.phi_ba - 0.4) < 4 * art.scale.phi_ba_std, art.scale
