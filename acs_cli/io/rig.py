@@ -52,6 +52,10 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
             scale_std: float | fixed
             tied: bool                  # false: no edge ties it to the reference's world
                                         # (its T_ref_world is then a choice, not an estimate)
+        clock: str                      # with estimate_time_offset: the camera whose clock
+                                        # the recording's offsets are counted from
+        time_offsets: {<camera>: {time_offset_s, time_offset_s_std}}   # its clock minus
+                                        # the clock camera's, seconds
     warnings: [str]
 
 Every length (``T_cam_ref`` translations, joint positions) is in the reference camera's
@@ -218,6 +222,10 @@ class RigRecordingResult:
     shared_world: bool
     frames: int
     worlds: dict[str, RigWorldResult] = field(default_factory=dict)
+    #: with ``estimate_time_offset``: the camera whose clock the offsets are counted from,
+    #: and each camera's clock minus it (seconds, with its std)
+    clock: str | None = None
+    time_offsets: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -454,6 +462,17 @@ class RigArtifact(YamlArtifact):
                         for w in r.worlds.values()
                     },
                 }
+                | (
+                    {
+                        "clock": r.clock,
+                        "time_offsets": {
+                            c: {"time_offset_s": o, "time_offset_s_std": s}
+                            for c, (o, s) in r.time_offsets.items()
+                        },
+                    }
+                    if r.clock is not None
+                    else {}
+                )
                 for r in self.recordings.values()
             }
         out["warnings"] = list(self.warnings)
@@ -658,5 +677,19 @@ def _parse_recordings(doc: Any, p: Path) -> dict[str, RigRecordingResult]:
                 tied=bool(w.get("tied", True)),
             )
         frames = as_int(r.get("frames", 0), f"{k}.frames", p, minimum=0)
-        out[str(name)] = RigRecordingResult(str(name), world == "shared", frames, worlds)
+        offsets = {}
+        for c, o in as_mapping(r.get("time_offsets") or {}, f"{k}.time_offsets", p).items():
+            ko = f"{k}.time_offsets.{c}"
+            o = as_mapping(o, ko, p)
+            offsets[str(c)] = (
+                as_number(o.get("time_offset_s"), f"{ko}.time_offset_s", p),
+                as_number(
+                    o.get("time_offset_s_std", 0.0), f"{ko}.time_offset_s_std", p, non_negative=True
+                ),
+            )
+        clock = r.get("clock")
+        out[str(name)] = RigRecordingResult(
+            str(name), world == "shared", frames, worlds,
+            None if clock is None else str(clock), offsets,
+        )  # fmt: skip
     return out

@@ -23,7 +23,7 @@ whole rig (:func:`acs_cli.core.rig_solve.estimate_rig`) and writes ``rig.yaml``
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -428,15 +428,11 @@ def run_rig(
             tracks, slots, index, warnings = tracks_on_timeline(config, trajectories)
             warnings += rig_synchronisation(config, trajectories, priors)
         recordings = recordings_of(config, [slots.size])
-
+        clocks = {config.reference_recording: offsets} if offsets else {}
     else:
-        if config.estimate_time_offset:
-            raise InputError(
-                "estimate_time_offset: takes a config of one recording (give each recording's "
-                "cameras on one clock, or calibrate the offsets recording by recording)",
-                path=config.path,
-            )
-        tracks, slots, recordings, index, warnings = tracks_of_recordings(config, by_rec, priors)
+        tracks, slots, recordings, index, warnings, clocks = tracks_of_recordings(
+            config, by_rec, priors
+        )
     warnings += turned
     k = recording_frame(config, recordings)
     try:
@@ -464,7 +460,7 @@ def run_rig(
             )
     sections: dict[str, BundleSection] = {}
     has_corners = any(p.corners is not None for p in files.values())
-    if config.bundle and not offsets and has_corners:
+    if config.bundle and not clocks and has_corners:
         trajectories = {label(config, r, c): t for r, got in by_rec.items() for c, t in got.items()}
         # a recording's joints held still enter as their Algorithm II priors (as in the
         # pose-based solve), and its frames stay out of the bundle
@@ -491,6 +487,16 @@ def run_rig(
             for c, r in art.cameras.items()
         }
         art = dataclasses.replace(art, cameras=cams)
+    elif clocks:  # several recordings: each its own clocks
+        recs = {
+            name: dataclasses.replace(
+                r, clock=clock_of(config, clocks[name]), time_offsets=clocks[name]
+            )
+            if name in clocks
+            else r
+            for name, r in art.recordings.items()
+        }
+        art = dataclasses.replace(art, recordings=recs)
     seen = config.recording_of_reference().cameras
     cams = {
         c: dataclasses.replace(r, invert=c in seen and seen[c].invert)
@@ -718,22 +724,34 @@ def tracks_of_recordings(
     config: RigRunConfig,
     by_rec: dict[str, dict[str, Trajectory]],
     priors: dict[str, EdgePrior],
-) -> tuple[dict[str, CameraTrack], np.ndarray, Recordings, dict[str, np.ndarray], list[str]]:
-    """Every recording's cameras on its own timeline (as :func:`tracks_on_timeline`), the
-    timelines one after the other: the rig's tracks, times, recordings, each camera's row
-    of its trajectory at every instant by :func:`label` (-1 outside its recording) and
-    warnings."""
+) -> tuple[
+    dict[str, CameraTrack],
+    np.ndarray,
+    Recordings,
+    dict[str, np.ndarray],
+    list[str],
+    dict[str, dict[str, tuple[float, float]]],
+]:
+    """Every recording's cameras on its own timeline (as :func:`tracks_on_timeline`; with
+    ``estimate_time_offset``, each recording's clocks estimated on its own and its cameras
+    interpolated, :func:`rig_time_offsets`), the timelines one after the other: the rig's
+    tracks, times, recordings, each camera's row of its trajectory at every instant by
+    :func:`label` (-1 outside its recording), warnings, and each recording's clock offsets
+    (empty without ``estimate_time_offset``)."""
     parts: list[tuple[dict[str, CameraTrack], np.ndarray]] = []
     rows: list[tuple[str, dict[str, np.ndarray]]] = []
     warnings: list[str] = []
+    clocks: dict[str, dict[str, tuple[float, float]]] = {}
     for rname, rec in config.recordings.items():
         trajs = by_rec[rname]
-        tr, slots, idx, notes = tracks_on_timeline(config, trajs, rec)
+        if config.estimate_time_offset and len(trajs) > 1:
+            clocks[rname], notes = rig_time_offsets(config, trajs, priors, rec)
+            tr, slots, idx = tracks_with_offsets(config, trajs, clocks[rname])
+        else:
+            tr, slots, idx, notes = tracks_on_timeline(config, trajs, rec)
+            notes += rig_synchronisation(config, trajs, priors, rec)
         rows.append((rname, idx))
         warnings += [f"recording {rname}: {w}" for w in notes]
-        warnings += [
-            f"recording {rname}: {w}" for w in rig_synchronisation(config, trajs, priors, rec)
-        ]
         parts.append((tr, slots))
     n = sum(slots.size for _, slots in parts)
     tracks: dict[str, CameraTrack] = {}
@@ -756,7 +774,7 @@ def tracks_of_recordings(
             index[label(config, rname, c)][at : at + slots.size] = r
         at += slots.size
     times = np.concatenate([slots for _, slots in parts])
-    return tracks, times, recordings, index, warnings
+    return tracks, times, recordings, index, warnings, clocks
 
 
 def recordings_of(config: RigRunConfig, sizes: list[int]) -> Recordings:
@@ -812,20 +830,39 @@ def _need_timestamps(config: RigRunConfig, trajectories: dict[str, Trajectory]) 
             )
 
 
+def clock_of(config: RigRunConfig, cameras: Iterable[str]) -> str:
+    """The camera whose clock a recording's offsets are counted from: the reference camera
+    when the recording saw it, else its camera nearest the reference in the tree."""
+    here = set(cameras)
+    order = [config.reference_camera] + [s.target for s in config.topology.tree_order()]
+    return next(c for c in order if c in here)
+
+
 def rig_time_offsets(
-    config: RigRunConfig, trajectories: dict[str, Trajectory], priors: dict[str, EdgePrior]
+    config: RigRunConfig,
+    trajectories: dict[str, Trajectory],
+    priors: dict[str, EdgePrior],
+    recording: RigRecordingSpec | None = None,
 ) -> tuple[dict[str, tuple[float, float]], list[str]]:
-    """Every camera's clock offset to the reference camera's (seconds, with its std), each
-    joint's estimated on its two cameras (:func:`acs_cli.core.time_offset.estimate_time_offset`)
-    and added along the tree; and warnings."""
+    """Every camera's clock offset to its recording's clock (:func:`clock_of`; seconds, with
+    its std), each joint the recording moves estimated on its two cameras
+    (:func:`acs_cli.core.time_offset.estimate_time_offset`) and added along the tree; and
+    warnings (prefixed with the recording's name in a config of several)."""
     _need_timestamps(config, trajectories)
-    ref = config.reference_camera
-    offsets = {ref: (0.0, 0.0)}
+    rec = recording if recording is not None else config.recordings[config.reference_recording]
+    root = clock_of(config, trajectories)
+    offsets = {root: (0.0, 0.0)}
     notes = []
-    shared = config.recordings[config.reference_recording].shared_world
+    shared = rec.shared_world
     for step in config.topology.tree_order():
         j = step.joint
         p, q = j.between
+        # the steps away from the reference: within the recording, away from its clock's
+        # camera (the recording's camera nearest the reference), once it is reached
+        if q not in trajectories or p not in trajectories or step.source not in offsets:
+            continue
+        if j.name in rec.fixed_joints:
+            continue
         tp, tq = trajectories[p], trajectories[q]
         try:
             off = estimate_time_offset(
@@ -842,6 +879,13 @@ def rig_time_offsets(
         d = off.offset_s if step.forward else -off.offset_s  # target's clock - source's
         base, var = offsets[step.source]
         offsets[step.target] = (base + d, float(np.sqrt(var**2 + off.std_s**2)))
+    lost = [c for c in trajectories if c not in offsets]
+    if lost:
+        raise InputError(
+            f"estimate_time_offset: recording {rec.name}'s camera(s) {', '.join(lost)} are "
+            f"not joined to {root} by a joint it moves: their clocks cannot be related",
+            path=config.path,
+        )
     notes.append(
         "every camera's poses are interpolated (SE(3) splines) at the reference camera's "
         "times plus its clock offset; no bundle adjustment on the corners"
@@ -854,16 +898,18 @@ def tracks_with_offsets(
     trajectories: dict[str, Trajectory],
     offsets: dict[str, tuple[float, float]],
 ) -> tuple[dict[str, CameraTrack], np.ndarray, dict[str, np.ndarray]]:
-    """Every camera on the reference camera's timeline, interpolated at its clock's times
+    """Every camera on its recording's clock camera's timeline (:func:`clock_of`: the
+    reference camera when the recording saw it), interpolated at its clock's times
     (``t + offset``): tracks, the timeline, and rows (-1: interpolated, no measured row).
 
-    The timeline is the reference camera's instants from the first to the last that every
+    The timeline is the clock camera's instants from the first to the last that every
     camera covers (so that ``reference.frame: 0`` is the first instant all cameras share).
     """
-    ref = trajectories[config.reference_camera]
+    root = clock_of(config, trajectories)
+    ref = trajectories[root]
     poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name, t in trajectories.items():
-        if name == config.reference_camera:
+        if name == root:
             poses[name] = (t.T_world_cam.copy(), np.ones(len(t), bool))
             continue
         interp = PoseInterpolator(t.timestamps, t.T_world_cam)
@@ -883,10 +929,7 @@ def tracks_with_offsets(
         for name, (T, v) in poses.items()
     }
     rows = np.arange(len(ref))[span]
-    index = {
-        name: rows - span.start if name == config.reference_camera else np.full(rows.size, -1)
-        for name in trajectories
-    }
+    index = {name: rows if name == root else np.full(rows.size, -1) for name in trajectories}
     return tracks, ref.timestamps[span], index
 
 

@@ -169,3 +169,52 @@ def test_the_reference_in_the_second_recording_and_its_trajectories(
     res = acscal("trajectory", "--rig", tmp_path / "out" / "rig.yaml", "-o", tmp_path / "t")
     assert res.returncode == 0, res.stderr
     assert sorted(f.name for f in (tmp_path / "t").iterdir()) == traj
+
+
+def test_each_recording_estimates_its_own_clocks(tmp_path: Path) -> None:
+    """Issue 19: ``estimate_time_offset`` with several recordings (it was refused): each
+    recording's clock offsets are estimated on its own, from the camera nearest the
+    reference (cam0 in the hip trial, cam1 in the knee trial), and reported per recording."""
+    from sample_data_gen.rig_sim import make_edges, rig_recording
+
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    edges = make_edges(np.random.default_rng(0), joints)
+    trials = {
+        "hip": ({"cam1": 0.013}, ("cam0", "cam1")),
+        "knee": ({"cam2": -0.021}, ("cam1", "cam2")),
+    }
+    for seed, (name, (late, cams)) in enumerate(trials.items()):
+        rec = rig_recording(
+            np.random.default_rng(seed + 1), 150, joints=joints, edges=edges, smooth=True,
+            time_offsets=late, sigma_rot_deg=0.1, sigma_trans=0.002,
+        )  # fmt: skip
+        for c in cams:
+            write_tum(tmp_path / f"{name}_{c}.tum", rec.timestamps, rec.T_wc_c[c])
+    cfg = tmp_path / "rig.yaml"
+    cfg.write_text(
+        "schema_version: 2\noutput: out\nestimate_time_offset: true\nmax_offset: 0.1\n"
+        "reference: {camera: cam0, recording: hip, frame: 0}\n"
+        "recordings:\n"
+        "  hip:\n    cameras: {cam0: {poses: hip_cam0.tum}, cam1: {poses: hip_cam1.tum}}\n"
+        "  knee:\n    cameras: {cam1: {poses: knee_cam1.tum}, cam2: {poses: knee_cam2.tum}}\n"
+        "joints:\n  hip: {between: [cam0, cam1], type: ball}\n"
+        "  knee: {between: [cam1, cam2], type: hinge}\n",
+        encoding="utf-8",
+    )
+    res = acscal("run", cfg, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    rig = RigArtifact.load(tmp_path / "out" / "rig.yaml")
+    for name, clock, cam, truth in (
+        ("hip", "cam0", "cam1", 0.013),
+        ("knee", "cam1", "cam2", -0.021),
+    ):
+        r = rig.recordings[name]
+        assert r.clock == clock
+        offset, std = r.time_offsets[cam]
+        assert abs(offset - truth) < max(4 * std, 1e-4), (name, offset, std)
+    for name, (p, q), _ in joints:
+        truth_p, truth_q = edges[name].o_p, edges[name].o_q
+        j = rig.joints[name]
+        for c, o in ((p, truth_p), (q, truth_q)):
+            err = float(np.linalg.norm(j.position_in[c] - o))
+            assert err < 5 * np.linalg.norm(j.position_std_in[c]) + 1e-4, (name, c, err)
