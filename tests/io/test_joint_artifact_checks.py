@@ -18,6 +18,7 @@ import yaml
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.joint import JointArtifact, JointSection
+from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelativePose, RelposeArtifact, Scale, load_joint_section
 from acs_cli.io.validate import as_covariance3
 from acs_cli.stages.joint import read_joint_in_units
@@ -148,6 +149,7 @@ def test_unknown_scale_relpose_reused_only_on_its_own_trajectories(tmp_path: Pat
     for i, p in enumerate((*own, *other)):
         p.write_text(f"{i} 0 0 0 0 0 0 1\n")
     rel = _relpose_file(tmp_path / "relpose.yaml", own, unknown_scale=True)
+    own, other = (tuple(PosesArtifact.load(p) for p in ps) for ps in (own, other))
     for unknown_scale in (True, False):  # A's and B's units are those of these very files
         joint, notes = read_joint_in_units(rel, "m", unknown_scale=unknown_scale, poses=own)
         np.testing.assert_array_equal(joint.position_in_a, POS_A)
