@@ -33,7 +33,6 @@ from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.detections import Detection, read_detections, write_detections
-from acs_cli.io.export import read_opencv_yaml, write_opencv_yaml
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
@@ -180,11 +179,6 @@ def seeds() -> dict[str, bytes]:
             },
         )
         out["relpose"] = (root / "relpose.yaml").read_bytes()
-        write_opencv_yaml(
-            root / "cv.yaml",
-            {"T_b_a": np.array(T_b_a), "phi_ba": 0.75, "length_unit": "m", "reference": 3},
-        )
-        out["opencv"] = (root / "cv.yaml").read_bytes()
         Tc = _poses(3, 5)
         Tc[0] = np.eye(4)
         cams = {
@@ -305,10 +299,6 @@ def _rig_kalibr(path: Path) -> None:
     run_rig_export(path, path.with_name("rig_chain.yaml"), "kalibr", intrinsics=cams)
 
 
-def _opencv(path: Path) -> None:
-    read_opencv_yaml(path, ["T_b_a", "phi_ba", "length_unit"])
-
-
 def _joint_prior(path: Path) -> None:
     load_prior(path, metric=False)
 
@@ -338,7 +328,6 @@ READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
     ("relpose", "relpose.yaml", read_joint),
     ("relpose", "relpose.yaml", _export_opencv),
     ("relpose", "relpose.yaml", _export_kalibr),
-    ("opencv", "cv.yaml", _opencv),
     ("rig", "rig.yaml", RigArtifact.load),
     ("rig", "rig.yaml", _rig_urdf),
     ("rig", "rig.yaml", _rig_kalibr),
@@ -674,7 +663,7 @@ def test_mutated_yaml_structure(kind: str, edits: list[tuple[int, str, int]]) ->
     _only_input_error(kind, text.encode())
 
 
-@pytest.mark.parametrize("kind", [*YAML_KINDS, "opencv"])
+@pytest.mark.parametrize("kind", YAML_KINDS)
 def test_yaml_edge_documents(kind: str) -> None:
     """YAML that parses to odd things: deep nesting, anchors, tags, multiple documents."""
     blobs = [
