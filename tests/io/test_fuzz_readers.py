@@ -17,7 +17,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from functools import cache
+from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +37,7 @@ from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
     Trajectory,
-    read_colmap,
-    read_kitti,
-    read_npz_poses,
     read_trajectory,
-    read_tum,
     write_kitti,
     write_npz_poses,
     write_tum,
@@ -309,13 +305,13 @@ def _run_config(path: Path) -> None:
 
 # (seed key, file name, reader)
 READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
-    ("tum", "traj.tum", read_tum),
+    ("tum", "traj.tum", partial(read_trajectory, fmt="tum")),
     ("tum", "traj.txt", read_trajectory),
-    ("kitti", "traj.kitti", read_kitti),
+    ("kitti", "traj.kitti", partial(read_trajectory, fmt="kitti")),
     ("kitti", "kitti.txt", read_trajectory),
-    ("colmap", "images.txt", read_colmap),
+    ("colmap", "images.txt", partial(read_trajectory, fmt="colmap")),
     ("colmap", "images.txt", read_trajectory),
-    ("npz", "poses.npz", read_npz_poses),
+    ("npz", "poses.npz", partial(read_trajectory, fmt="npz")),
     ("npz", "poses.npz", read_trajectory),
     ("npz", "poses.npz", PosesArtifact.load),
     ("detections", "x.detections.npz", _read_detections),
