@@ -33,6 +33,7 @@ from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.detections import Detection, read_detections, write_detections
+from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
@@ -44,7 +45,6 @@ from acs_cli.io.trajectory import (
 )
 from acs_cli.stages.export import run_export, run_rig_export
 from acs_cli.stages.joint import read_joint
-from acs_cli.stages.poses import read_intrinsics
 from acs_cli.stages.relpose import load_prior
 from acs_cli.stages.run import STATE_FILE, load_run_config
 
@@ -317,7 +317,7 @@ READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
     ("detections", "x.detections.npz", _read_detections),
     ("run_config", "run.yaml", _run_config),
     ("run_state", STATE_FILE, _check_state),
-    ("intrinsics", "intrinsics.yaml", read_intrinsics),
+    ("intrinsics", "intrinsics.yaml", IntrinsicsArtifact.load),
     ("intrinsics", "intrinsics.yaml", lambda p: read_yaml_artifact(p, "intrinsics", ["model"])),
     ("joint", "joint.yaml", read_joint),
     ("joint", "joint.yaml", _joint_prior),
