@@ -36,7 +36,7 @@ import yaml
 from acs_cli.core import se3
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.intrinsics import IntrinsicsArtifact
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
 from acs_cli.stages.relpose import RelposeConfig, run_relpose
 from sample_data_gen.textured import render_markerless
@@ -92,7 +92,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 poses["a"], poses["b"], None, root / "relpose.yaml",
                 RelposeConfig(unknown_scale=True, self_calibrate=True),
             ).estimate  # fmt: skip
-            ta, tb = read_tum(data / "truth_a.tum"), read_tum(data / "truth_b.tum")
+            ta, tb = (
+                read_trajectory(data / "truth_a.tum", "tum"),
+                read_trajectory(data / "truth_b.tum", "tum"),
+            )
             k = rel.reference
             T_b_a = se3.invert_transforms(tb.T_world_cam[k]) @ ta.T_world_cam[k]
             phi_true = _unit(ta.T_world_cam) / _unit(tb.T_world_cam)

@@ -150,7 +150,7 @@ def _markerless_demo(out: Path, seed: int) -> None:
     from acs_cli.io.intrinsics import IntrinsicsArtifact
     from acs_cli.io.poses import PosesArtifact
     from acs_cli.io.relpose import RelposeArtifact
-    from acs_cli.io.trajectory import read_tum
+    from acs_cli.io.trajectory import read_trajectory
     from sample_data_gen.textured import render_markerless
 
     console.rule("Markerless: structure from motion, then acscal relpose --unknown-scale")
@@ -186,7 +186,10 @@ def _markerless_demo(out: Path, seed: int) -> None:
         "--poses-b", _show(run / "poses_b.npz"), "-o", _show(run / "relpose.yaml"),
     )  # fmt: skip
     rel = RelposeArtifact.load(run / "relpose.yaml")
-    truth_a, truth_b = read_tum(data / "truth_a.tum"), read_tum(data / "truth_b.tum")
+    truth_a, truth_b = (
+        read_trajectory(data / "truth_a.tum", "tum"),
+        read_trajectory(data / "truth_b.tum", "tum"),
+    )
     reg = {c: PosesArtifact.load(run / f"poses_{c}.npz") for c in ("a", "b")}
     # SfM units: the mean distance between consecutive camera centres (of the registered
     # images); the truth's own, in metres, over the same images

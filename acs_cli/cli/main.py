@@ -27,7 +27,7 @@ from acs_cli.cli.output import (
     reset,
     warn,
 )
-from acs_cli.cli.report import positive_seconds
+from acs_cli.cli.report import FormatAOpt, FormatBOpt, PairBy, TrajFormat, positive_seconds
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 
 # Imports here are light (typer, rich's console): numpy, the stages and what they import
@@ -72,20 +72,6 @@ def _joint_type_opt(help_text: str) -> Any:
     return typer.Option("--joint-type", help=help_text)
 
 
-class TrajFormat(str, Enum):
-    auto = "auto"
-    tum = "tum"
-    kitti = "kitti"
-    colmap = "colmap"
-    npz = "npz"
-
-
-class PairBy(str, Enum):
-    auto = "auto"
-    timestamp = "timestamp"
-    by_index = "index"
-
-
 class ExportFormat(str, Enum):
     kalibr = "kalibr"
     opencv = "opencv"
@@ -100,8 +86,6 @@ MethodOpt = Annotated[
         help="refined (default: all constraints, noise-weighted, robust) or paper (as published).",
     ),
 ]
-FormatAOpt = Annotated[TrajFormat, typer.Option("--format-a", help="Format of --poses-a.")]
-FormatBOpt = Annotated[TrajFormat, typer.Option("--format-b", help="Format of --poses-b.")]
 PairByOpt = Annotated[
     PairBy, typer.Option("--pair-by", help="Pair A's and B's samples by timestamp or index.")
 ]

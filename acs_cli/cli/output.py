@@ -40,7 +40,6 @@ __all__ = [
     "emit",
     "emit_error",
     "err",
-    "json_active",
     "json_option_callback",
     "out",
     "reset",
@@ -95,11 +94,6 @@ def reset() -> None:
     _MODE.active = False
     _MODE.command = "acscal"
     out.file = None  # type: ignore[assignment]  # rich: None is sys.stdout, looked up per print
-
-
-def json_active() -> bool:
-    """Whether the running command was given ``--json``."""
-    return _MODE.active
 
 
 def json_option_callback(ctx: typer.Context, value: bool) -> bool:

@@ -27,7 +27,7 @@ def positive_seconds(value: float | None) -> float | None:
     return value
 
 
-class _Format(str, Enum):
+class TrajFormat(str, Enum):
     auto = "auto"
     tum = "tum"
     kitti = "kitti"
@@ -35,10 +35,14 @@ class _Format(str, Enum):
     npz = "npz"
 
 
-class _PairBy(str, Enum):
+class PairBy(str, Enum):
     auto = "auto"
     timestamp = "timestamp"
     by_index = "index"
+
+
+FormatAOpt = Annotated[TrajFormat, typer.Option("--format-a", help="Format of --poses-a.")]
+FormatBOpt = Annotated[TrajFormat, typer.Option("--format-b", help="Format of --poses-b.")]
 
 
 def trajectory(
@@ -84,19 +88,15 @@ def trajectory(
             "with the relative pose).",
         ),
     ] = None,
-    format_a: Annotated[_Format, typer.Option("--format-a", help="Format of --poses-a.")] = (
-        _Format.auto
-    ),
-    format_b: Annotated[_Format, typer.Option("--format-b", help="Format of --poses-b.")] = (
-        _Format.auto
-    ),
+    format_a: FormatAOpt = TrajFormat.auto,
+    format_b: FormatBOpt = TrajFormat.auto,
     pair_by: Annotated[
-        _PairBy,
+        PairBy,
         typer.Option(
             "--pair-by",
             help="Pair A's and B's samples by timestamp or index (default: as relpose did).",
         ),
-    ] = _PairBy.auto,
+    ] = PairBy.auto,
     max_dt: Annotated[
         float | None,
         typer.Option(

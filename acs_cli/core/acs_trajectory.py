@@ -42,7 +42,6 @@ __all__ = [
     "overlap_relative_pose",
     "overlap_residuals",
     "recover_trajectory",
-    "relative_to_reference",
     "scale_translations",
 ]
 
@@ -153,33 +152,6 @@ def scale_translations(T: ArrayLike, factor: float) -> FloatArray:
     out = np.array(T, dtype=float)
     out[..., :3, 3] *= _positive(factor, "factor")
     return out
-
-
-def relative_to_reference(T_w_c: ArrayLike, reference: int = 0) -> FloatArray:
-    """A camera's poses relative to its pose at the reference instant.
-
-    Parameters
-    ----------
-    T_w_c : array_like, shape (n, 4, 4)
-        ``T_world_cam`` of each frame.
-    reference : int
-        Index ``k`` of the reference frame.
-
-    Returns
-    -------
-    ndarray, shape (n, 4, 4)
-        ``inv(T_w_c[k]) @ T_w_c[i]``: the camera at frame ``i`` in its own frame at ``k``
-        (the paper's ``H^i`` with ``k`` as the initial frame).
-
-    Raises
-    ------
-    ValueError
-        (an :class:`~acs_cli.errors.InputError`) for a wrong shape, a non-rigid transform or
-        a reference out of range.
-    """
-    T = _transforms(T_w_c, "T_w_c")
-    k = _reference(reference, T.shape[0])
-    return np.asarray(np.matmul(se3.invert_transforms(T[k]), T))
 
 
 def joint_path(T_w_c: ArrayLike, position_in_c: ArrayLike) -> FloatArray:

@@ -25,26 +25,6 @@ from acs_cli.errors import InputError
 MIN_FRAME_CORNERS = 4
 
 
-def project_points(x_cam: FloatArray, intrinsics: FloatArray, model: str = "pinhole") -> FloatArray:
-    """Projection of camera-frame points (:meth:`CameraModel.project` of ``model``).
-
-    Parameters
-    ----------
-    x_cam : ndarray, shape (..., 3)
-        Points in the camera's frame (metres), ``z > 0``.
-    intrinsics : ndarray, shape (p,)
-        ``fx, fy, cx, cy`` (pixels) and the model's distortion (OpenCV's order); ``p = 9``
-        for the pinhole model (``k1, k2, p1, p2, k3``).
-    model : {"pinhole", "rational", "fisheye"}
-
-    Returns
-    -------
-    ndarray, shape (..., 2)
-        Pixel coordinates (as OpenCV's ``projectPoints`` of the model).
-    """
-    return camera_model(model).project(x_cam, intrinsics)
-
-
 def right_jacobians(rotvec: FloatArray) -> FloatArray:
     """``(n, 3, 3)`` right Jacobians of SO(3): ``Exp(phi + d) = Exp(phi) Exp(Jr(phi) d)``."""
     th = np.linalg.norm(rotvec, axis=1)

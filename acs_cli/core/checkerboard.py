@@ -316,9 +316,7 @@ def refine_x_junction(
     rows: int,
     radius: float,
     *,
-    edge_width: float = EDGE_WIDTH,
     iterations: int = 3,
-    sample_spacing: float | None = None,
     tolerance: float = 1e-3,
 ) -> NDArray[np.float64]:
     """Fit the model of a blurred checkerboard corner to the image around each corner.
@@ -326,17 +324,17 @@ def refine_x_junction(
     Around corner ``c`` the image is modelled as ``I(p) = m + a tanh(d1 / s) tanh(d2 / s)``
     with ``d1 = n1 . (p - c)`` and ``d2 = n2 . (p - c)`` the signed distances (pixels) to
     the board's two edge lines through ``c`` (their normals ``n1``, ``n2`` from the
-    directions to the corner's grid neighbours) and ``s`` the edge width. Samples on a
-    disc of ``radius`` pixels, weighted by a Gaussian of sigma ``radius / 1.5``, fit
-    ``m``, ``a`` and the shift of ``c`` by linear least squares on the model linearised in
-    ``c`` (one Gauss-Newton step); the corner moves, the disc is sampled again (bilinear)
-    and the step repeated. The edge lines' directions and ``s`` stay fixed: the model and
-    a corner's image are both symmetric under a half turn about the corner, so errors in
-    them do not move the fitted junction to first order. All corners are fitted at once;
-    a corner stops when a round moves it less than ``tolerance``. On an image blurred more
-    than the model the steps fall short of the junction by a factor common to the board:
-    from the third round on they are scaled by the gain :func:`_step_gain` reads from the
-    first two rounds' steps (1 on sharp images).
+    directions to the corner's grid neighbours) and ``s`` the edge width
+    (:data:`EDGE_WIDTH`). Samples on a disc of ``radius`` pixels, weighted by a Gaussian of
+    sigma ``radius / 1.5``, fit ``m``, ``a`` and the shift of ``c`` by linear least squares
+    on the model linearised in ``c`` (one Gauss-Newton step); the corner moves, the disc is
+    sampled again (bilinear) and the step repeated. The edge lines' directions and ``s``
+    stay fixed: the model and a corner's image are both symmetric under a half turn about
+    the corner, so errors in them do not move the fitted junction to first order. All
+    corners are fitted at once; a corner stops when a round moves it less than
+    ``tolerance``. On an image blurred more than the model the steps fall short of the
+    junction by a factor common to the board: from the third round on they are scaled by the
+    gain :func:`_step_gain` reads from the first two rounds' steps (1 on sharp images).
 
     Samples lie on a sunflower spiral and its mirror image, one per 1.5 x 1.5 px (1 x 1 px
     when ``radius`` is under 6 px): not on a square grid, which would see edges along the
@@ -356,13 +354,8 @@ def refine_x_junction(
         Inner corners along the board's x and y axes (>= 2 each).
     radius : float
         Radius of the fitted disc, pixels (>= 2); about 0.4 of the corner spacing.
-    edge_width : float
-        The model's edge width ``s``, pixels (> 0).
     iterations : int
         Most fit-and-move rounds (>= 1).
-    sample_spacing : float, optional
-        One sample per ``sample_spacing^2`` square pixels (> 0); default 1.5 px, or 1 px
-        when ``radius`` is under 6 px.
     tolerance : float
         A corner stops when a round moves it less than this along both axes (pixels).
 
@@ -375,23 +368,17 @@ def refine_x_junction(
     Raises
     ------
     ValueError
-        If the corners are not ``cols x rows``, ``radius < 2``, ``edge_width <= 0`` or
-        ``iterations < 1``.
+        If the corners are not ``cols x rows``, ``radius < 2`` or ``iterations < 1``.
     """
     c = np.asarray(corners, dtype=float).reshape(-1, 2).copy()
     if cols < 2 or rows < 2 or c.shape[0] != cols * rows:
         raise ValueError(f"expected {cols}x{rows} >= 2x2 corners, got {c.shape[0]}")
-    if radius < 2 or edge_width <= 0 or iterations < 1 or (sample_spacing or 1.0) <= 0:
-        raise ValueError(
-            f"need radius >= 2, edge_width > 0, iterations >= 1, sample_spacing > 0; got "
-            f"{radius}, {edge_width}, {iterations}, {sample_spacing}"
-        )
+    if radius < 2 or iterations < 1:
+        raise ValueError(f"need radius >= 2 and iterations >= 1; got {radius}, {iterations}")
     img = np.asarray(gray)
     if img.dtype != np.uint8:  # 8-bit images are sampled as they are: cheaper
         img = img.astype(np.float32)
-    if sample_spacing is None:
-        sample_spacing = 1.5 if radius >= 6 else 1.0
-    u, v = _disc_samples(radius, sample_spacing)
+    u, v = _disc_samples(radius, 1.5 if radius >= 6 else 1.0)
     # the second half of the samples mirrors the first: the model's terms are computed on
     # the first half only (the shape and the constant are even about the corner, the
     # derivatives odd), the image's samples folded into their even and odd parts
@@ -400,7 +387,7 @@ def refine_x_junction(
     w = np.exp(-(uh**2 + vh**2) / (2.0 * (radius / 1.5) ** 2)).astype(np.float32)
     t1, t2 = _edge_normals(c, cols, rows)
     n1x, n1y, n2x, n2y = (
-        np.asarray(f(t) / edge_width, np.float32)[:, None]
+        np.asarray(f(t) / EDGE_WIDTH, np.float32)[:, None]
         for t in (t1, t2)
         for f in (np.cos, np.sin)
     )
@@ -474,11 +461,11 @@ def _to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
     return np.ascontiguousarray(img)
 
 
-def check_widths(width: int, cols: int, rows: int, coarse_width: int = COARSE_WIDTH) -> list[int]:
+def check_widths(width: int, cols: int, rows: int) -> list[int]:
     """Widths (pixels) the quick board check should see the image at, smallest first.
 
     :data:`CHECK_WIDTH` if a board filling the image shows squares of at least
-    :data:`CHECK_SQUARE_PX` there; ``coarse_width``, or the width at which a board spanning
+    :data:`CHECK_SQUARE_PX` there; :data:`COARSE_WIDTH`, or the width at which a board spanning
     :data:`TYPICAL_BOARD_FRACTION` of the image shows such squares if that is wider; and,
     for boards of many squares, the width at which a board spanning
     :data:`MIN_BOARD_FRACTION` of the image does. Each is at most ``width``. The board's
@@ -490,8 +477,6 @@ def check_widths(width: int, cols: int, rows: int, coarse_width: int = COARSE_WI
         The image's width, pixels.
     cols, rows : int
         Inner corners of the board.
-    coarse_width : int
-        Width about which the coarse search runs, pixels.
 
     Returns
     -------
@@ -499,7 +484,7 @@ def check_widths(width: int, cols: int, rows: int, coarse_width: int = COARSE_WI
         Increasing widths, each at most ``width``.
     """
     span = max(cols, rows) + 3  # squares across the printed board, margin included
-    mid = _search_width(width, cols, rows, coarse_width)
+    mid = _search_width(width, cols, rows)
     out = []
     if width > CHECK_WIDTH and CHECK_WIDTH < mid and CHECK_WIDTH >= CHECK_SQUARE_PX * span:
         out.append(CHECK_WIDTH)
@@ -510,11 +495,11 @@ def check_widths(width: int, cols: int, rows: int, coarse_width: int = COARSE_WI
     return out
 
 
-def _search_width(width: int, cols: int, rows: int, coarse_width: int) -> int:
+def _search_width(width: int, cols: int, rows: int) -> int:
     """The second width of :func:`check_widths`, about which the coarse search runs."""
     span = max(cols, rows) + 3
     typical = int(np.ceil(CHECK_SQUARE_PX * span / TYPICAL_BOARD_FRACTION))
-    return min(width, max(coarse_width, typical))
+    return min(width, max(COARSE_WIDTH, typical))
 
 
 def _level(width: int, target: float) -> int:
@@ -525,7 +510,7 @@ def _level(width: int, target: float) -> int:
     return level
 
 
-def check_levels(width: int, cols: int, rows: int, coarse_width: int = COARSE_WIDTH) -> list[int]:
+def check_levels(width: int, cols: int, rows: int) -> list[int]:
     """Pyramid levels the quick board check runs on, smallest image first.
 
     Level ``L`` is the image halved ``L`` times (``width >> L`` pixels wide). Each width of
@@ -539,8 +524,6 @@ def check_levels(width: int, cols: int, rows: int, coarse_width: int = COARSE_WI
         The image's width, pixels.
     cols, rows : int
         Inner corners of the board.
-    coarse_width : int
-        Width about which the coarse search runs, pixels.
 
     Returns
     -------
@@ -549,7 +532,7 @@ def check_levels(width: int, cols: int, rows: int, coarse_width: int = COARSE_WI
         the second width of :func:`check_widths` maps to, or wider.
     """
     out: list[int] = []
-    for target in check_widths(width, cols, rows, coarse_width):
+    for target in check_widths(width, cols, rows):
         level = _level(width, target)
         if level not in out:
             out.append(level)
@@ -564,7 +547,7 @@ def _half(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
 
 
 def _coarse_search(
-    gray: NDArray[np.uint8], cols: int, rows: int, coarse_width: int
+    gray: NDArray[np.uint8], cols: int, rows: int
 ) -> tuple[NDArray[np.float32], int] | None:
     """Quick board checks on small pyramid levels first, then the classic search.
 
@@ -577,11 +560,11 @@ def _coarse_search(
     if it is smaller, on the search level. Returns the coarse corners, shape
     (cols * rows, 1, 2) in that level's pixels, and the level; or None.
     """
-    levels = check_levels(gray.shape[1], cols, rows, coarse_width)
+    levels = check_levels(gray.shape[1], cols, rows)
     pyramid = [gray]
     while len(pyramid) <= levels[0]:
         pyramid.append(_half(pyramid[-1]))
-    search_level = _level(gray.shape[1], _search_width(gray.shape[1], cols, rows, coarse_width))
+    search_level = _level(gray.shape[1], _search_width(gray.shape[1], cols, rows))
     size = (cols, rows)
     for i, level in enumerate(levels):
         if level == search_level:
@@ -642,9 +625,6 @@ def detect_checkerboard(
     image: NDArray[np.generic],
     cols: int,
     rows: int,
-    *,
-    coarse_width: int = COARSE_WIDTH,
-    fit: bool = True,
 ) -> NDArray[np.float64] | None:
     """Find a checkerboard's inner corners with sub-pixel accuracy.
 
@@ -654,12 +634,6 @@ def detect_checkerboard(
         The image (grey or BGR; any numeric dtype, rescaled to 8 bits).
     cols, rows : int
         Inner corners along the board's x axis (per row) and y axis (>= 2 each).
-    coarse_width : int
-        Width (pixels) about which the coarse search runs (see :func:`check_widths`);
-        images at most this wide are searched at full resolution.
-    fit : bool
-        Refine with the X-junction fit (:func:`refine_x_junction`); if False, with
-        ``cornerSubPix`` alone.
 
     Returns
     -------
@@ -675,7 +649,7 @@ def detect_checkerboard(
     if cols < 2 or rows < 2:
         raise ValueError(f"a board needs at least 2x2 inner corners, got {cols}x{rows}")
     gray = _to_gray(image)
-    seen = _coarse_search(gray, cols, rows, coarse_width)
+    seen = _coarse_search(gray, cols, rows)
     if seen is None:
         return None
     coarse, level = seen
@@ -697,9 +671,7 @@ def detect_checkerboard(
     coarse_local = c - offset
     # coarse corners from a 4x or more downscaled image are off by a few px: a wide pass first
     windows = (wide, half) if scale > 2.5 else (half,)
-    if not fit:
-        out = _subpix(roi, coarse_local, windows, _SUBPIX_CRITERIA)
-    elif scale > 2.5:
+    if scale > 2.5:
         start = _subpix(roi, coarse_local, windows, _SUBPIX_COARSE_CRITERIA)
         out = _fit(roi, start, cols, rows, radius, MAX_FIT_SHIFT)[0]
     else:

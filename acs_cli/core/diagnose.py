@@ -21,8 +21,7 @@ then tried one by one, each by refitting the same estimator on the inputs correc
     fits much better.
 
 A cause is named when its refit brings the residual RMS below :data:`MUCH_BETTER` of the
-current one (and within :data:`NOISE_FACTOR` of the expected RMS when the pose noise is
-known); among several, the most specific (in the order above) of those within
+current one; among several, the most specific (in the order above) of those within
 :data:`AMBIGUITY_FACTOR` of the best. Corrections that cannot change a fit are not tried:
 for one camera about a fixed joint, inverted poses fit exactly as well as the true ones (the
 joint in the camera and its world point swap roles: ``R_i o + t_i = p_w`` holds for
@@ -385,16 +384,9 @@ def _screened(
 # ----------------------------------------------------------------------------- selection
 
 
-def _select(
-    trials: Sequence[_Trial], current_rms: float, expected_rms: float | None
-) -> _Trial | None:
+def _select(trials: Sequence[_Trial], current_rms: float) -> _Trial | None:
     """The trial that fits much better (see the module's doc), or None."""
-    good = [
-        t
-        for t in trials
-        if t.rms < MUCH_BETTER * current_rms
-        and (expected_rms is None or t.rms <= NOISE_FACTOR * expected_rms)
-    ]
+    good = [t for t in trials if t.rms < MUCH_BETTER * current_rms]
     if not good:
         return None
     best = min(t.rms for t in good)
@@ -456,11 +448,9 @@ def _message(trial: _Trial, current_rms: float, unit: str) -> str:
     )
 
 
-def _diagnosis(
-    trials: list[_Trial], current_rms: float, expected_rms: float | None, unit: str
-) -> Diagnosis | None:
+def _diagnosis(trials: list[_Trial], current_rms: float, unit: str) -> Diagnosis | None:
     """The :class:`Diagnosis` of the trials, or None when none fits much better."""
-    best = _select(trials, current_rms, expected_rms)
+    best = _select(trials, current_rms)
     if best is None:
         return None
     return Diagnosis(
@@ -512,7 +502,6 @@ def diagnose_fixed_joint(
     quaternion_source: bool,
     current_rms: float,
     camera: str = "a",
-    expected_rms: float | None = None,
     unit: str = "m",
 ) -> Diagnosis | None:
     """What one camera's poses about a fixed joint do not fit, if a usual cause explains it.
@@ -532,8 +521,6 @@ def diagnose_fixed_joint(
         The fit's residual RMS (``JointEstimate.residual_rms[camera]``).
     camera : {"a", "b"}
         Which camera, for the message.
-    expected_rms : float, optional
-        The RMS the stated pose noise implies (:func:`expected_residual_rms`).
     unit : str
         The trajectory's length unit, for the message.
 
@@ -553,7 +540,7 @@ def diagnose_fixed_joint(
 
     candidates = _pose_candidates((T,), (quaternion_source,))
     trials = _screened(candidates, fit("refined"), fit("paper"), _rms_or_inf(fit("paper"), T))
-    return _diagnosis(trials, current_rms, expected_rms, unit)
+    return _diagnosis(trials, current_rms, unit)
 
 
 # ----------------------------------------------------------------------------- pairs
@@ -602,7 +589,6 @@ def diagnose_overlap(
     current_rms: float,
     timed: TimedPair | None = None,
     max_offset: float = MAX_OFFSET_S,
-    expected_rms: float | None = None,
     unit: str = "m",
 ) -> Diagnosis | None:
     """What two cameras' paired poses in one world do not fit (the overlap joint).
@@ -625,8 +611,6 @@ def diagnose_overlap(
         Both whole trajectories with timestamps in seconds, for the clocks' check.
     max_offset : float
         Largest clock offset searched, seconds.
-    expected_rms : float, optional
-        The RMS the stated pose noise implies (:func:`expected_residual_rms`).
     unit : str
         The trajectories' length unit, for the message.
 
@@ -647,9 +631,9 @@ def diagnose_overlap(
     candidates = _pose_candidates((Ta, Tb), quaternion_source) + _unit_candidates(Ta, Tb, ())
     base = _rms_or_inf(fit("paper"), Ta, Tb)
     trials = _screened(candidates, fit("refined"), fit("paper"), base)
-    if timed is not None and _select(trials, current_rms, expected_rms) is None:
+    if timed is not None and _select(trials, current_rms) is None:
         trials.append(_clock_trial(timed, residuals, fit("refined"), max_offset))
-    return _diagnosis(trials, current_rms, expected_rms, unit)
+    return _diagnosis(trials, current_rms, unit)
 
 
 def scaled_prior(prior: JointPrior, factor: float) -> JointPrior:
@@ -756,7 +740,6 @@ def diagnose_relpose(
     quaternion_source: tuple[bool, bool] = (True, True),
     timed: TimedPair | None = None,
     max_offset: float = MAX_OFFSET_S,
-    expected_rms: float | None = None,
     unit: str = "m",
 ) -> Diagnosis | None:
     """What two cameras' paired poses, each in its own world, do not fit (relative pose).
@@ -788,8 +771,6 @@ def diagnose_relpose(
         Both whole trajectories with timestamps in seconds, for the clocks' check.
     max_offset : float
         Largest clock offset searched, seconds.
-    expected_rms : float, optional
-        The RMS the stated pose noise implies (:func:`expected_residual_rms`).
     unit : str
         B's length unit, for the message.
 
@@ -826,7 +807,7 @@ def diagnose_relpose(
     base = _rms_or_inf(fit("paper"), Ta, Tb, prior) if paper else 0.0
     trials = _screened(candidates, fit("refined"), fit("paper") if paper else None, base)
     # the joint and the clocks are costlier to check: only when the poses' corrections fail
-    if _select(trials, current_rms, expected_rms) is None:
+    if _select(trials, current_rms) is None:
         if prior is not None and (
             prior.position_in_a is not None or prior.position_in_b is not None
         ):
@@ -836,4 +817,4 @@ def diagnose_relpose(
             trials.append(
                 _clock_trial(timed, residuals, lambda A, B: refined(A, B, prior), max_offset)
             )
-    return _diagnosis(trials, current_rms, expected_rms, unit)
+    return _diagnosis(trials, current_rms, unit)

@@ -851,16 +851,6 @@ class HingeEstimate:
         return np.sqrt(np.diag(self.covariance_point))
 
 
-@dataclass(frozen=True)
-class HingePairEstimate:
-    """Fixed-joint hinge results for camera A and, when given, camera B
-    (see :func:`estimate_hinge_fixed_pair`)."""
-
-    a: HingeEstimate
-    b: HingeEstimate | None
-    method: str
-
-
 def perpendicular_basis(v: FloatArray) -> FloatArray:
     """An orthonormal basis ``(3, 2)`` of the plane perpendicular to unit ``v`` ``(3,)``
     (a deterministic, continuous choice away from ``v``'s smallest component's axis)."""
@@ -1153,31 +1143,3 @@ def estimate_hinge_fixed(
         point_in_world=p_w,
         method=method,
     )
-
-
-def estimate_hinge_fixed_pair(
-    T_wa_a: FloatArray, T_wb_b: FloatArray | None = None, method: str = "refined"
-) -> HingePairEstimate:
-    """A hinge in one or two cameras' frames, each from its own fixed-joint session.
-
-    The hinge analogue of :func:`estimate_joint_fixed`: camera A's body turns about the
-    hinge while B's is held, and (optionally) the other way round; each trajectory is in
-    its own world and the two need not be paired.
-
-    Parameters
-    ----------
-    T_wa_a : ndarray, shape (n, 4, 4)
-        Camera A's poses ``T_world_a`` while A's body turns about the hinge.
-    T_wb_b : ndarray, shape (m, 4, 4), optional
-        Camera B's poses ``T_world_b`` in its own session.
-    method : {"refined", "paper"}
-
-    Returns
-    -------
-    HingePairEstimate
-        ``a`` and ``b`` (``None`` without ``T_wb_b``), as :func:`estimate_hinge_fixed`.
-    """
-    _check_method(method)
-    a = estimate_hinge_fixed(T_wa_a, "camera A", method=method)
-    b = None if T_wb_b is None else estimate_hinge_fixed(T_wb_b, "camera B", method=method)
-    return HingePairEstimate(a=a, b=b, method=method)

@@ -269,10 +269,3 @@ def chain_transforms(
         T = T_qp if step.forward else se3.invert_transforms(T_qp)
         out[step.target] = T @ out[step.source]  # T_target_ref = T_target_source T_source_ref
     return out
-
-
-def transform_between(
-    topology: RigTopology, T_cam_ref: Mapping[str, FloatArray], a: str, b: str
-) -> FloatArray:
-    """``T_a_b`` from every camera's ``T_cam_ref``: ``T_a_ref @ inv(T_b_ref)``."""
-    return np.asarray(T_cam_ref[a] @ se3.invert_transforms(T_cam_ref[b]))

@@ -17,13 +17,14 @@ file). The NPZ poses artifact (:class:`acs_cli.io.poses.PosesArtifact`) subclass
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 from acs_cli.io.artifacts import check_yaml_artifact, load_yaml_file, write_yaml_artifact
 
-__all__ = ["HEADER_KEYS", "Artifact", "YamlArtifact", "header_of"]
+__all__ = ["HEADER_KEYS", "Artifact", "Section", "YamlArtifact", "header_of"]
 
 A = TypeVar("A", bound="Artifact")
 Y = TypeVar("Y", bound="YamlArtifact")
@@ -35,6 +36,13 @@ HEADER_KEYS = ("schema", "schema_version", "tool", "created", "inputs", "method"
 def header_of(doc: dict[str, Any]) -> dict[str, Any]:
     """The header keys of a parsed artifact (those of :data:`HEADER_KEYS` it has)."""
     return {k: doc[k] for k in HEADER_KEYS if k in doc}
+
+
+class Section:
+    """An artifact's section (a dataclass) whose keys are its fields, in their order."""
+
+    def to_plain(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}  # type: ignore[arg-type]
 
 
 class Artifact(ABC):

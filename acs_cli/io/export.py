@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import gzip
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +29,6 @@ __all__ = [
     "ROS_DISTORTION_MODELS",
     "check_ros_camera_name",
     "opencv_camera_values",
-    "read_opencv_yaml",
     "ros_camera_info_text",
     "write_opencv_yaml",
     "write_ros_camera_info",
@@ -286,57 +285,3 @@ def write_ros_camera_info(
         camera_matrix, distortion, image_size, model, camera_name, comments=comments
     )
     atomic_write_text(path, text)
-
-
-def read_opencv_yaml(
-    path: str | Path, keys: Iterable[str]
-) -> dict[str, NDArray[Any] | float | str]:
-    """Read values written by :func:`write_opencv_yaml` (or any ``cv2.FileStorage`` file).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    keys : iterable of str
-        Keys to read.
-
-    Returns
-    -------
-    dict
-        Matrices as ndarrays, numbers as float, strings as str.
-
-    Raises
-    ------
-    InputError
-        A missing or unparsable file, or a missing key.
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", path=p)
-    try:
-        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
-    except Exception as exc:  # cv2.error, or SystemError wrapping it on a parse error
-        raise InputError("not a readable OpenCV FileStorage file", path=p) from exc
-    out: dict[str, NDArray[Any] | float | str] = {}
-    try:
-        if not fs.isOpened():
-            raise InputError("not a readable OpenCV FileStorage file", path=p)
-        for key in keys:
-            node = fs.getNode(key)
-            if node.empty() or node.isNone():
-                raise InputError(f"missing key '{key}'", path=p)
-            if node.isString():
-                out[key] = node.string()
-            elif node.isInt() or node.isReal():
-                out[key] = float(node.real())
-            else:
-                try:
-                    mat = node.mat()
-                except Exception:  # cv2.error: a malformed opencv-matrix node
-                    mat = None
-                if mat is None:
-                    raise InputError(f"'{key}' is not a matrix, number or string", path=p)
-                out[key] = np.asarray(mat)
-    finally:
-        fs.release()
-    return out

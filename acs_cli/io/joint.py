@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from acs_cli.core.intrinsics import DISTORTION_NAMES
 from acs_cli.errors import InputError
-from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.base import Section, YamlArtifact, header_of
 from acs_cli.io.validate import (
     FloatArray,
     as_bool,
@@ -113,7 +113,7 @@ PAIR_BY = ("auto", "timestamp", "index")
 
 
 @dataclass(frozen=True)
-class Pairing:
+class Pairing(Section):
     """``quality.pairing``: how A's and B's samples were paired.
 
     Attributes
@@ -146,16 +146,6 @@ class Pairing:
             optional_number(d.get("max_dt_s"), f"{key}.max_dt_s", path, non_negative=True),
         )
 
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "by": self.by,
-            "requested": self.requested,
-            "pairs": self.pairs,
-            "unpaired_a": self.unpaired_a,
-            "unpaired_b": self.unpaired_b,
-            "max_dt_s": self.max_dt_s,
-        }
-
     @property
     def pair_by(self) -> str:
         """The ``--pair-by`` to repeat this pairing (``auto`` for an unknown value)."""
@@ -163,7 +153,7 @@ class Pairing:
 
 
 @dataclass(frozen=True)
-class PoseNoise:
+class PoseNoise(Section):
     """Estimated pose noise: translation (length unit) and rotation (deg), per axis."""
 
     sigma_trans: float
@@ -177,12 +167,9 @@ class PoseNoise:
             as_number(d.get("sigma_rot_deg"), f"{key}.sigma_rot_deg", path),
         )
 
-    def to_plain(self) -> dict[str, float]:
-        return {"sigma_trans": self.sigma_trans, "sigma_rot_deg": self.sigma_rot_deg}
-
 
 @dataclass(frozen=True)
-class MotionQuality:
+class MotionQuality(Section):
     """``quality.motion.<a/b>`` (fixed joint): how the camera turned and where the joint is
     weakest (:class:`acs_cli.core.joint.MotionSummary`).
 
@@ -241,20 +228,9 @@ class MotionQuality:
             as_number(d.get("weak_std"), f"{key}.weak_std", path, non_negative=True),
         )
 
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "dominant_axis": self.dominant_axis,
-            "other_axes": self.other_axes,
-            "rotation_spread_deg": self.rotation_spread_deg,
-            "rotation_ratio": self.rotation_ratio,
-            "near_hinge": self.near_hinge,
-            "weak_direction": self.weak_direction,
-            "weak_std": self.weak_std,
-        }
-
 
 @dataclass(frozen=True)
-class BundleSection:
+class BundleSection(Section):
     """``quality.bundle_adjustment.<cam>``: one camera's bundle adjustment on its corners.
 
     Attributes
@@ -313,19 +289,6 @@ class BundleSection:
             model,
             as_bool(d.get("intrinsics_held", False), f"{key}.intrinsics_held", path),
         )
-
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "intrinsics_file": self.intrinsics_file,
-            "rms_px": self.rms_px,
-            "sigma_px": self.sigma_px,
-            "frames": self.frames,
-            "camera_matrix": self.camera_matrix,
-            "distortion": self.distortion,
-            "intrinsics_std": dict(self.intrinsics_std),
-            "model": self.model,
-            "intrinsics_held": self.intrinsics_held,
-        }
 
     def values(self) -> dict[str, float]:
         """``fx fy cx cy`` and the distortion coefficients by name."""

@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
-from acs_cli.io.base import YamlArtifact, header_of
+from acs_cli.io.base import Section, YamlArtifact, header_of
 from acs_cli.io.joint import (
     BundleSection,
     FramesUsed,
@@ -56,7 +56,7 @@ Source = Path | str | None
 
 
 @dataclass(frozen=True)
-class RelativePose:
+class RelativePose(Section):
     """``relative_pose``: camera B relative to camera A at the reference instant.
 
     Attributes
@@ -122,23 +122,9 @@ class RelativePose:
             optional_matrix(d.get("T_wb_wa"), (4, 4), f"{k}.T_wb_wa", path),
         )
 
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "T_b_a": self.T_b_a,
-            "T_b_a_covariance": self.T_b_a_covariance,
-            "rpy_deg": self.rpy_deg,
-            "rpy_deg_std": self.rpy_deg_std,
-            "translation_b_in_a": self.translation_b_in_a,
-            "translation_b_in_a_std": self.translation_b_in_a_std,
-            "reference": int(self.reference),
-            "reference_timestamp_a": self.reference_timestamp_a,
-            "reference_timestamp_b": self.reference_timestamp_b,
-            "T_wb_wa": self.T_wb_wa,
-        }
-
 
 @dataclass(frozen=True)
-class Scale:
+class Scale(Section):
     """``scale`` (unknown scale only): ``phi_ba = mu_b / mu_a`` and, with a metric joint,
     each trajectory's units per metre, with one-sigma stds."""
 
@@ -166,16 +152,6 @@ class Scale:
             mu("mu_b"),
             optional_number(d.get("mu_b_std"), "scale.mu_b_std", path, allow_nan=True),
         )
-
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "phi_ba": self.phi_ba,
-            "phi_ba_std": self.phi_ba_std,
-            "mu_a": self.mu_a,
-            "mu_a_std": self.mu_a_std,
-            "mu_b": self.mu_b,
-            "mu_b_std": self.mu_b_std,
-        }
 
 
 @dataclass(frozen=True)
@@ -229,7 +205,7 @@ class RelposeQuality:
 
 
 @dataclass(frozen=True)
-class TimeOffsetSection:
+class TimeOffsetSection(Section):
     """``relpose.yaml``'s ``time_offset``: the constant offset between the cameras' clocks.
 
     Attributes
@@ -262,14 +238,6 @@ class TimeOffsetSection:
             as_number(d.get("max_offset_s"), "time_offset.max_offset_s", path, positive=True),
             as_int(d.get("frames", 0), "time_offset.frames", path, minimum=0),
         )  # fmt: skip
-
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "time_offset_s": self.time_offset_s,
-            "time_offset_s_std": self.time_offset_s_std,
-            "max_offset_s": self.max_offset_s,
-            "frames": self.frames,
-        }
 
 
 @dataclass(frozen=True, eq=False)

@@ -544,7 +544,6 @@ def kalibr_camchain(
     header: Sequence[str] = (),
     comments: Sequence[str] | None = None,
     overlaps: Mapping[str, Iterable[str]] | None = None,
-    rostopics: Mapping[str, str] | None = None,
 ) -> str:
     """A Kalibr camchain YAML of a chain of cameras (``cam0``, ``cam1``, ... in order).
 
@@ -575,8 +574,6 @@ def kalibr_camchain(
         One comment line (without ``#``) before each camera; ``camN: <name>`` without.
     overlaps : mapping of camera name to camera names, optional
         Cameras that share views (made symmetric); ``cam_overlaps: []`` without.
-    rostopics : mapping of camera name to str, optional
-        Topics other than ``/<camera>/image_raw``.
 
     Returns
     -------
@@ -589,7 +586,7 @@ def kalibr_camchain(
         A camera without intrinsics (Kalibr refuses such a camchain; the message names
         every such camera), intrinsics of an unknown camera, intrinsics Kalibr cannot hold
         (rational with non-zero k3..k6, pinhole with k3, skew), unreadable intrinsics files,
-        unknown cameras in ``overlaps`` or ``rostopics``, a ``T_cn_cnm1`` that is not
+        unknown cameras in ``overlaps``, a ``T_cn_cnm1`` that is not
         rigid (or given for the first camera, or missing for another).
     ValueError
         ``T_cn_cnm1`` or ``comments`` not one per camera.
@@ -611,9 +608,6 @@ def kalibr_camchain(
             + ", ".join(missing)
             + " (give each camera's intrinsics.yaml)"
         )
-    for c in rostopics or {}:
-        if c not in cams:
-            raise InputError(f"rostopic given for unknown camera {c!r}")
     overlap = _overlap_indices(cams, overlaps)
     text = "".join(f"# {line}\n" for line in header)
     for i, cam in enumerate(cams):
@@ -624,7 +618,7 @@ def kalibr_camchain(
         if T is not None:
             entry["T_cn_cnm1"] = se3.check_transforms(T, name=f"camera {cam} T_cn_cnm1")[0]
         entry.update(_kalibr_intrinsics(cam, given[cam]))
-        entry["rostopic"] = str((rostopics or {}).get(cam) or f"/{cam}/image_raw")
+        entry["rostopic"] = f"/{cam}/image_raw"
         entry["cam_overlaps"] = overlap[cam]
         comment = f"cam{i}: {cam}" if comments is None else comments[i]
         text += f"# {comment}\n" + _yaml_block({f"cam{i}": entry})
@@ -635,8 +629,6 @@ def kalibr_camchain_from_rig(
     rig: RigArtifact,
     intrinsics: Mapping[str, IntrinsicsLike] | None,
     *,
-    overlaps: Mapping[str, Iterable[str]] | None = None,
-    rostopics: Mapping[str, str] | None = None,
     notes: Sequence[str] = (),
 ) -> str:
     """The rig as a Kalibr camchain YAML (:func:`kalibr_camchain`, in the rig's camera order).
@@ -650,7 +642,7 @@ def kalibr_camchain_from_rig(
     ----------
     rig : RigArtifact
         The calibrated rig.
-    intrinsics, overlaps, rostopics
+    intrinsics
         As :func:`kalibr_camchain`.
     notes : sequence of str
         More comment lines for the top (e.g. where the intrinsics came from, warnings).
@@ -711,8 +703,6 @@ def kalibr_camchain_from_rig(
         intrinsics,
         header=[*header, *notes],
         comments=comments,
-        overlaps=overlaps,
-        rostopics=rostopics,
     )
 
 
@@ -834,7 +824,6 @@ def write_rig_export(
     *,
     intrinsics: Mapping[str, IntrinsicsLike] | None = None,
     robot_name: str = "acs_rig",
-    overlaps: Mapping[str, Iterable[str]] | None = None,
     notes: Sequence[str] = (),
 ) -> str:
     """Write the rig as ``fmt`` (``"urdf"`` or ``"kalibr"``) atomically.
@@ -850,8 +839,6 @@ def write_rig_export(
         :func:`kalibr_camchain_from_rig`.
     robot_name : str
         ``urdf``: the robot's name.
-    overlaps : mapping, optional
-        ``kalibr``: cameras that share views.
     notes : sequence of str
         Comment lines for the top of the file (after its own).
 
@@ -871,7 +858,7 @@ def write_rig_export(
             head, sep, rest = text.partition("\n")
             text = head + sep + "".join(f"<!-- {_xml_comment(n)} -->\n" for n in notes) + rest
     elif fmt == "kalibr":
-        text = kalibr_camchain_from_rig(rig, intrinsics, overlaps=overlaps, notes=notes)
+        text = kalibr_camchain_from_rig(rig, intrinsics, notes=notes)
     else:
         raise InputError(
             f"unknown rig export format {fmt!r}; use one of {', '.join(RIG_EXPORT_FORMATS)}"

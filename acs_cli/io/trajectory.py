@@ -45,12 +45,8 @@ __all__ = [
     "Trajectory",
     "check_npz_members",
     "parse_trajectory",
-    "read_colmap",
     "read_input",
-    "read_kitti",
-    "read_npz_poses",
     "read_trajectory",
-    "read_tum",
     "write_kitti",
     "write_npz_poses",
     "write_tum",
@@ -318,36 +314,15 @@ def _check_rotation_blocks(
 # TUM
 
 
-def read_tum(path: str | Path) -> Trajectory:
-    """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line.
-
-    Lines starting with ``#`` and blank lines are skipped. The pose is ``T_world_cam``
-    (translation in the file's length unit, quaternion ``(x, y, z, w)``; it is normalised).
-
-    Parameters
-    ----------
-    path : str or Path
-        The TUM file.
-
-    Returns
-    -------
-    Trajectory
-        ``timestamps`` (n,) in seconds, ``T_world_cam`` (n, 4, 4), ``has_timestamps=True``;
-        frame numbers (``time_unit="frame"``) when a comment line says
-        :data:`FRAME_NUMBERS_NOTE` (as acscal writes them), and ``timestamps_ns`` exactly
-        when every time is a plain decimal of at most 9 places.
-
-    Raises
-    ------
-    InputError
-        Missing/unreadable/empty file; a line with a column count other than 8, a token
-        that is not a number, NaN/inf, a quaternion norm off 1 by more than ``1e-3``, or a
-        timestamp not after the previous one (the message names the line).
-    """
-    return read_trajectory(path, "tum")
-
-
 def _parse_tum(text: str, p: Path) -> Trajectory:
+    """A TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``T_world_cam``.
+
+    Lines starting with ``#`` and blank lines are skipped; quaternions ``(x, y, z, w)`` are
+    normalised (refused off 1 by more than :data:`QUAT_NORM_TOL`), timestamps must increase.
+    Times are seconds, or frame numbers (``time_unit="frame"``) when a comment line says
+    :data:`FRAME_NUMBERS_NOTE` (as acscal writes them); ``timestamps_ns`` is set exactly
+    when every time is a plain decimal of at most 9 places.
+    """
     lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty TUM file)", path=p)
@@ -415,7 +390,7 @@ def write_tum(
         A comment line written under the header (e.g. that the times are frame numbers).
     T_world_cam : array_like, shape (n, 4, 4)
         Camera poses in the world frame. Written as ``tx ty tz qx qy qz qw`` with 15
-        significant digits and ``qw >= 0``, so :func:`read_tum` gives them back to ~1e-12.
+        significant digits and ``qw >= 0``, so :func:`read_trajectory` gives them back to ~1e-12.
 
     Raises
     ------
@@ -453,25 +428,12 @@ def write_tum(
 # KITTI
 
 
-def read_kitti(path: str | Path) -> Trajectory:
-    """Read a KITTI trajectory: 12 numbers a line, the row-major top 3x4 of ``T_world_cam``.
-
-    Returns
-    -------
-    Trajectory
-        ``timestamps`` = frame indices ``0..n-1``, ``has_timestamps=False``,
-        ``T_world_cam`` (n, 4, 4) with rotation blocks re-orthonormalised.
-
-    Raises
-    ------
-    InputError
-        Missing/unreadable/empty file; a line without 12 numbers, a non-number, NaN/inf,
-        or a rotation block that is not orthonormal within ``1e-4`` (naming the line).
-    """
-    return read_trajectory(path, "kitti")
-
-
 def _parse_kitti(text: str, p: Path) -> Trajectory:
+    """A KITTI trajectory: 12 numbers a line, the row-major top 3x4 of ``T_world_cam``.
+
+    Timestamps are the frame indices (``has_timestamps=False``); rotation blocks must be
+    orthonormal within :data:`KITTI_ORTHONORMAL_TOL` and are re-orthonormalised.
+    """
     lines, numbers = _data_lines(text)
     if not lines:
         raise InputError("contains no poses (empty KITTI file)", path=p)
@@ -526,36 +488,15 @@ def _colmap_file(path: Path) -> Path:
     return path
 
 
-def read_colmap(path: str | Path) -> Trajectory:
-    """Read camera poses from a COLMAP text model (``images.txt``).
+def _parse_colmap(text: str, p: Path) -> Trajectory:
+    """Camera poses of a COLMAP text model's ``images.txt``.
 
     Each image takes two lines: ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`` and its
     POINTS2D line (``X Y POINT3D_ID`` triples, possibly empty). The stored pose is
-    ``cam_from_world`` (``T_cam_world``); it is inverted to ``T_world_cam``.
-
-    Parameters
-    ----------
-    path : str or Path
-        ``images.txt`` or a folder containing it.
-
-    Returns
-    -------
-    Trajectory
-        Poses in natural order of image name (``img2`` before ``img10``), ``names`` set.
-        If every name's stem holds a number and these increase, they are the timestamps
-        (``has_timestamps=True``); otherwise timestamps are the indices ``0..n-1``.
-
-    Raises
-    ------
-    InputError
-        No ``images.txt``; an image line with fewer than 10 fields, a non-number, NaN/inf,
-        a bad quaternion or a repeated image name; a POINTS2D line that is not triples;
-        no images.
+    ``cam_from_world`` (``T_cam_world``); it is inverted to ``T_world_cam``. Poses come in
+    natural order of image name (``img2`` before ``img10``), ``names`` set; if every name's
+    stem holds a number and these increase, they are the timestamps, else the indices.
     """
-    return read_trajectory(path, "colmap")
-
-
-def _parse_colmap(text: str, p: Path) -> Trajectory:
     entries: list[tuple[str, int]] = []
     values: list[list[float]] = []
     raw_lines = text.split("\n")
@@ -721,34 +662,14 @@ def _check_npz_schema(arrays: Mapping[str, np.ndarray], path: Path) -> None:
             )
 
 
-def read_npz_poses(path: str | Path) -> Trajectory:
-    """Read poses from an NPZ file (written by ``acscal poses`` or a plain one).
-
-    Parameters
-    ----------
-    path : str or Path
-        An NPZ archive with ``T_world_cam`` (n, 4, 4) and optionally ``timestamps`` (n,)
-        seconds, ``image_names`` (n,) str, ``has_timestamps`` (bool), ``schema``
-        (= ``"acscal/poses"``), ``schema_version`` (int) and ``reprojection_rms`` (n,) px.
-
-    Returns
-    -------
-    Trajectory
-        Rotation blocks re-orthonormalised. Without ``timestamps`` the timestamps are the
-        indices and ``has_timestamps`` is False.
-
-    Raises
-    ------
-    InputError
-        Missing, truncated or corrupt file; another artifact's schema; a newer
-        schema_version; missing ``T_world_cam``; wrong shapes or dtypes; non-finite values;
-        rotation blocks not orthonormal within ``1e-4``.
-    """
-    return read_trajectory(path, "npz")
-
-
 def parse_npz_poses(arrays: Mapping[str, np.ndarray], p: Path) -> Trajectory:
-    """The trajectory of an NPZ's arrays (see :func:`read_npz_poses`)."""
+    """The trajectory of an NPZ's arrays (written by ``acscal poses`` or a plain one).
+
+    ``T_world_cam`` (n, 4, 4) and optionally ``timestamps`` (n,) seconds, ``image_names``
+    (n,) str, ``has_timestamps`` (bool), ``schema`` (= :data:`NPZ_SCHEMA`), ``schema_version``
+    (int) and ``reprojection_rms`` (n,) px. Rotation blocks are re-orthonormalised; without
+    ``timestamps`` the timestamps are the indices and ``has_timestamps`` is False.
+    """
     _check_npz_schema(arrays, p)
     if "T_world_cam" not in arrays:
         raise InputError("has no 'T_world_cam' array of shape (n, 4, 4)", path=p)

@@ -37,14 +37,6 @@ class CornerResiduals:
     residual: FloatArray
     image: np.ndarray
 
-    def per_image_rms(self, n_images: int) -> FloatArray:
-        """RMS of the corners' error distances (px) in each of ``n_images`` images, as a poses
-        NPZ's ``reprojection_rms`` (NaN for an image without corners)."""
-        sq = np.bincount(self.image, np.sum(self.residual**2, axis=1), minlength=n_images)
-        count = np.bincount(self.image, minlength=n_images)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.sqrt(sq / count)
-
 
 def corner_residuals(
     corners: FloatArray,

@@ -625,27 +625,21 @@ def coverage_counts(
     return counts
 
 
-def coverage_fraction(
-    corners: FloatArray, image_size: tuple[int, int], grid: tuple[int, int] = COVERAGE_GRID
-) -> float:
+def coverage_fraction(corners: FloatArray, image_size: tuple[int, int]) -> float:
     """The share of the cells of :func:`coverage_counts` holding at least one corner."""
-    return float((coverage_counts(corners, image_size, grid) > 0).mean())
+    return float((coverage_counts(corners, image_size) > 0).mean())
 
 
-def coverage_figure(
-    cameras: Sequence[CoverageData], grid: tuple[int, int] = COVERAGE_GRID, dpi: int = 100
-) -> bytes:
+def coverage_figure(cameras: Sequence[CoverageData], dpi: int = 100) -> bytes:
     """Per camera: where in the image the board's corners were detected.
 
-    A heat map of corner counts over a ``grid`` of cells with every corner on top; the
-    title gives the share of cells with at least one corner.
+    A heat map of corner counts over the :data:`COVERAGE_GRID` of cells with every corner
+    on top; the title gives the share of cells with at least one corner.
 
     Parameters
     ----------
     cameras : sequence of CoverageData
         At least one.
-    grid : (int, int)
-        Cells across and down.
     dpi : int
     """
     n = len(cameras)
@@ -656,7 +650,7 @@ def coverage_figure(
         w, h = cam.image_size
         pts = np.asarray(cam.corners, dtype=float).reshape(-1, 2)
         pts = pts[np.all(np.isfinite(pts), axis=1)]
-        counts = coverage_counts(pts, cam.image_size, grid)
+        counts = coverage_counts(pts, cam.image_size)
         covered = float((counts > 0).mean()) * 100.0
         im = ax.imshow(
             counts, extent=(0, w, h, 0), cmap="viridis", interpolation="nearest", aspect="equal"

@@ -140,11 +140,6 @@ class RigTrajectory:
     position_in_a: FloatArray
     agree_at_reference: bool = False
 
-    @property
-    def consistency_rms(self) -> float:
-        """RMS of :attr:`consistency`, ``unit``."""
-        return float(np.sqrt(np.mean(self.consistency**2)))
-
 
 @dataclass(frozen=True)
 class RigOfManyView:

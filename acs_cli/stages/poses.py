@@ -52,12 +52,10 @@ from acs_cli.stages.intrinsics import (
 )
 
 __all__ = [
-    "CameraIntrinsics",
     "PosesConfig",
     "PosesRun",
     "SfmPosesConfig",
     "SfmPosesRun",
-    "read_intrinsics",
     "run_poses",
     "run_sfm_poses",
 ]
@@ -99,10 +97,6 @@ class PosesConfig:
     target: MarkerTarget | None = None
 
 
-#: Kept for callers of the former reader: the intrinsics artifact's class.
-CameraIntrinsics = IntrinsicsArtifact
-
-
 @dataclass(frozen=True)
 class PosesRun:
     """What :func:`run_poses` did."""
@@ -113,17 +107,6 @@ class PosesRun:
     output: Path
     cached: int
     warnings: list[str] = field(default_factory=list)
-
-
-def read_intrinsics(path: Path) -> IntrinsicsArtifact:
-    """Read and check an ``acscal/intrinsics`` artifact (:meth:`IntrinsicsArtifact.load`).
-
-    Raises
-    ------
-    InputError
-        Not an intrinsics artifact, or a key of the wrong shape or value.
-    """
-    return IntrinsicsArtifact.load(path)
 
 
 class _TimeOptions(Protocol):
@@ -230,7 +213,7 @@ def run_poses(
     DegenerateMotionError
         No image shows enough of an AprilGrid or ChArUco target for a pose.
     """
-    cam = read_intrinsics(intrinsics)
+    cam = IntrinsicsArtifact.load(intrinsics)
     stamps = _time_source(config)
     target = _poses_target(config, cam, intrinsics)
     cols, rows, square = 0, 0, 0.0  # the checkerboard's; unused with a target
@@ -481,7 +464,7 @@ def _sfm_camera(intrinsics: Path) -> SfmCamera:
     """The camera of an intrinsics file, checked for COLMAP (an InputError names the file)."""
     from acs_cli.core.sfm import colmap_camera
 
-    cam = read_intrinsics(intrinsics)
+    cam = IntrinsicsArtifact.load(intrinsics)
     sfm_cam = SfmCamera(
         cam.model,
         (int(cam.image_size[0]), int(cam.image_size[1])),

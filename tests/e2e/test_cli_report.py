@@ -22,7 +22,7 @@ from cli_runner import acscal
 
 from acs_cli.core import se3
 from acs_cli.io.poses import PosesArtifact
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from sample_data_gen.render import render_scenario
 from sample_data_gen.writer import SCENARIOS, make_sequence, rig_for_seed, write_scenario
 
@@ -121,7 +121,7 @@ def test_trajectory_of_the_run_matches_the_rendered_truth(
         "--poses-b", run_dir / "cam_b" / "poses_general.npz", "-o", out,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
-    ta, tb, tj = (read_tum(out / f"{n}.tum") for n in ("cam_a", "cam_b", "joint"))
+    ta, tb, tj = (read_trajectory(out / f"{n}.tum", "tum") for n in ("cam_a", "cam_b", "joint"))
     doc = load(out / "trajectory.yaml")
     assert doc["schema"] == "acscal/trajectory"
     n = len(ta)
@@ -172,7 +172,7 @@ def test_trajectory_under_unknown_scale_is_in_a_units(tmp_path: Path) -> None:
     seq = make_sequence(rng, rig_for_seed(seed), "general", frames)
     T_r_a = se3.invert_transforms(seq.T_wa_a[3]) @ seq.T_wa_a
     T_r_b = T_r_a @ seq.T_a_b
-    tb = read_tum(out / "cam_b.tum")
+    tb = read_trajectory(out / "cam_b.tum", "tum")
     np.testing.assert_allclose(tb.T_world_cam[:, :3, 3], mu_a * T_r_b[:, :3, 3], atol=1e-8)
     np.testing.assert_allclose(tb.T_world_cam[:, :3, :3], T_r_b[:, :3, :3], atol=1e-8)
 

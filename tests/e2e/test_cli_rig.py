@@ -11,7 +11,7 @@ from cli_runner import acscal
 
 from acs_cli.core import se3
 from acs_cli.io.rig import RigArtifact
-from acs_cli.io.trajectory import read_tum, write_tum
+from acs_cli.io.trajectory import read_trajectory, write_tum
 from sample_data_gen.writer import write_rig_recording
 
 
@@ -48,7 +48,7 @@ def test_run_calibrates_the_rig_beside_its_truth(recording: Path) -> None:
     assert sorted(f.name for f in traj.iterdir()) == [
         "cam0.tum", "cam1.tum", "cam2.tum", "cam3.tum", "cam4.tum", "j02.tum", "j23.tum"
     ]  # fmt: skip
-    first = {c: read_tum(traj / f"{c}.tum").T_world_cam[0] for c in rig.cameras}
+    first = {c: read_trajectory(traj / f"{c}.tum", "tum").T_world_cam[0] for c in rig.cameras}
     np.testing.assert_allclose(first["cam0"], np.eye(4), atol=1e-9)
     for c, cam in rig.cameras.items():
         np.testing.assert_allclose(first[c], se3.invert_transforms(cam.T_cam_ref), atol=1e-9)
@@ -103,7 +103,7 @@ def test_bad_rig_exits_2_naming_the_key(
 
 
 def test_neighbours_that_never_overlap_in_time_exit_2(tmp_path: Path, recording: Path) -> None:
-    late = read_tum(recording / "cam4.tum")
+    late = read_trajectory(recording / "cam4.tum", "tum")
     write_tum(tmp_path / "cam4_late.tum", late.timestamps + 1000.0, late.T_world_cam)
     cams = "".join(f"  cam{i}: {{poses: {recording / f'cam{i}.tum'}}}\n" for i in range(4))
     cams += f"  cam4: {{poses: {tmp_path / 'cam4_late.tum'}, scale: unknown}}\n"
@@ -190,8 +190,8 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
     res = acscal("trajectory", "--rig", rig_file, "-o", tmp_path / "traj")
     assert res.returncode == 0, res.stderr
     for name in ("cam0", "cam4", "j23"):
-        mine = read_tum(tmp_path / "traj" / f"{name}.tum").T_world_cam
-        run = read_tum(recording / "out" / "trajectories" / f"{name}.tum").T_world_cam
+        mine = read_trajectory(tmp_path / "traj" / f"{name}.tum", "tum").T_world_cam
+        run = read_trajectory(recording / "out" / "trajectories" / f"{name}.tum", "tum").T_world_cam
         # every frame but the reference instant (corrected there by the joint constraints)
         np.testing.assert_allclose(mine[1:], run[1:], atol=1e-6)
         assert np.linalg.norm(mine[0, :3, 3] - run[0, :3, 3]) < 0.1
@@ -279,7 +279,10 @@ def test_a_rig_with_joint_priors_gets_its_bundle_adjustment(tmp_path: Path) -> N
     T_W = rec.rig.T_W_c
     for c in ("cam1", "cam2", "h12"):
         path = tmp_path / "out" / "trajectories" / f"{c}.tum"
-        run, mapped = read_tum(path), read_tum(tmp_path / "t" / f"{c}.tum")
+        run, mapped = (
+            read_trajectory(path, "tum"),
+            read_trajectory(tmp_path / "t" / f"{c}.tum", "tum"),
+        )
         # the rows the bundle adjusted, as the file's note lists them (each camera sees its
         # board there); every one of them is in the mapped file too
         note = path.read_text(encoding="utf-8").splitlines()[1]

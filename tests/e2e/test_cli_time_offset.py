@@ -9,7 +9,7 @@ import pytest
 from cli_runner import acscal
 
 from acs_cli.io.relpose import RelposeArtifact
-from acs_cli.io.trajectory import read_tum, write_kitti, write_tum
+from acs_cli.io.trajectory import read_trajectory, write_kitti, write_tum
 from sample_data_gen.acs_sim import add_pose_noise, make_rig, smooth_general_sequence
 
 
@@ -61,7 +61,7 @@ def test_the_offset_needs_timestamps_and_the_refined_method(
 ) -> None:
     a, b = offset_files
     kitti = tmp_path / "b.kitti"
-    write_kitti(kitti, read_tum(b).T_world_cam)  # KITTI files carry no timestamps
+    write_kitti(kitti, read_trajectory(b, "tum").T_world_cam)  # KITTI files carry no timestamps
     res = acscal(
         "relpose", "--self-calibrate", "--estimate-time-offset", "--poses-a", a,
         "--poses-b", kitti, "--format-b", "kitti", "-o", tmp_path / "x.yaml",

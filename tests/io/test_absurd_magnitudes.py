@@ -14,6 +14,7 @@ import copy
 import io
 import re
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.target import parse_target_short, read_target_yaml
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from acs_cli.io.validate import as_covariance3
 from acs_cli.stages.joint import read_joint
 from acs_cli.stages.relpose import load_prior
@@ -136,7 +137,7 @@ def test_tum_timestamps_in_nanoseconds_are_refused(tmp_path: Path) -> None:
         "1403636579763555584 0 0 0 0 0 0 1\n1403636579813555456 0.1 0 0 0 0 0 1\n",
         encoding="utf-8",
     )
-    err = _refused(read_tum, path, "'timestamps'")
+    err = _refused(partial(read_trajectory, fmt="tum"), path, "'timestamps'")
     assert "wrong unit" in str(err)
 
 
@@ -201,7 +202,7 @@ def _numbers_replaced(kind: str) -> list[tuple[str, bytes]]:
 
 
 @pytest.mark.parametrize(
-    "kind", [*(k for k in YAML_KINDS if k != "run_config"), "opencv", "tum", "kitti", "colmap"]
+    "kind", [*(k for k in YAML_KINDS if k != "run_config"), "tum", "kitti", "colmap"]
 )
 def test_every_number_of_absurd_magnitude_reads_or_is_refused(tmp_path: Path, kind: str) -> None:
     """Each number of a valid file, in turn, replaced by an absurd value: every reader of the
@@ -224,6 +225,6 @@ def test_every_number_of_absurd_magnitude_reads_or_is_refused(tmp_path: Path, ki
 
 def test_seed_numbers_are_found() -> None:
     """The test above replaces numbers in every kind it lists (the seeds hold some)."""
-    for kind in ("joint", "relpose", "rig", "intrinsics", "tum", "opencv"):
+    for kind in ("joint", "relpose", "rig", "intrinsics", "tum"):
         assert len(_numbers_replaced(kind)) >= 5 * len(ABSURD), kind
     assert re.search(rb"\d", seeds()["colmap"])

@@ -17,7 +17,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from functools import cache
+from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -33,23 +33,18 @@ from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, read_yaml_artifact, write_yaml_artifact
 from acs_cli.io.detections import Detection, read_detections, write_detections
-from acs_cli.io.export import read_opencv_yaml, write_opencv_yaml
+from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import RigArtifact, RigCameraResult, RigJointResult
 from acs_cli.io.trajectory import (
     Trajectory,
-    read_colmap,
-    read_kitti,
-    read_npz_poses,
     read_trajectory,
-    read_tum,
     write_kitti,
     write_npz_poses,
     write_tum,
 )
 from acs_cli.stages.export import run_export, run_rig_export
 from acs_cli.stages.joint import read_joint
-from acs_cli.stages.poses import read_intrinsics
 from acs_cli.stages.relpose import load_prior
 from acs_cli.stages.run import STATE_FILE, load_run_config
 
@@ -180,11 +175,6 @@ def seeds() -> dict[str, bytes]:
             },
         )
         out["relpose"] = (root / "relpose.yaml").read_bytes()
-        write_opencv_yaml(
-            root / "cv.yaml",
-            {"T_b_a": np.array(T_b_a), "phi_ba": 0.75, "length_unit": "m", "reference": 3},
-        )
-        out["opencv"] = (root / "cv.yaml").read_bytes()
         Tc = _poses(3, 5)
         Tc[0] = np.eye(4)
         cams = {
@@ -305,10 +295,6 @@ def _rig_kalibr(path: Path) -> None:
     run_rig_export(path, path.with_name("rig_chain.yaml"), "kalibr", intrinsics=cams)
 
 
-def _opencv(path: Path) -> None:
-    read_opencv_yaml(path, ["T_b_a", "phi_ba", "length_unit"])
-
-
 def _joint_prior(path: Path) -> None:
     load_prior(path, metric=False)
 
@@ -319,26 +305,25 @@ def _run_config(path: Path) -> None:
 
 # (seed key, file name, reader)
 READERS: list[tuple[str, str, Callable[[Path], Any]]] = [
-    ("tum", "traj.tum", read_tum),
+    ("tum", "traj.tum", partial(read_trajectory, fmt="tum")),
     ("tum", "traj.txt", read_trajectory),
-    ("kitti", "traj.kitti", read_kitti),
+    ("kitti", "traj.kitti", partial(read_trajectory, fmt="kitti")),
     ("kitti", "kitti.txt", read_trajectory),
-    ("colmap", "images.txt", read_colmap),
+    ("colmap", "images.txt", partial(read_trajectory, fmt="colmap")),
     ("colmap", "images.txt", read_trajectory),
-    ("npz", "poses.npz", read_npz_poses),
+    ("npz", "poses.npz", partial(read_trajectory, fmt="npz")),
     ("npz", "poses.npz", read_trajectory),
     ("npz", "poses.npz", PosesArtifact.load),
     ("detections", "x.detections.npz", _read_detections),
     ("run_config", "run.yaml", _run_config),
     ("run_state", STATE_FILE, _check_state),
-    ("intrinsics", "intrinsics.yaml", read_intrinsics),
+    ("intrinsics", "intrinsics.yaml", IntrinsicsArtifact.load),
     ("intrinsics", "intrinsics.yaml", lambda p: read_yaml_artifact(p, "intrinsics", ["model"])),
     ("joint", "joint.yaml", read_joint),
     ("joint", "joint.yaml", _joint_prior),
     ("relpose", "relpose.yaml", read_joint),
     ("relpose", "relpose.yaml", _export_opencv),
     ("relpose", "relpose.yaml", _export_kalibr),
-    ("opencv", "cv.yaml", _opencv),
     ("rig", "rig.yaml", RigArtifact.load),
     ("rig", "rig.yaml", _rig_urdf),
     ("rig", "rig.yaml", _rig_kalibr),
@@ -674,7 +659,7 @@ def test_mutated_yaml_structure(kind: str, edits: list[tuple[int, str, int]]) ->
     _only_input_error(kind, text.encode())
 
 
-@pytest.mark.parametrize("kind", [*YAML_KINDS, "opencv"])
+@pytest.mark.parametrize("kind", YAML_KINDS)
 def test_yaml_edge_documents(kind: str) -> None:
     """YAML that parses to odd things: deep nesting, anchors, tags, multiple documents."""
     blobs = [

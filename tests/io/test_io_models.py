@@ -33,7 +33,7 @@ from acs_cli.io.relpose import (
     Scale,
     load_joint_section,
 )
-from acs_cli.io.trajectory import Trajectory, read_npz_poses
+from acs_cli.io.trajectory import Trajectory, read_trajectory
 from acs_cli.io.validate import (
     as_covariance3,
     as_int,
@@ -337,7 +337,7 @@ def test_poses_round_trip(tmp_path: Path, with_corners: bool) -> None:
     else:
         assert loaded.corners is None and loaded.board_points is None
     # the same file through the trajectory reader
-    np.testing.assert_allclose(read_npz_poses(p).T_world_cam, loaded.trajectory.T_world_cam)
+    np.testing.assert_allclose(read_trajectory(p, "npz").T_world_cam, loaded.trajectory.T_world_cam)
     assert "6 posed images" in loaded.summary()
 
 

@@ -18,11 +18,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.trajectory import (
     Trajectory,
-    read_colmap,
-    read_kitti,
-    read_npz_poses,
     read_trajectory,
-    read_tum,
     write_kitti,
     write_npz_poses,
     write_tum,
@@ -61,7 +57,7 @@ def test_tum_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
     t = 1.7e9 + np.cumsum(rng.uniform(0.01, 0.1, 20))
     path = tmp_path / "a.tum"
     write_tum(path, t, T)
-    traj = read_tum(path)
+    traj = read_trajectory(path, "tum")
     assert traj.format == "tum" and traj.has_timestamps and traj.names == ()
     assert traj.source == str(path)
     np.testing.assert_allclose(traj.timestamps, t, atol=1e-9, rtol=0)
@@ -74,7 +70,7 @@ def test_tum_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
 def test_tum_comments_blank_lines(tmp_path: Path) -> None:
     path = tmp_path / "a.txt"
     path.write_text(TUM_GOOD)
-    traj = read_tum(path)
+    traj = read_trajectory(path, "tum")
     assert len(traj) == 3
     np.testing.assert_allclose(traj.timestamps, [1, 2, 3])
     np.testing.assert_allclose(traj.T_world_cam[2, :3, 3], [2, 0, 0])
@@ -86,7 +82,7 @@ def test_tum_comments_blank_lines(tmp_path: Path) -> None:
 def test_tum_crlf_and_bom(tmp_path: Path) -> None:
     path = tmp_path / "a.txt"
     path.write_bytes(b"\xef\xbb\xbf" + TUM_GOOD.replace("\n", "\r\n").encode())
-    assert len(read_tum(path)) == 3
+    assert len(read_trajectory(path, "tum")) == 3
 
 
 @pytest.mark.parametrize(
@@ -108,14 +104,14 @@ def test_tum_malformed(tmp_path: Path, content: str, line: int, pattern: str) ->
     path = tmp_path / "bad.txt"
     path.write_bytes(content.encode("latin-1"))
     with pytest.raises(InputError, match=pattern) as info:
-        read_tum(path)
+        read_trajectory(path, "tum")
     assert_line(info, path, line)
 
 
 def test_tum_quaternion_within_tolerance_is_normalised(tmp_path: Path) -> None:
     path = tmp_path / "a.txt"
     path.write_text("1 0 0 0 0 0 0 1.0005\n")
-    traj = read_tum(path)
+    traj = read_trajectory(path, "tum")
     np.testing.assert_allclose(traj.T_world_cam[0], np.eye(4), atol=1e-15)
 
 
@@ -124,14 +120,14 @@ def test_tum_empty(tmp_path: Path, content: str) -> None:
     path = tmp_path / "empty.txt"
     path.write_text(content)
     with pytest.raises(InputError, match="no poses") as info:
-        read_tum(path)
+        read_trajectory(path, "tum")
     assert info.value.path == str(path)
 
 
 def test_missing_file(tmp_path: Path) -> None:
-    for reader in (read_tum, read_kitti, read_colmap, read_npz_poses, read_trajectory):
+    for fmt in ("tum", "kitti", "colmap", "npz", "auto"):
         with pytest.raises(InputError, match="no such file"):
-            reader(tmp_path / "nope.txt")
+            read_trajectory(tmp_path / "nope.txt", fmt)
 
 
 def test_write_tum_rejects_bad_input(tmp_path: Path) -> None:
@@ -158,7 +154,7 @@ def test_tum_round_trip_property(n: int, seed: int, t0: float, scale: float) -> 
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "p.tum"
         write_tum(path, t, T)
-        traj = read_tum(path)
+        traj = read_trajectory(path, "tum")
     np.testing.assert_allclose(traj.timestamps, t, atol=1e-9, rtol=0)
     np.testing.assert_allclose(traj.T_world_cam[:, :3, :3], T[:, :3, :3], atol=1e-9, rtol=0)
     np.testing.assert_allclose(traj.T_world_cam[:, :3, 3], T[:, :3, 3], atol=1e-9, rtol=0)
@@ -171,7 +167,7 @@ def test_kitti_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
     T = random_poses(rng, 15)
     path = tmp_path / "k.txt"
     write_kitti(path, T)
-    traj = read_kitti(path)
+    traj = read_trajectory(path, "kitti")
     assert traj.format == "kitti" and not traj.has_timestamps
     np.testing.assert_array_equal(traj.timestamps, np.arange(15.0))
     np.testing.assert_allclose(traj.T_world_cam, T, atol=1e-12, rtol=0)
@@ -181,7 +177,7 @@ def test_kitti_low_precision_is_reorthonormalised(tmp_path: Path, rng: np.random
     T = random_poses(rng, 5)
     path = tmp_path / "k.txt"
     np.savetxt(path, T[:, :3, :].reshape(5, 12), fmt="%.6e")
-    traj = read_kitti(path)
+    traj = read_trajectory(path, "kitti")
     R = traj.T_world_cam[:, :3, :3]
     np.testing.assert_allclose(
         np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-12
@@ -209,7 +205,7 @@ def test_kitti_malformed(tmp_path: Path, mutate: object, pattern: str) -> None:
     path = tmp_path / "k.txt"
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match=pattern) as info:
-        read_kitti(path)
+        read_trajectory(path, "kitti")
     assert_line(info, path, 3)
 
 
@@ -218,7 +214,7 @@ def test_kitti_reflection(tmp_path: Path) -> None:
     path = tmp_path / "k.txt"
     path.write_text(_kitti_line(np.eye(4)) + "\n" + _kitti_line(T) + "\n")
     with pytest.raises(InputError, match="reflection") as info:
-        read_kitti(path)
+        read_trajectory(path, "kitti")
     assert_line(info, path, 2)
 
 
@@ -251,7 +247,7 @@ def test_colmap_round_trip_sorted_with_timestamps(tmp_path: Path, rng: np.random
     names = [f"frame_{s}.png" for s in stamps]
     write_images_txt(tmp_path / "images.txt", names, T)
     for arg in (tmp_path, tmp_path / "images.txt"):
-        traj = read_colmap(arg)
+        traj = read_trajectory(arg, "colmap")
         order = np.argsort(stamps)
         assert traj.names == tuple(names[k] for k in order)
         assert traj.has_timestamps
@@ -265,7 +261,7 @@ def test_colmap_decimal_timestamps_and_subfolders(tmp_path: Path, rng: np.random
     T = random_poses(rng, 3)
     names = ["left/1520000000.250.png", "left/1520000000.125.png", "left/1520000001.000.png"]
     write_images_txt(tmp_path / "images.txt", names, T)
-    traj = read_colmap(tmp_path)
+    traj = read_trajectory(tmp_path, "colmap")
     np.testing.assert_allclose(traj.timestamps, [1520000000.125, 1520000000.25, 1520000001.0])
 
 
@@ -273,7 +269,7 @@ def test_colmap_names_without_numbers_use_index(tmp_path: Path, rng: np.random.G
     T = random_poses(rng, 3)
     names = ["c.png", "a.png", "b.png"]
     write_images_txt(tmp_path / "images.txt", names, T, points=False)
-    traj = read_colmap(tmp_path / "images.txt")
+    traj = read_trajectory(tmp_path / "images.txt", "colmap")
     assert traj.names == ("a.png", "b.png", "c.png")
     assert not traj.has_timestamps
     np.testing.assert_array_equal(traj.timestamps, [0.0, 1.0, 2.0])
@@ -283,7 +279,7 @@ def test_colmap_names_without_numbers_use_index(tmp_path: Path, rng: np.random.G
 def test_colmap_last_points_line_missing(tmp_path: Path) -> None:
     path = tmp_path / "images.txt"
     path.write_text("# c\n1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 1 2 3 1 b.png")
-    traj = read_colmap(path)
+    traj = read_trajectory(path, "colmap")
     np.testing.assert_allclose(traj.T_world_cam[1, :3, 3], [-1, -2, -3])
 
 
@@ -304,19 +300,19 @@ def test_colmap_malformed(tmp_path: Path, content: str, line: int, pattern: str)
     path = tmp_path / "images.txt"
     path.write_text(content)
     with pytest.raises(InputError, match=pattern) as info:
-        read_colmap(path)
+        read_trajectory(path, "colmap")
     assert_line(info, path, line)
 
 
 def test_colmap_empty_and_missing(tmp_path: Path) -> None:
     (tmp_path / "images.txt").write_text("# nothing\n")
     with pytest.raises(InputError, match="no images"):
-        read_colmap(tmp_path)
+        read_trajectory(tmp_path, "colmap")
     empty = tmp_path / "sub"
     empty.mkdir()
     (empty / "images.bin").write_bytes(b"\0")
     with pytest.raises(InputError, match="model_converter"):
-        read_colmap(empty)
+        read_trajectory(empty, "colmap")
 
 
 # ----------------------------------------------------------------------------- NPZ
@@ -331,7 +327,7 @@ def test_npz_round_trip(tmp_path: Path, rng: np.random.Generator) -> None:
     path = tmp_path / "poses.npz"
     header = {"schema": "acscal/poses", "inputs": {"images": {"path": "imgs", "sha256": "00"}}}
     write_npz_poses(path, traj, {"reprojection_rms": rms}, header=header)
-    back = read_npz_poses(path)
+    back = read_trajectory(path, "npz")
     assert back.format == "npz" and back.has_timestamps and back.names == names
     np.testing.assert_allclose(back.T_world_cam, T, atol=1e-14)
     np.testing.assert_array_equal(back.timestamps, t)
@@ -346,7 +342,7 @@ def test_npz_index_trajectory_round_trip(tmp_path: Path, rng: np.random.Generato
     traj = Trajectory(np.arange(4.0), random_poses(rng, 4), "x", "kitti", False)
     path = tmp_path / "p.out"  # a suffix other than .npz is kept as is
     write_npz_poses(path, traj)
-    back = read_npz_poses(path)
+    back = read_trajectory(path, "npz")
     assert not back.has_timestamps and back.names == ()
     assert PosesArtifact.load(path).header == {}
     assert [p.name for p in tmp_path.iterdir()] == ["p.out"]
@@ -356,11 +352,11 @@ def test_npz_plain(tmp_path: Path, rng: np.random.Generator) -> None:
     T = random_poses(rng, 3)
     path = tmp_path / "plain.npz"
     np.savez(path, T_world_cam=T.astype(np.float32))
-    traj = read_npz_poses(path)
+    traj = read_trajectory(path, "npz")
     assert not traj.has_timestamps
     np.testing.assert_allclose(traj.T_world_cam, T, atol=1e-6)
     np.savez(path, T_world_cam=T, timestamps=np.array([0.5, 1.0, 1.5]))
-    traj = read_npz_poses(path)
+    traj = read_trajectory(path, "npz")
     assert traj.has_timestamps
     np.testing.assert_array_equal(traj.timestamps, [0.5, 1.0, 1.5])
 
@@ -403,7 +399,7 @@ def test_npz_malformed(tmp_path: Path, arrays: dict[str, np.ndarray], pattern: s
     path = tmp_path / "bad.npz"
     np.savez(path, **arrays)  # type: ignore[arg-type]
     with pytest.raises(InputError, match=pattern) as info:
-        read_npz_poses(path)
+        read_trajectory(path, "npz")
     assert info.value.path == str(path)
 
 
@@ -418,12 +414,12 @@ def test_npz_truncated_and_garbage(tmp_path: Path, rng: np.random.Generator) -> 
         path = tmp_path / f"bad{k}.npz"
         path.write_bytes(blob)
         with pytest.raises(InputError) as info:
-            read_npz_poses(path)
+            read_trajectory(path, "npz")
         assert info.value.path == str(path)
     npy = tmp_path / "single.npy"
     np.save(npy, np.eye(4)[None])
     with pytest.raises(InputError, match=r"single \.npy"):
-        read_npz_poses(npy)
+        read_trajectory(npy, "npz")
 
 
 # ----------------------------------------------------------------------------- dispatch
@@ -436,7 +432,7 @@ def test_read_trajectory_auto(tmp_path: Path, rng: np.random.Generator) -> None:
     col = tmp_path / "model"
     col.mkdir()
     write_images_txt(col / "images.txt", [f"{k}.png" for k in range(4)], T)
-    write_npz_poses(tmp_path / "c.npz", read_tum(tmp_path / "a.txt"))
+    write_npz_poses(tmp_path / "c.npz", read_trajectory(tmp_path / "a.txt", "tum"))
     assert read_trajectory(tmp_path / "a.txt").format == "tum"
     assert read_trajectory(tmp_path / "b.txt").format == "kitti"
     assert read_trajectory(col).format == "colmap"
@@ -498,17 +494,17 @@ def test_trajectory_validation() -> None:
 def test_readers_raise_only_input_error(data: bytes | str) -> None:
     blob = data.encode() if isinstance(data, str) else data
     with tempfile.TemporaryDirectory() as d:
-        for name, reader in (
-            ("t.txt", read_tum),
-            ("k.txt", read_kitti),
-            ("images.txt", read_colmap),
-            ("p.npz", read_npz_poses),
-            ("auto.txt", read_trajectory),
+        for name, fmt in (
+            ("t.txt", "tum"),
+            ("k.txt", "kitti"),
+            ("images.txt", "colmap"),
+            ("p.npz", "npz"),
+            ("auto.txt", "auto"),
         ):
             path = Path(d) / name
             path.write_bytes(blob)
             try:
-                reader(path)
+                read_trajectory(path, fmt)
             except InputError as exc:
                 assert "\n" not in str(exc)
 
@@ -542,8 +538,10 @@ def test_colmap_names_of_several_words_and_missing_points_lines(tmp_path: Path) 
     lines = [f"{k} 1 0 0 0 {0.1 * k} 0 0 1 my left image {k}.png" for k in (1, 2, 3, 4)]
     good = tmp_path / "images.txt"
     good.write_text("".join(f"{ln}\n\n" for ln in lines))
-    assert read_colmap(good).names == tuple(f"my left image {k}.png" for k in (1, 2, 3, 4))
+    assert read_trajectory(good, "colmap").names == tuple(
+        f"my left image {k}.png" for k in (1, 2, 3, 4)
+    )
     bad = tmp_path / "no_points.txt"
     bad.write_text("".join(f"{ln}\n" for ln in lines))
     with pytest.raises(InputError, match="POINTS2D"):
-        read_colmap(bad)
+        read_trajectory(bad, "colmap")

@@ -15,8 +15,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.timestamps import image_times, read_timestamps_file, stamp_from_name
 from acs_cli.io.trajectory import (
     Trajectory,
-    read_npz_poses,
-    read_tum,
+    read_trajectory,
     write_npz_poses,
     write_tum,
 )
@@ -68,7 +67,7 @@ def test_nanosecond_names_keep_every_digit_through_npz_and_tum(tmp_path: Path) -
         timestamps_ns=times.nanoseconds,
     )
     write_npz_poses(tmp_path / "p.npz", traj)
-    back = read_npz_poses(tmp_path / "p.npz")
+    back = read_trajectory(tmp_path / "p.npz", "npz")
     assert back.timestamps_ns is not None
     assert back.timestamps_ns.tolist() == times.nanoseconds.tolist()
     write_tum(
@@ -76,7 +75,7 @@ def test_nanosecond_names_keep_every_digit_through_npz_and_tum(tmp_path: Path) -
     )
     first = (tmp_path / "p.tum").read_text().splitlines()[1].split()[0]
     assert first == "1403636579.763555584"
-    tum = read_tum(tmp_path / "p.tum")
+    tum = read_trajectory(tmp_path / "p.tum", "tum")
     assert tum.timestamps_ns is not None
     assert tum.timestamps_ns.tolist() == times.nanoseconds.tolist()
 
@@ -92,7 +91,7 @@ def test_tum_round_trip_of_any_nanoseconds(values: list[int]) -> None:
         if np.any(np.diff(seconds) <= 0):
             return  # nanoseconds closer than a double resolves: not a valid trajectory
         write_tum(path, seconds, _poses(ns.size), timestamps_ns=ns)
-        back = read_tum(path)
+        back = read_trajectory(path, "tum")
     assert back.timestamps_ns is not None
     assert back.timestamps_ns.tolist() == ns.tolist()
 
@@ -106,7 +105,7 @@ def test_frame_numbers_are_not_seconds_and_say_so(tmp_path: Path) -> None:
     write_tum(tmp_path / "f.tum", times.seconds, _poses(3), note="times are frame numbers (x)")
     text = (tmp_path / "f.tum").read_text()
     assert text.splitlines()[1].startswith("# ") and "frame numbers" in text
-    back = read_tum(tmp_path / "f.tum")
+    back = read_trajectory(tmp_path / "f.tum", "tum")
     assert back.timestamps.tolist() == [10.0, 11.0, 13.0] and back.time_unit == "frame"
 
 

@@ -90,11 +90,8 @@ def test_fixed_joint_residuals_vanish_on_exact_data(rng: np.random.Generator) ->
     np.testing.assert_allclose(path, np.broadcast_to(seq.joint_in_world_a, (15, 3)), atol=TOL)
 
 
-def test_relative_to_reference_and_scaling(rng: np.random.Generator) -> None:
+def test_scaling(rng: np.random.Generator) -> None:
     seq = general_sequence(rng, make_rig(rng), n=6)
-    rel = at.relative_to_reference(seq.T_wa_a, 2)
-    np.testing.assert_allclose(rel[2], np.eye(4), atol=TOL)
-    np.testing.assert_allclose(seq.T_wa_a[2] @ rel, seq.T_wa_a, atol=TOL)
     scaled = at.scale_translations(seq.T_wa_a, 3.0)
     np.testing.assert_allclose(scaled[:, :3, 3], 3.0 * seq.T_wa_a[:, :3, 3])
     np.testing.assert_array_equal(scaled[:, :3, :3], seq.T_wa_a[:, :3, :3])

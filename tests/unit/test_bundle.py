@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from acs_cli.core import se3
-from acs_cli.core.bundle import intrinsics_vector, project_points, right_jacobians
+from acs_cli.core.bundle import intrinsics_vector, right_jacobians
 from acs_cli.core.camera_models import camera_model
 from acs_cli.core.joint import estimate_joint_fixed
 from acs_cli.core.paper import algorithm_2_pivot
@@ -26,6 +26,8 @@ from sample_data_gen.acs_sim import random_unit_vectors
 
 W, H = 1024, 768
 BOARD = np.array([[c * 0.04, r * 0.04, 0.0] for r in range(6) for c in range(9)])
+
+PINHOLE = camera_model("pinhole")
 
 
 #: A lens of each model: focal length (px) and distortion (the pinhole one is drawn).
@@ -53,7 +55,7 @@ def _scene(rng: np.random.Generator, sigma_px: float, n: int = 20, model: str = 
         angle = np.radians(rng.uniform(5, 25))
         R = se3.matrix_from_rotvec(random_unit_vectors(rng, 1)[0] * angle) @ R_rest
         x_cam = (BOARD - p_w) @ R + o
-        uv = project_points(x_cam, intrinsics_vector(K, dist, model), model)
+        uv = camera_model(model).project(x_cam, intrinsics_vector(K, dist, model))
         if np.any(uv < 5) or np.any(uv[:, 0] > W - 5) or np.any(uv[:, 1] > H - 5):
             continue
         Rs.append(R)
@@ -98,18 +100,18 @@ def _plain_chain(s: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
 def test_projection_jacobians_match_finite_differences(rng: np.random.Generator) -> None:
     intr = np.array([900, 910, 500, 380, -0.2, 0.05, 0.001, -0.002, 0.01])
     X = rng.normal(size=(6, 3)) * 0.3 + [0, 0, 1.0]
-    Di, Dp = camera_model("pinhole").jacobians(X, intr)
-    h = 1e-6
-    num_i = np.stack([(project_points(X, intr + e * h) - project_points(X, intr - e * h)) / (2 * h)
+    Di, Dp = PINHOLE.jacobians(X, intr)
+    h, project = 1e-6, PINHOLE.project
+    num_i = np.stack([(project(X, intr + e * h) - project(X, intr - e * h)) / (2 * h)
                       for e in np.eye(9)], axis=-1)  # fmt: skip
-    num_p = np.stack([(project_points(X + e * h, intr) - project_points(X - e * h, intr)) / (2 * h)
+    num_p = np.stack([(project(X + e * h, intr) - project(X - e * h, intr)) / (2 * h)
                       for e in np.eye(3)], axis=-1)  # fmt: skip
     np.testing.assert_allclose(Di, num_i, atol=1e-4)
     np.testing.assert_allclose(Dp, num_p, atol=1e-3)
     # the projection is OpenCV's
     K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1]])
     uv, _ = cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, intr[4:])
-    np.testing.assert_allclose(project_points(X, intr), uv.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(PINHOLE.project(X, intr), uv.reshape(-1, 2), atol=1e-9)
 
 
 def test_right_jacobian(rng: np.random.Generator) -> None:
@@ -274,7 +276,7 @@ def test_frames_rejected_on_their_poses_are_judged_again_on_their_corners(
     moved = 5  # a frame taken with the joint elsewhere: its corners fit no rotation
     R = s["T"][moved, :3, :3]
     x_cam = (BOARD - (s["p_w"] + np.array([0.02, -0.01, 0.0]))) @ R + s["o"]
-    corners[moved] = project_points(x_cam, s["intrinsics"]) + rng.normal(0, 0.1, (54, 2))
+    corners[moved] = PINHOLE.project(x_cam, s["intrinsics"]) + rng.normal(0, 0.1, (54, 2))
     intr = IntrinsicsArtifact(
         model="pinhole", image_size=(W, H), camera_matrix=s["K"], distortion=s["dist"]
     )

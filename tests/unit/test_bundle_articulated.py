@@ -11,7 +11,8 @@ import pytest
 from test_bundle import LENSES, hide_corners  # the same lenses and partial views
 
 from acs_cli.core import se3
-from acs_cli.core.bundle import intrinsics_vector, project_points
+from acs_cli.core.bundle import intrinsics_vector
+from acs_cli.core.camera_models import camera_model
 from acs_cli.core.overlap import OVERLAP_RIG, estimate_overlap_rig, joint_of_rig
 from acs_cli.core.relpose import (
     TWO_BODY_JOINT,
@@ -105,11 +106,11 @@ def _scene(
         T_a_b = np.eye(4)
         T_a_b[:3, :3], T_a_b[:3, 3] = R_ab, o_a - R_ab @ o_b
         T_wb_b = T_wb_wa @ T_wa_a @ T_a_b
-        ua = project_points(
-            BOARD @ np.linalg.inv(T_wa_a)[:3, :3].T + np.linalg.inv(T_wa_a)[:3, 3], ia, models[0]
+        ua = camera_model(models[0]).project(
+            BOARD @ np.linalg.inv(T_wa_a)[:3, :3].T + np.linalg.inv(T_wa_a)[:3, 3], ia
         )
         Tbw = np.linalg.inv(T_wb_b)
-        ub = project_points(BOARD @ Tbw[:3, :3].T + Tbw[:3, 3], ib, models[1])
+        ub = camera_model(models[1]).project(BOARD @ Tbw[:3, :3].T + Tbw[:3, 3], ib)
         if not (_in_view(ua) and _in_view(ub)):
             continue
         Ta.append(T_wa_a)

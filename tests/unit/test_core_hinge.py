@@ -13,7 +13,6 @@ from acs_cli.core.joint import (
     HINGE_RATIO,
     HingeEstimate,
     estimate_hinge_fixed,
-    estimate_hinge_fixed_pair,
     estimate_joint_fixed,
     fixed_joint_warnings,
     perpendicular_basis,
@@ -240,25 +239,25 @@ def test_pair_on_one_hinge(rng: np.random.Generator) -> None:
     u_b = rig.R0.T @ u_a  # the hinge axis in B's frame (R_a_b = Q R0, Q about u_a)
     a = _hinge_session(rng, 40, rig.o_a, u_a)
     b = _hinge_session(rng, 25, rig.o_b, u_b)  # not paired with A's
-    est = estimate_hinge_fixed_pair(a.T_w_c, b.T_w_c)
-    assert est.method == "refined" and est.b is not None
-    _check_exact(est.a, a, 40)
-    _check_exact(est.b, b, 25)
+    est_a, est_b = estimate_hinge_fixed(a.T_w_c), estimate_hinge_fixed(b.T_w_c)
+    assert est_a.method == "refined"
+    _check_exact(est_a, a, 40)
+    _check_exact(est_b, b, 25)
     # the two nearest points are one point of the rig only when the joint is there: both
     # lie on the same line, so B's point maps onto A's line
     T_a_b = rig.T_a_b(np.eye(3)[None])[0]
-    p = se3.transform_points(T_a_b, est.b.point_in_cam)
-    d = p - est.a.point_in_cam
+    p = se3.transform_points(T_a_b, est_b.point_in_cam)
+    d = p - est_a.point_in_cam
     np.testing.assert_allclose(d - (d @ u_a) * u_a, np.zeros(3), atol=1e-9)
-    one = estimate_hinge_fixed_pair(a.T_w_c, method="paper")
-    assert one.b is None and one.method == "paper"
-    np.testing.assert_allclose(one.a.point_in_cam, a.nearest_point, atol=1e-9)
+    one = estimate_hinge_fixed(a.T_w_c, method="paper")
+    assert one.method == "paper"
+    np.testing.assert_allclose(one.point_in_cam, a.nearest_point, atol=1e-9)
 
 
-def test_pair_names_the_camera(rng: np.random.Generator) -> None:
+def test_a_refusal_names_the_camera(rng: np.random.Generator) -> None:
     a = _random_hinge(rng, 20)
     with pytest.raises(DegenerateMotionError, match="camera B"):
-        estimate_hinge_fixed_pair(a.T_w_c, a.T_w_c[:2])
+        estimate_hinge_fixed(a.T_w_c[:2], "camera B")
 
 
 # ----------------------------------------------------------------------------- a near-hinge

@@ -9,7 +9,7 @@ import pytest
 
 from acs_cli.core import se3
 from acs_cli.io.artifacts import read_yaml_artifact
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from sample_data_gen.__main__ import main
 from sample_data_gen.writer import (
     SAMPLE_MU_A,
@@ -20,8 +20,8 @@ from sample_data_gen.writer import (
 
 
 def _load(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    a = read_tum(folder / "cam_a.tum")
-    b = read_tum(folder / "cam_b.tum")
+    a = read_trajectory(folder / "cam_a.tum", "tum")
+    b = read_trajectory(folder / "cam_b.tum", "tum")
     truth = read_yaml_artifact(folder / "truth.yaml", "truth")
     np.testing.assert_array_equal(a.timestamps, b.timestamps)
     return a.T_world_cam, b.T_world_cam, a.timestamps, truth

@@ -10,7 +10,7 @@ import yaml
 
 from acs_cli.core import se3
 from acs_cli.io.artifacts import read_yaml_artifact
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from sample_data_gen.__main__ import main
 from sample_data_gen.rig_sim import SAMPLE_JOINTS
 from sample_data_gen.writer import RIG_NOISE, write_rig_recording
@@ -31,7 +31,7 @@ def test_rig_files_truth_and_tum(tmp_path: Path) -> None:
     )
     # TUM round trip: what the file holds is the recording's trajectory of each camera
     for c in CAMS:
-        traj = read_tum(out / f"{c}.tum")
+        traj = read_trajectory(out / f"{c}.tum", "tum")
         np.testing.assert_allclose(traj.timestamps, rec.timestamps, atol=1e-9)
         np.testing.assert_allclose(traj.T_world_cam, rec.T_wc_c[c], atol=1e-12)
     # truth matches the recording
@@ -82,7 +82,7 @@ def test_rig_noise_and_scale(tmp_path: Path) -> None:
     """The files carry the noise asked for (0.3 deg, 1 cm per axis) and cam4's scale."""
     rec = write_rig_recording(tmp_path, seed=1, frames=400)
     for c in ("cam0", "cam4"):  # metric, and unknown scale
-        T_file = read_tum(tmp_path / f"{c}.tum").T_world_cam
+        T_file = read_trajectory(tmp_path / f"{c}.tum", "tum").T_world_cam
         T_W = rec.T_W_c[c]
         # file = [R_G R_W Exp(n_r), mu (R_G t_W + t_G + n_t)] with a random world G
         R_G, _ = se3.project_to_rotation(
@@ -154,7 +154,7 @@ def test_cli_rig(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "rig:" in capsys.readouterr().out
     truth = read_yaml_artifact(tmp_path / "r" / "truth.yaml", "rig_truth")
     assert truth["n_frames"] == 7 and truth["seed"] == 2
-    assert len(read_tum(tmp_path / "r" / "cam3.tum")) == 7
+    assert len(read_trajectory(tmp_path / "r" / "cam3.tum", "tum")) == 7
     assert main([str(tmp_path / "d"), "--rig"]) == 0
     truth = read_yaml_artifact(tmp_path / "d" / "truth.yaml", "rig_truth")
     assert truth["n_frames"] == 100

@@ -12,7 +12,7 @@ import pytest
 
 from acs_cli.core import se3
 from acs_cli.io.artifacts import read_yaml_artifact
-from acs_cli.io.trajectory import read_tum
+from acs_cli.io.trajectory import read_trajectory
 from sample_data_gen.__main__ import main
 from sample_data_gen.textured import (
     ROOM_SIZE,
@@ -59,7 +59,7 @@ def test_files_and_truth_written(sample: Path) -> None:
         assert 0.8 * SIZE[0] <= K[0, 0] <= 0.9 * SIZE[0]
         T = np.array(cam["T_world_cam"])
         assert T.shape == (6, 4, 4)
-        traj = read_tum(sample / tum)
+        traj = read_trajectory(sample / tum, "tum")
         assert np.allclose(traj.timestamps, stamps)
         assert np.allclose(traj.T_world_cam, T, atol=1e-6)
         for i in range(6):
@@ -202,7 +202,7 @@ def test_time_offset_convention(tmp_path: Path) -> None:
         diff = np.abs(_image(late, "cam_b", i).astype(int) - _image(sync, "cam_b", i + 2))
         assert diff.max() <= 1
     # B's file keeps B's own stamps; the joint holds at equal rig times
-    assert np.allclose(read_tum(late / "truth_b.tum").timestamps, np.arange(6) / FPS)
+    assert np.allclose(read_trajectory(late / "truth_b.tum", "tum").timestamps, np.arange(6) / FPS)
     T_a = np.array(tl["cam_a"]["T_world_cam"])
     T_b_at_a = np.array(tl["T_world_b_at_a_times"])
     o_a, o_b = (np.array(tl["joint"][k]) for k in ("position_in_a", "position_in_b"))

@@ -18,7 +18,8 @@ import pytest
 
 import sample_data_gen.acs_sim as sim
 from acs_cli.core import se3
-from acs_cli.core.bundle import intrinsics_vector, project_points
+from acs_cli.core.bundle import intrinsics_vector
+from acs_cli.core.camera_models import camera_model
 from acs_cli.core.joint import estimate_joint_fixed, estimate_pivot
 from acs_cli.core.overlap import estimate_joint_overlap
 from acs_cli.core.relpose import JointPrior, estimate_relpose
@@ -119,7 +120,7 @@ def test_bundle_adjustment_std_matches_the_error_spread() -> None:
     R = se3.matrix_from_rotvec(rng.normal(0, 0.2, (20, 3)))
     T = se3.transforms_from_rt(R, p_w - se3.rotate(R, o))
     x_cam = np.einsum("nji,mj->nmi", R, board - p_w) + o
-    px = project_points(x_cam, intr)
+    px = camera_model("pinhole").project(x_cam, intr)
     errs, stds = [], []
     for _ in range(N_TRIALS):
         obs = px + rng.normal(0, 0.1, px.shape)
