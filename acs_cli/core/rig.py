@@ -16,21 +16,17 @@ stores ``T_q_p`` (maps points of ``p``'s frame into ``q``'s); walking it from ``
 uses its inverse.
 
 This module is topology and chaining only (no estimation): :class:`RigTopology` validates
-a tree (every error names the offending key) and answers paths; :func:`chain_transforms`
-composes per-edge transforms into ``T_cam_ref`` for every camera.
+a tree (every error names the offending key) and answers paths (:meth:`RigTopology.tree_order`
+walks it from the reference camera, each step forward along its edge's ``T_q_p`` or back).
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 
-import numpy as np
-
-from acs_cli.core import se3
 from acs_cli.core.joints import JOINT_MODELS, joint_types
-from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 
 #: The joint types an edge can have: the registry's (:mod:`acs_cli.core.joints`).
@@ -245,27 +241,3 @@ def rig_topology(
                 f"{key}: the rig falls into {len(groups)} separate pieces; join them with a joint"
             )
     return RigTopology(cams, tuple(edges), reference)
-
-
-def chain_transforms(
-    topology: RigTopology, edge_transforms: Mapping[str, FloatArray]
-) -> dict[str, FloatArray]:
-    """``T_cam_ref`` ``(4, 4)`` for every camera from one ``T_q_p`` per edge.
-
-    Parameters
-    ----------
-    topology : RigTopology
-    edge_transforms : mapping of joint name to ndarray, shape (4, 4)
-        ``T_q_p`` of each edge ``between: [p, q]`` at one instant.
-
-    Returns
-    -------
-    dict
-        Camera name to ``T_cam_ref``; the reference camera's is the identity.
-    """
-    out: dict[str, FloatArray] = {topology.reference: np.eye(4)}
-    for step in topology.tree_order():
-        T_qp = se3.check_transforms(edge_transforms[step.joint.name], name=step.joint.name)[0]
-        T = T_qp if step.forward else se3.invert_transforms(T_qp)
-        out[step.target] = T @ out[step.source]  # T_target_ref = T_target_source T_source_ref
-    return out

@@ -29,8 +29,8 @@ final information) until the levels settle. Every residual is a function of the 
 rig only, so the solution does not depend on how the rig is written down (which body is
 the reference, which way round a joint's ``between`` is).
 
-Camera ``c``'s pose is chained along the tree, ``T_ref_c[i]`` (as
-:func:`acs_cli.core.rig.chain_transforms`), so a corner ``X`` of its board is at
+Camera ``c``'s pose is chained along the tree, ``T_ref_c[i]`` (its steps from the reference,
+:meth:`acs_cli.core.rig.RigTopology.tree_order`), so a corner ``X`` of its board is at
 
     x_c = (G[i] T_ref_c[i])^-1 W_c X
 
