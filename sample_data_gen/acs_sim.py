@@ -331,3 +331,50 @@ def hand_eye_pair(
         add_pose_noise(rng, T_w_b, sigma_rot_deg, sigma_trans),
         T_b_a,
     )
+
+
+@dataclass(frozen=True)
+class NearHingePair:
+    """Two cameras joined by a ball joint that bends mostly about one axis (a knee), each
+    camera's poses in one world (``T_w_a``, ``T_w_b``: the overlap's) and B's also in a
+    world of its own (``T_wb_b``: the relative pose's). See :func:`near_hinge_pair`."""
+
+    T_w_a: FloatArray
+    T_w_b: FloatArray
+    T_wb_b: FloatArray
+    timestamps: FloatArray
+    axis_in_a: FloatArray  # the flexion axis in A's frame, at the articulation's rest pose
+    axis_in_b: FloatArray  # ... and in B's (constant)
+    o_a: FloatArray
+    o_b: FloatArray
+
+
+def near_hinge_pair(
+    rng: np.random.Generator,
+    n: int,
+    *,
+    flex_deg: float = 25.0,
+    wobble_deg: float = 1.8,
+    sigma_rot_deg: float = 0.05,
+    sigma_trans: float = 0.0005,
+    fps: float = 30.0,
+) -> NearHingePair:
+    """A ball joint bending ``flex_deg`` (RMS) about one axis ``u`` (three smooth cycles)
+    and ``wobble_deg`` (RMS, at random) about each of the two axes across it, the joint 0.3 m
+    from each camera; camera A turning about every axis (up to 90 deg) and moving within
+    +-1 m. ``wobble_deg`` at about 7% of ``flex_deg`` is a near-hinge (rotation ratio about
+    0.1), a ``wobble_deg`` near ``flex_deg`` a well-spread ball."""
+    u = random_unit_vectors(rng, 1)[0]
+    across = np.linalg.svd(u[None, :])[2][1:]  # (2, 3): orthonormal, across u
+    phi = np.radians(flex_deg) * np.sqrt(2.0) * np.sin(np.linspace(0.0, 6.0 * np.pi, n) + 0.3)
+    w = np.radians(wobble_deg) * rng.standard_normal((n, 2))
+    R0 = random_rotations(rng, 1)[0]
+    R_ab = R0 @ se3.matrix_from_rotvec(phi[:, None] * u + w @ across)
+    o_a, o_b = random_unit_vectors(rng, 2) * 0.3
+    T_a_b = se3.transforms_from_rt(R_ab, o_a - np.einsum("nij,j->ni", R_ab, o_b))
+    T_w_a = se3.transforms_from_rt(random_rotations(rng, n, 90.0), rng.uniform(-1, 1, (n, 3)))
+    T_w_b = T_w_a @ T_a_b
+    X = random_transform(rng, 2.0)  # world B's pose in the shared world, inverted
+    Ta = add_pose_noise(rng, T_w_a, sigma_rot_deg, sigma_trans)
+    Tb = add_pose_noise(rng, T_w_b, sigma_rot_deg, sigma_trans)
+    return NearHingePair(Ta, Tb, X @ Tb, np.arange(n) / fps, R0 @ u, u, o_a, o_b)

@@ -74,7 +74,9 @@ class JointEstimate:
     position_in_world : dict
         Fixed-joint only: the joint's world position in each trajectory's world.
     motion : dict of str to MotionSummary
-        Fixed-joint only: how each camera (``"a"``, ``"b"``) turned (:func:`motion_summary`).
+        Ball joints: how each camera (``"a"``, ``"b"``) turned (fixed joint,
+        :func:`motion_summary`) or how the joint bent, in each camera's frame (overlap,
+        :func:`articulation_motion`).
     """
 
     position_in_a: FloatArray
@@ -170,10 +172,8 @@ def rotation_spread(R: FloatArray, what: str) -> RotationSpread:
     DegenerateMotionError
         Too little rotation overall.
     """
-    n = R.shape[0]
-    D = (R - R.mean(axis=0)).reshape(-1, 3)
-    _, s, Vt = np.linalg.svd(D, full_matrices=False)
-    spread = float(s[0] / np.sqrt(n))
+    out = spread_of(R)
+    spread = float(out.singular_values[0] / np.sqrt(out.frames))
     if spread < MIN_ROTATION_SPREAD:
         raise DegenerateMotionError(
             f"{what}: too little rotation (RMS spread {np.degrees(spread):.2f} deg); the joint "
@@ -181,18 +181,28 @@ def rotation_spread(R: FloatArray, what: str) -> RotationSpread:
             "of degrees about at least two different axes.",
             details={"rotation_spread_deg": float(np.degrees(spread))},
         )
-    return RotationSpread(float(s[2] / s[0]), Vt[2], float(s[2] / np.sqrt(n)), s, Vt, n)
+    return out
+
+
+def spread_of(R: FloatArray) -> RotationSpread:
+    """How rotations ``(n, 3, 3)`` spread over their principal axes (the singular values of
+    the stacked, centred ``R_i - mean(R)``), unchecked (:func:`rotation_spread` checks)."""
+    n = R.shape[0]
+    D = (R - R.mean(axis=0)).reshape(-1, 3)
+    _, s, Vt = np.linalg.svd(D, full_matrices=False)
+    ratio = float(s[2] / s[0]) if s[0] > 0 else 0.0
+    return RotationSpread(ratio, Vt[2], float(s[2] / np.sqrt(n)), s, Vt, n)
 
 
 @dataclass(frozen=True)
 class MotionSummary:
-    """How a camera turned during a fixed-joint motion, in its own frame (see
-    :func:`motion_summary`).
+    """How a camera turned during a fixed-joint motion, or how a joint bent (its
+    articulation), in one body's frame (see :func:`motion_summary`).
 
     Attributes
     ----------
     axes : ndarray, shape (3, 3)
-        Rows: orthonormal rotation axes in the camera's frame, the one it turned about most
+        Rows: orthonormal rotation axes in the body's frame, the one it turned about most
         first (for a near-hinge, the hinge axis); each with its largest-magnitude component
         positive.
     spread_deg : ndarray, shape (3,)
@@ -312,58 +322,109 @@ def _vec(v: FloatArray) -> str:
 
 
 def near_hinge_warning(
-    cam: str, motion: MotionSummary, covariance: FloatArray, unit: str
+    what: str,
+    motion: dict[str, MotionSummary],
+    covariance: dict[str, FloatArray],
+    unit: str | dict[str, str],
 ) -> str | None:
-    """The warning for a near-hinge that passed as a point, with its numbers; else None.
+    """The warning for a ball joint whose motion is nearly a hinge but that passed as a
+    point, with its numbers; else None. The one wording of every mode (fixed joint, overlap,
+    relative pose, rig).
 
     Parameters
     ----------
-    cam : str
-        ``"a"`` or ``"b"``.
-    motion : MotionSummary
-    covariance : ndarray, shape (3, 3)
-        Of the joint in the camera's frame (``unit`` squared).
-    unit : str
-        The trajectories' length unit.
+    what : str
+        Whose motion, first in the sentence (``"camera A"``, ``"the joint"``, ``"joint hip"``).
+    motion : dict of str to MotionSummary
+        By body name (``"A"``, ``"thigh"``): the motion in that body's frame
+        (:func:`motion_summary`, :func:`articulation_motion`). A near-hinge when any is.
+    covariance : dict of str to ndarray, shape (3, 3)
+        The joint's covariance in each body's frame (``unit`` squared); bodies without one
+        are not named for the weak direction.
+    unit : str or dict of str to str
+        The length unit of the covariances, or of each body's (unknown scales).
     """
-    if not motion.near_hinge:
+    if not any(m.near_hinge for m in motion.values()):
         return None
-    c = cam.upper()
-    weak, std = weakest_direction(covariance)
-    s = motion.spread_deg
+    first = motion[next(iter(motion))]
+    ratio = min(m.ratio for m in motion.values())
+    axes = [f"{_vec(m.dominant_axis)} in {body}'s frame" for body, m in motion.items()]
+    s = first.spread_deg
+    weak = []
+    for body, cov in covariance.items():
+        v, std = weakest_direction(cov)
+        u = unit if isinstance(unit, str) else unit[body]
+        weak.append(f"{_vec(v)} in {body} (std {std:.3g} {u})")
     return (
-        f"camera {c}: the motion is nearly a hinge: it turns {s[0]:.3g} deg (RMS) about the "
-        f"axis {_vec(motion.dominant_axis)} in {c}'s frame and only {s[1]:.2g} and "
-        f"{s[2]:.2g} deg about the two others (rotation ratio {motion.ratio:.3f} < "
-        f"{HINGE_RATIO}); the joint is weakest along {_vec(weak)} (std {std:.3g} {unit}). "
-        "A joint that turns about one axis (a knee, an elbow) may be better modelled as a "
-        "hinge: declare it 'type: hinge' in a rig run config (acscal run)"
+        f"{what}: near-hinge motion (rotation ratio {ratio:.3f} < {HINGE_RATIO}): it turns "
+        f"{s[0]:.3g} deg (RMS) about the axis {' and '.join(axes)}, and only {s[1]:.2g} and "
+        f"{s[2]:.2g} deg about the two others; the joint is weakly determined along "
+        f"{' and '.join(weak)}. Record motion about a second axis; a joint that turns about "
+        "one axis (a knee, an elbow) may be better modelled as a hinge: declare it one "
+        "(--joint-type hinge, or 'type: hinge' in a rig run config)"
     )
 
 
-def fixed_joint_warnings(est: JointEstimate, unit: str) -> list[str]:
-    """Warnings on a fixed-joint estimate's motion, per camera: a near-hinge
-    (:func:`near_hinge_warning`) and rejected frames that look like a model misfit
-    (:func:`misfit_note`), in one sentence when both.
+def joint_motion_warnings(est: JointEstimate, unit: str) -> list[str]:
+    """Warnings on a joint estimate's motion (:attr:`JointEstimate.motion`): a near-hinge
+    (:func:`near_hinge_warning`) with, when the rejected frames look like a model misfit
+    (:func:`misfit_note`), that in the same sentence; and for a fixed joint the misfit
+    alone. Fixed joint: per camera (each camera's rotations); overlap: the joint (the
+    articulation, in both cameras' frames).
 
     Parameters
     ----------
     est : JointEstimate
-        From :func:`estimate_joint_fixed` (possibly refined by a bundle adjustment).
+        From :func:`estimate_joint_fixed` or the overlap (possibly refined by a bundle
+        adjustment).
     unit : str
         The trajectories' length unit.
     """
+    fixed = est.scenario == "fixed_joint"
+    groups = (
+        [(f"camera {k.upper()}", [k], k) for k in est.motion]
+        if fixed
+        else ([("the joint", list(est.motion), "ab")] if est.motion else [])
+    )
     out = []
-    for cam, motion in est.motion.items():
-        cov = est.covariance_of(cam)
-        hinge = None if cov is None else near_hinge_warning(cam, motion, cov, unit)
-        inl = est.inliers.get(cam)
+    for what, cams, key in groups:
+        covs = {c.upper(): cov for c in cams if (cov := est.covariance_of(c)) is not None}
+        hinge = near_hinge_warning(what, {c.upper(): est.motion[c] for c in cams}, covs, unit)
+        inl = est.inliers.get(key)
         misfit = None if inl is None else misfit_note(inl)
         if hinge is not None:
             out.append(hinge + ("" if misfit is None else f"; {misfit}"))
-        elif misfit is not None:
-            out.append(f"camera {cam.upper()}: {misfit}")
+        elif misfit is not None and fixed:
+            out.append(f"{what}: {misfit}")
     return out
+
+
+def articulation_motion(
+    R_p: FloatArray, R_q: FloatArray, p: str, q: str
+) -> dict[str, MotionSummary]:
+    """How a joint's articulation spread over its principal axes, in each body's frame.
+
+    The articulation is the relative rotation ``R_p_q[i] = R_p[i]^T R_q[i]`` (``q``'s frame
+    in ``p``'s); its spread (:func:`spread_of`) gives the axes in ``q``'s frame, that of its
+    transpose ``R_q_p`` the same axes in ``p``'s (:func:`motion_summary` each).
+
+    Parameters
+    ----------
+    R_p, R_q : ndarray, shape (n, 3, 3)
+        The two bodies' rotations in one world (per instant; any world shared at each
+        instant).
+    p, q : str
+        The bodies' names (the keys returned).
+
+    Returns
+    -------
+    dict of str to MotionSummary
+    """
+    R_pq = np.einsum("nji,njk->nik", R_p, R_q)
+    return {
+        p: motion_summary(spread_of(np.transpose(R_pq, (0, 2, 1)))),
+        q: motion_summary(spread_of(R_pq)),
+    }
 
 
 def hinge_explains(

@@ -31,7 +31,13 @@ from acs_cli.core.joint import (
 from acs_cli.core.paper import algorithm_1_overlap, algorithm_1_solve
 from acs_cli.core.relpose import check_joint_type
 from acs_cli.core.rig import RigTopology, rig_topology
-from acs_cli.core.rig_solve import CameraTrack, Recordings, RigEstimate, estimate_rig
+from acs_cli.core.rig_solve import (
+    CameraTrack,
+    Recordings,
+    RigEstimate,
+    edge_motion,
+    estimate_rig,
+)
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
@@ -178,6 +184,7 @@ def joint_of_rig(est: RigEstimate, n: int) -> JointEstimate:
         residual_rms={"ab": float(e.residual_rms)},
         inliers={"ab": inliers},
         noise={"ab": noise} if noise else {},
+        motion=edge_motion(est, JOINT),
         joint_type=e.joint.type,
         axis_in={c: np.asarray(u, float) for c, u in e.axis_in.items()},
         axis_std_deg_in={c: float(v) for c, v in e.axis_std_deg_in.items()},

@@ -30,6 +30,7 @@ from acs_cli.core import lsq, se3
 from acs_cli.core.joint import (
     JointEstimate,
     PivotEstimate,
+    articulation_motion,
     hinge_explains,
     joint_of_pivots,
     motion_summary,
@@ -122,6 +123,7 @@ def algorithm_1_overlap(T_w_a: FloatArray, T_w_b: FloatArray) -> JointEstimate:
         "paper",
         {"ab": rms},
         {"ab": np.ones(n, bool)},
+        motion=articulation_motion(Ta[:, :3, :3], Tb[:, :3, :3], "a", "b"),
     )
 
 

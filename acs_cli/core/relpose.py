@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from acs_cli.core import se3
-from acs_cli.core.joint import METHODS, MIN_ROTATION_SPREAD
+from acs_cli.core.joint import METHODS, MIN_ROTATION_SPREAD, MotionSummary, articulation_motion
 from acs_cli.core.paper import PaperRelativePose, relative_pose_paper
 from acs_cli.core.quality import OVERRIDE_HINT, largest_std, length_scale
 from acs_cli.core.rig import RigJoint, RigTopology
@@ -42,6 +42,7 @@ from acs_cli.core.rig_solve import (
     CameraTrack,
     EdgePrior,
     RigEstimate,
+    edge_motion,
     estimate_rig,
 )
 from acs_cli.core.rig_start import similarity_from_lifted
@@ -170,6 +171,9 @@ class RelposeEstimate:
     axis_in_b: FloatArray | None = None
     axis_in_a_std_deg: float | None = None
     axis_in_b_std_deg: float | None = None
+    #: a ball joint: how it bent (its articulation), in A's and B's frames (``"a"``, ``"b"``:
+    #: :func:`acs_cli.core.joint.articulation_motion`); empty for a hinge or a rigid mount
+    motion: dict[str, MotionSummary] = field(default_factory=dict)
 
     @property
     def has_point(self) -> bool:
@@ -329,6 +333,10 @@ def _paper(
         unknown_scale=unknown_scale,
         self_calibrated=False,
         residuals=r,
+        # the articulation with A's rotations carried into world B
+        motion=articulation_motion(
+            np.einsum("ij,njk->nik", p.T_wb_wa[:3, :3], Ta[:, :3, :3]), Tb[:, :3, :3], _A, _B
+        ),
     )
 
 
@@ -481,6 +489,7 @@ def relpose_from_rig(
         axis_in_b=np.asarray(axis[_B], float) if _B in axis else None,
         axis_in_a_std_deg=float(edge.axis_std_deg_in[_A]) if _A in axis else None,
         axis_in_b_std_deg=float(edge.axis_std_deg_in[_B]) if _B in axis else None,
+        motion=edge_motion(rig, _JOINT),
     )
 
 

@@ -61,7 +61,13 @@ from scipy.sparse import coo_matrix, csr_matrix
 from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
 from acs_cli.core.estimation import fit_variance_components
-from acs_cli.core.joint import MIN_ROTATION_SPREAD, lever_shapes
+from acs_cli.core.joint import (
+    MIN_ROTATION_SPREAD,
+    MotionSummary,
+    articulation_motion,
+    lever_shapes,
+    near_hinge_warning,
+)
 from acs_cli.core.joints import joint_model
 from acs_cli.core.joints.base import (
     SINGLE_AXIS_RATIO,
@@ -1862,6 +1868,33 @@ def _assemble(
 
 
 # --------------------------------------------------------------------------- degeneracy
+
+
+def edge_motion(est: RigEstimate, name: str) -> dict[str, MotionSummary]:
+    """How ball joint ``name`` bent over the frames it used: its articulation's principal
+    axes in each of its two bodies' frames (:func:`acs_cli.core.joint.articulation_motion`),
+    keyed by camera; empty for other joint types (a hinge turns about one axis by design)."""
+    e = est.edges[name]
+    if e.joint.type != "ball" or e.inliers.size < 2:
+        return {}
+    p, q = e.joint.between
+    G = {c: est.cameras[c].poses_in_reference_world[e.inliers, :3, :3] for c in (p, q)}
+    return articulation_motion(G[p], G[q], p, q)
+
+
+def near_hinge_warnings(est: RigEstimate, unit: str, known: Iterable[str] = ()) -> list[str]:
+    """The near-hinge warning (:func:`acs_cli.core.joint.near_hinge_warning`) of each ball
+    joint of a rig whose position was estimated from the motion (not in ``known``: joints
+    given a prior, which supplies what the motion cannot), in ``unit``."""
+    out, skip = [], set(known)
+    for name, e in est.edges.items():
+        if name in skip:
+            continue
+        text = near_hinge_warning(f"joint {name}", edge_motion(est, name), e.position_cov_in, unit)
+        if text is not None:
+            out.append(text)
+    return out
+
 
 #: A rigid pair whose cameras turn relative to each other by more than this (RMS, degrees),
 #: or a hinge whose axis moves by more than this in one body as seen from the other, does

@@ -170,15 +170,17 @@ class PoseNoise(Section):
 
 @dataclass(frozen=True)
 class MotionQuality(Section):
-    """``quality.motion.<a/b>`` (fixed joint): how the camera turned and where the joint is
-    weakest (:class:`acs_cli.core.joint.MotionSummary`).
+    """How a ball joint's body turned and where the joint is weakest, in that body's frame
+    (:class:`acs_cli.core.joint.MotionSummary`): ``joint.yaml``'s and ``relpose.yaml``'s
+    ``quality.motion.<a/b>`` (fixed joint: the camera's rotations; overlap, relative pose:
+    the articulation between the two cameras) and ``rig.yaml``'s ``joints.<j>.motion.<camera>``.
 
     Attributes
     ----------
     dominant_axis : ndarray, shape (3,)
-        The axis the camera turned about most, in its frame (a near-hinge's hinge axis).
+        The axis the body turned about most, in its frame (a near-hinge's hinge axis).
     other_axes : ndarray, shape (2, 3)
-        The two other principal rotation axes (rows), in the camera's frame.
+        The two other principal rotation axes (rows), in the body's frame.
     rotation_spread_deg : ndarray, shape (3,)
         RMS rotation about the dominant axis and the two others, degrees.
     rotation_ratio : float
@@ -186,7 +188,7 @@ class MotionQuality(Section):
     near_hinge : bool
         ``rotation_ratio`` below the hinge rule's ``HINGE_RATIO`` (and not refused).
     weak_direction : ndarray, shape (3,)
-        Unit direction, camera frame, along which the joint is least determined.
+        Unit direction, body frame, along which the joint is least determined.
     weak_std : float
         The joint's standard deviation along it (length unit).
     """
@@ -227,6 +229,26 @@ class MotionQuality(Section):
             as_vector(d.get("weak_direction"), f"{key}.weak_direction", path),
             as_number(d.get("weak_std"), f"{key}.weak_std", path, non_negative=True),
         )
+
+    @classmethod
+    def of(
+        cls, motion: dict[str, MotionSummary], covariance: dict[str, FloatArray | None]
+    ) -> dict[str, MotionQuality]:
+        """Per body, from the motion summaries and the joint's covariances ``(3, 3)`` (bodies
+        without a covariance are left out)."""
+        return {
+            k: cls.from_motion(m, cov)
+            for k, m in motion.items()
+            if (cov := covariance.get(k)) is not None
+        }
+
+    @classmethod
+    def parse_all(cls, value: Any, key: str, path: Source) -> dict[str, MotionQuality]:
+        """A mapping of body to :class:`MotionQuality` (absent: empty)."""
+        return {
+            k: cls.parse(v, f"{key}.{k}", path)
+            for k, v in as_mapping(value or {}, key, path).items()
+        }
 
 
 @dataclass(frozen=True)
@@ -564,7 +586,8 @@ class JointQuality:
     bundle_adjustment : dict of str to BundleSection
         Per camera, when the corners were adjusted.
     motion : dict of str to MotionQuality
-        Fixed joint only: how each camera turned, and where its joint is weakest.
+        Ball joints: how each camera turned (fixed joint) or how the joint bent (overlap),
+        in each camera's frame, and where the joint is weakest.
     """
 
     frames: dict[str, FramesUsed] = field(default_factory=dict)
@@ -605,10 +628,7 @@ class JointQuality:
                 for k, v in noise.items()
             },
             _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
-            {
-                k: MotionQuality.parse(v, f"quality.motion.{k}", path)
-                for k, v in as_mapping(d.get("motion") or {}, "quality.motion", path).items()
-            },
+            MotionQuality.parse_all(d.get("motion"), "quality.motion", path),
         )
 
     def to_plain(self) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from acs_cli.io.joint import (
     FramesUsed,
     JointArtifact,
     JointSection,
+    MotionQuality,
     Pairing,
     PoseNoise,
     _bundles,
@@ -168,6 +169,9 @@ class RelposeQuality:
     estimated_pose_noise : PoseNoise or None
         ``None`` for the paper's method.
     bundle_adjustment : dict of str to BundleSection
+    motion : dict of str to MotionQuality
+        A ball joint: how it bent, in each camera's frame (``a``, ``b``), and where it is
+        weakest (the schema of ``joint.yaml``'s ``quality.motion``).
     """
 
     residual_rms: float | None = None
@@ -175,6 +179,7 @@ class RelposeQuality:
     pairing: Pairing | None = None
     estimated_pose_noise: PoseNoise | None = None
     bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
+    motion: dict[str, MotionQuality] = field(default_factory=dict)
 
     @classmethod
     def parse(cls, value: Any, path: Source) -> RelposeQuality:
@@ -188,6 +193,7 @@ class RelposeQuality:
             else Pairing.parse(d["pairing"], "quality.pairing", path),
             None if not noise else PoseNoise.parse(noise, "quality.estimated_pose_noise", path),
             _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
+            MotionQuality.parse_all(d.get("motion"), "quality.motion", path),
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -201,6 +207,8 @@ class RelposeQuality:
         }
         if self.bundle_adjustment:
             out["bundle_adjustment"] = {k: s.to_plain() for k, s in self.bundle_adjustment.items()}
+        if self.motion:
+            out["motion"] = {k: m.to_plain() for k, m in self.motion.items()}
         return out
 
 

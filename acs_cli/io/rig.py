@@ -36,6 +36,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         residual_rms: float             # of the joint constraint over the frames used
         frames_used: int
         frames_rejected: int
+        motion: {p: {...}, q: {...}}    # ball only: how the joint bent, in each body's frame
+                                        # (joint.yaml's quality.motion.<a/b> schema)
     bundle_adjustment:                  # when every camera's poses carried board corners
       <name>: {intrinsics_file, rms_px, sigma_px, frames, camera_matrix, distortion,
                intrinsics_std, intrinsics_held}  # as joint.yaml's quality.bundle_adjustment
@@ -76,7 +78,7 @@ from acs_cli.core.joints import JOINT_MODELS, JointModel, joint_model
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
-from acs_cli.io.joint import BundleSection
+from acs_cli.io.joint import BundleSection, MotionQuality
 from acs_cli.io.validate import (
     as_int,
     as_mapping,
@@ -246,6 +248,8 @@ class RigJointResult:
     #: std (rotation_deg (3,) as a right perturbation, translation (3,))
     T_q_p: FloatArray | None = None
     T_q_p_std: tuple[FloatArray, FloatArray] | None = None
+    #: a ball joint: how it bent, in each body's frame, and where it is weakest
+    motion: dict[str, MotionQuality] = field(default_factory=dict)
 
     @property
     def model(self) -> JointModel:
@@ -430,6 +434,8 @@ class RigArtifact(YamlArtifact):
             d["residual_rms"] = j.residual_rms
             d["frames_used"] = j.frames_used
             d["frames_rejected"] = j.frames_rejected
+            if j.motion:
+                d["motion"] = {c: m.to_plain() for c, m in j.motion.items()}
             joints[j.name] = d
         out = {
             "reference": {"camera": self.reference_camera, "frame": self.reference_frame}
@@ -610,6 +616,7 @@ class RigArtifact(YamlArtifact):
                 T_q_p_std=None
                 if not jm.constant_transform or j.get("T_q_p_std") is None
                 else _std_parse(j["T_q_p_std"], f"{k}.T_q_p_std", p),
+                motion=MotionQuality.parse_all(j.get("motion"), f"{k}.motion", p),
             )
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):

@@ -22,7 +22,7 @@ from acs_cli.core.joint import (
     JointEstimate,
     estimate_joint_fixed,
     estimate_pivot,
-    fixed_joint_warnings,
+    joint_motion_warnings,
     overlap_motion,
 )
 from acs_cli.core.overlap import (
@@ -256,7 +256,7 @@ def run_joint(
             frames["b"] = FramesUsed.from_inliers(est.inliers["b"], tb.timestamps)
             poses_by_key["b"] = tb.T_world_cam
         in_world = {k: np.asarray(v, dtype=float) for k, v in est.position_in_world.items()}
-        warnings += fixed_joint_warnings(est, config.length_unit)
+    warnings += joint_motion_warnings(est, config.length_unit)
     for key, fr in frames.items():
         if fr.rejected:
             warnings.append(
@@ -284,11 +284,7 @@ def run_joint(
             for k, v in est.noise.items()
         },
         bundle_adjustment=bundles,
-        motion={
-            k: MotionQuality.from_motion(m, cov)
-            for k, m in est.motion.items()
-            if (cov := est.covariance_of(k)) is not None
-        },
+        motion=MotionQuality.of(est.motion, {k: est.covariance_of(k) for k in est.motion}),
     )
     header = make_header(
         "joint",

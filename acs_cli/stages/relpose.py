@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core.diagnose import diagnose_relpose, fit_is_suspicious
+from acs_cli.core.joint import near_hinge_warning
 from acs_cli.core.pairing import PairingResult
 from acs_cli.core.quality import (
     Measure,
@@ -37,7 +38,7 @@ from acs_cli.core.time_offset import (
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
-from acs_cli.io.joint import FramesUsed, JointSection, PoseNoise
+from acs_cli.io.joint import FramesUsed, JointSection, MotionQuality, PoseNoise
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import (
     RelativePose,
@@ -303,6 +304,14 @@ def run_relpose(
     frames = FramesUsed.from_inliers(est.inliers, pair.a.timestamps)
     if frames.rejected:
         warnings.append(f"{len(frames.rejected)} frame(s) rejected as outliers")
+    if est.self_calibrated:  # a given joint supplies what a near-hinge motion cannot
+        near = near_hinge_warning(
+            "the joint",
+            {c.upper(): m for c, m in est.motion.items()},
+            {"A": est.covariance_a, "B": est.covariance_b},
+            {"A": "A units", "B": "B units"} if config.unknown_scale else config.length_unit,
+        )
+        warnings += [] if near is None else [near]
     findings = relpose_findings(est, pair, prior, config, timed=offset is None)
     verdict = judge(relpose_verdict_measures(est, pair), config.accept_weak, findings)
     warnings += verdict.warnings()
@@ -316,6 +325,7 @@ def run_relpose(
         if est.noise
         else None,
         bundle_adjustment=bundle_section or {},
+        motion=MotionQuality.of(est.motion, {"a": est.covariance_a, "b": est.covariance_b}),
     )
     mode = (
         "a rigid mount (constant T_b_a: hand-eye calibration; no joint point)"

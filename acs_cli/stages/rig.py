@@ -54,10 +54,12 @@ from acs_cli.core.rig_solve import (
     EdgePrior,
     Recordings,
     RigEstimate,
+    edge_motion,
     estimate_rig,
     fixed_joint_prior,
     held_priors,
     merge_priors,
+    near_hinge_warnings,
 )
 from acs_cli.core.se3 import FloatArray
 from acs_cli.core.time_offset import (
@@ -73,7 +75,7 @@ from acs_cli.io.config import RigJointSpec as RigJointSpec
 from acs_cli.io.config import RigRecordingSpec, RigRunConfig
 from acs_cli.io.config import is_rig_config as is_rig_config
 from acs_cli.io.config import parse_rig_config as parse_rig_config
-from acs_cli.io.joint import BundleSection
+from acs_cli.io.joint import BundleSection, MotionQuality
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import (
     PoseOnlySection,
@@ -320,6 +322,7 @@ def rig_artifact(
             frames_rejected=e.frames_rejected,
             T_q_p=e.T_q_p if joint_model(e.joint.type).constant_transform else None,
             T_q_p_std=T_q_p_std,
+            motion=MotionQuality.of(edge_motion(est, name), dict(e.position_cov_in)),
         )
     return RigArtifact(
         reference_camera=est.topology.reference,
@@ -471,6 +474,7 @@ def run_rig(
         warnings += notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
+    warnings += near_hinge_warnings(est, unit, priors)
     verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
     warnings += verdict.warnings()
     art = dataclasses.replace(

@@ -14,7 +14,7 @@ from acs_cli.core.joint import (
     HingeEstimate,
     estimate_hinge_fixed,
     estimate_joint_fixed,
-    fixed_joint_warnings,
+    joint_motion_warnings,
     perpendicular_basis,
     rejected_runs,
     weakest_direction,
@@ -311,13 +311,13 @@ def test_near_hinge_is_reported_with_its_numbers(rng: np.random.Generator) -> No
     runs = rejected_runs(est.inliers["a"])
     long = sorted(runs[runs >= 5].tolist(), reverse=True)
     assert len(long) == 2, runs  # one run near each of the two full flexions
-    (text,) = fixed_joint_warnings(est, "m")
+    (text,) = joint_motion_warnings(est, "m")
     axis = "[" + " ".join(f"{x:+.3f}" for x in m.dominant_axis) + "]"
     for part in (
-        "camera A: the motion is nearly a hinge",
+        f"camera A: near-hinge motion (rotation ratio {m.ratio:.3f} < {HINGE_RATIO})",
         f"it turns {m.spread_deg[0]:.3g} deg (RMS) about the axis {axis} in A's frame",
         f"only {m.spread_deg[1]:.2g} and {m.spread_deg[2]:.2g} deg about the two others",
-        "weakest along [" + " ".join(f"{x:+.3f}" for x in weak) + "]",
+        "weakly determined along [" + " ".join(f"{x:+.3f}" for x in weak) + "] in A",
         f"(std {std:.3g} m)",
         "type: hinge",
         f"the rejected frames form 2 contiguous runs of {long[0]} and {long[1]} frames",
@@ -329,8 +329,8 @@ def test_near_hinge_is_reported_with_its_numbers(rng: np.random.Generator) -> No
 def test_knee_without_rolling_has_no_misfit_note(rng: np.random.Generator) -> None:
     est = estimate_joint_fixed(_knee_session(rng, slide=0.0).T_w_c)
     assert est.inliers["a"].all()
-    (text,) = fixed_joint_warnings(est, "m")
-    assert "nearly a hinge" in text and "misfit" not in text
+    (text,) = joint_motion_warnings(est, "m")
+    assert "near-hinge motion" in text and "misfit" not in text
 
 
 def test_near_hinge_in_joint_yaml(rng: np.random.Generator, tmp_path: Path) -> None:
@@ -349,7 +349,7 @@ def test_near_hinge_in_joint_yaml(rng: np.random.Generator, tmp_path: Path) -> N
     np.testing.assert_allclose(motion.weak_direction, weak)
     assert motion.weak_std == pytest.approx(std)
     assert motion.rotation_ratio == pytest.approx(est.motion["a"].ratio)
-    assert any("nearly a hinge" in w for w in art.warnings)
+    assert any("near-hinge motion" in w for w in art.warnings)
     again = tmp_path / "again.yaml"
     art.save(again)
     reloaded = JointArtifact.load(again).quality.motion["a"].to_plain()

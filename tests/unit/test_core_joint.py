@@ -11,7 +11,7 @@ from acs_cli.core.joint import (
     JointEstimate,
     estimate_joint_fixed,
     estimate_pivot,
-    fixed_joint_warnings,
+    joint_motion_warnings,
     lever_shapes,
     misfit_note,
     motion_summary,
@@ -480,11 +480,13 @@ def test_ball_joint_motion_is_not_a_hinge(rng: np.random.Generator) -> None:
     est = _fixed(_noisy(rng, seq.T_wa_a), _noisy(rng, seq.T_wb_b))
     assert set(est.motion) == {"a", "b"}
     assert not est.motion["a"].near_hinge and not est.motion["b"].near_hinge
-    assert fixed_joint_warnings(est, "m") == []
+    assert joint_motion_warnings(est, "m") == []
     paper = _fixed(seq.T_wa_a, method="paper")
     np.testing.assert_allclose(paper.motion["a"].spread_deg, est.motion["a"].spread_deg, rtol=0.1)
     ov = sim.general_sequence(rng, rig, N_FRAMES, shared_world=True)
-    assert estimate_joint_overlap(ov.T_wa_a, ov.T_wb_b).motion == {}  # fixed joint only
+    over = estimate_joint_overlap(ov.T_wa_a, ov.T_wb_b)  # the articulation, in A and B
+    assert set(over.motion) == {"a", "b"} and not over.motion["a"].near_hinge
+    assert joint_motion_warnings(over, "m") == []
 
 
 def test_misfit_note() -> None:
