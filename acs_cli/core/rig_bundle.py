@@ -523,17 +523,23 @@ def _recordings(
     topo: RigTopology, est: RigEstimate, frames: np.ndarray
 ) -> tuple[np.ndarray, list[frozenset[str]]]:
     """The recording of each adjusted frame ``(n,)`` and, per recording, the bodies it names
-    (its worlds' bodies; every body in a one-recording estimate); ``InputError`` for a
-    recording whose bodies the rig's tree does not join through bodies it saw (each would
-    need a pose of its own, which the bundle does not carry)."""
+    (its worlds' bodies; every body in a one-recording estimate; none in a recording without
+    frames adjusted, e.g. one that holds a joint still: nothing there has unknowns, and its
+    poses stay mapped by the pose-based estimate's worlds); ``InputError`` for a recording
+    whose bodies the rig's tree does not join through bodies it saw (each would need a pose
+    of its own, which the bundle does not carry)."""
     recs = est.recordings
     if recs is None or not est.worlds:
         return np.zeros(frames.size, int), [frozenset(topo.cameras)] * (
             1 if recs is None else len(recs.names)
         )
-    present = []
+    present: list[frozenset[str]] = []
     parent = {s.target: s.source for s in topo.tree_order()}
-    for name in recs.names:
+    adjusted = set(recs.of_frame[frames].tolist())
+    for r, name in enumerate(recs.names):
+        if r not in adjusted:
+            present.append(frozenset())
+            continue
         here = frozenset(c for w in est.worlds if w.recording == name for c in w.cameras)
         roots = [c for c in here if parent.get(c) not in here]
         if len(roots) > 1:

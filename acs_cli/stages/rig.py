@@ -993,10 +993,20 @@ def rig_bundle(
     notes: list[str] = []
     sources: dict[str, CornerViews] = {}
     n = est.cameras[config.reference_camera].poses_in_reference_world.shape[0]
-    labels: dict[str, list[str]] = {}  # each body's labels, one per recording that saw it
-    for r, rec in config.recordings.items():
+    # the recordings whose frames the bundle adjusts: one that holds a joint still gives it
+    # its prior and no frames (as in the pose-based solve), and one that has no world in the
+    # estimate (no joint it moves, e.g. of one body) none either
+    named = {w.recording for w in est.worlds}
+    moving = [r for r in config.recordings.values() if not r.fixed_joints and r.name in named]
+    if config.reference_recording not in {r.name for r in moving}:
+        return est, {}, ["no bundle adjustment of the rig: the reference recording "
+                         f"{config.reference_recording} holds joint(s) "
+                         f"{', '.join(config.recording_of_reference().fixed_joints)} still, "
+                         "and such a recording's frames stay out of the bundle"]  # fmt: skip
+    labels: dict[str, list[str]] = {}  # each body's labels, one per recording adjusted
+    for rec in moving:
         for c in rec.cameras:
-            labels.setdefault(c, []).append(label(config, r, c))
+            labels.setdefault(c, []).append(label(config, rec.name, c))
     for name, labs in labels.items():
         got: dict[str, CornerViews] = {}
         for lab in labs:
@@ -1051,14 +1061,13 @@ def rig_bundle(
             T[at] = trajectories[lab].T_world_cam[rows[at]]
             valid |= at
         poses[name] = CameraTrack(T, valid)
-    # the frames every joint its recording moves kept (a recording that holds a joint still
-    # gives it its prior, and no frames)
+    # the frames of the recordings adjusted that every joint its recording moves kept
     recs = est.recordings
     of = np.zeros(n, int) if recs is None else recs.of_frame
     use = np.ones(n, bool)
     for i, spec in enumerate(config.recordings.values()):
         here = of == i
-        if spec.fixed_joints:
+        if spec.name not in {r.name for r in moving}:
             use &= ~here
         for e in est.edges.values():
             if set(e.joint.between) <= set(spec.cameras):
@@ -1075,7 +1084,7 @@ def rig_bundle(
         ba = bundle_adjust_rig(
             config.topology, views, est, np.flatnonzero(mask), poses, priors=priors
         )
-    except DegenerateMotionError as exc:
+    except (DegenerateMotionError, InputError) as exc:  # e.g. a recording in two parts
         return est, {}, [*notes, f"no bundle adjustment of the rig: {exc.message}; the "
                          "pose-based estimate is kept"]  # fmt: skip
     if not ba.success:

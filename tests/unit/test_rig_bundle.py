@@ -332,3 +332,40 @@ def test_two_recordings_of_a_chain_share_its_joints_and_intrinsics() -> None:
         bundle_adjust_rig(
             topo, views, dataclasses.replace(est, worlds=worlds), np.flatnonzero(common)
         )
+
+
+def test_a_recording_without_frames_adjusted_has_no_unknowns() -> None:
+    """A recording none of whose frames is adjusted (one that holds a joint still: the rig
+    stage leaves its frames out) adds no boards to the bundle: it is the bundle of the other
+    recording alone, and the recording's worlds and poses stay the pose-based estimate's
+    (its boards used to be unknowns without rows: the bundle was refused as singular)."""
+    n = 120
+    rec = rig_corner_recording(np.random.default_rng(2), n, joints=(JOINTS[0],), noise_px=NOISE_PX)
+    topo, tracks, views = rec.rig.topology, rec.tracks(), rec.views()
+    of = np.repeat([0, 1], n // 2)
+    frames = np.flatnonzero(rec.common & (of == 0))
+    ref = int(frames[0])
+    est = estimate_rig(
+        topo, tracks, reference_frame=ref, recordings=Recordings(("a", "b"), of, (False, False))
+    )
+    ba = bundle_adjust_rig(topo, views, est, frames)
+    # the same frames as one recording
+    first = {c: dataclasses.replace(t, valid=t.valid & (of == 0)) for c, t in tracks.items()}
+    alone = bundle_adjust_rig(topo, views, estimate_rig(topo, first, reference_frame=ref), frames)
+    assert ba.success and alone.success
+    for c in ("cam0", "cam1"):
+        got, want = (
+            ba.estimate.edges["j01"].position_in[c],
+            alone.estimate.edges["j01"].position_in[c],
+        )
+        std = np.sqrt(np.diag(alone.estimate.edges["j01"].position_cov_in[c]))
+        assert np.all(np.abs(got - want) < 1e-3 * std), (c, got - want, std)
+    for w0, w in zip(est.worlds, ba.estimate.worlds, strict=True):
+        if w.recording == "b":
+            np.testing.assert_array_equal(w.T_ref_world, w0.T_ref_world)
+    b = np.flatnonzero(of == 1)
+    for c in topo.cameras:
+        np.testing.assert_array_equal(
+            ba.estimate.cameras[c].poses_in_reference_world[b],
+            est.cameras[c].poses_in_reference_world[b],
+        )
