@@ -1036,6 +1036,12 @@ def rig_bundle(
             return est, {}, [*notes, "no bundle adjustment of the rig: camera "
                              f"{name} saw different boards (or board orders) in its "
                              "recordings"]  # fmt: skip
+        models = {g.model for g in got.values()}
+        if len(models) > 1:  # one camera, one model: the bundle fits one set of intrinsics
+            return est, {}, [*notes, f"no bundle adjustment of the rig: camera {name}'s "
+                             "recordings were posed with different camera models ("
+                             + ", ".join(f"{g.model} in {lab}" for lab, g in got.items())
+                             + "); calibrate it in one model"]  # fmt: skip
         corners = np.full((n, *first.corners.shape[1:]), np.nan)  # NaN: not seen
         for lab, g in got.items():
             rows = index[lab]

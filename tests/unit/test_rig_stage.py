@@ -239,6 +239,53 @@ def test_a_recording_the_bundle_does_not_take_keeps_the_pose_based_rig(tmp_path:
     ), run.warnings
 
 
+def test_a_camera_posed_in_two_models_is_not_bundle_adjusted(tmp_path: Path) -> None:
+    """cam1 of a chain from two recordings, its knee recording's poses solved with rational
+    intrinsics and its hip recording's with pinhole ones: the bundle, which fits one set of
+    intrinsics per camera, is not run, and says why (it fitted the knee's corners with the
+    hip's pinhole model, and reported the hip's intrinsics file only)."""
+    import dataclasses
+
+    import yaml
+
+    from acs_cli.io.intrinsics import IntrinsicsArtifact
+    from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    n = 160
+    rec = rig_corner_recording(np.random.default_rng(5), n, joints=joints)
+    for name, out in {"hip": range(n // 2, n), "knee": range(n // 2)}.items():
+        (tmp_path / name).mkdir()
+        write_corner_poses(
+            tmp_path / name, rec, drop={c: list(out) for c in rec.rig.topology.cameras}
+        )
+    path = tmp_path / "knee" / "cam1_intrinsics.yaml"
+    pinhole = IntrinsicsArtifact.load(path)
+    rational = dataclasses.replace(
+        pinhole,
+        model="rational",
+        distortion=np.concatenate([pinhole.distortion, np.zeros(3)]),
+        distortion_names=["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
+    )
+    rational.save(path)
+    text = (
+        "schema_version: 2\noutput: out\nreference: {camera: cam0, recording: hip}\n"
+        "recordings:\n"
+        "  hip:\n    cameras: {cam0: {poses: hip/cam0.npz}, cam1: {poses: hip/cam1.npz}}\n"
+        "  knee:\n    cameras: {cam1: {poses: knee/cam1.npz}, cam2: {poses: knee/cam2.npz}}\n"
+        "joints:\n  hip: {between: [cam0, cam1], type: ball}\n"
+        "  knee: {between: [cam1, cam2], type: hinge}\n"
+    )
+    (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+    run = run_rig(parse_rig_config(yaml.safe_load(text), tmp_path / "rig.yaml"))
+    assert not run.artifact.bundle_adjustment
+    assert (
+        "no bundle adjustment of the rig: camera cam1's recordings were posed with different "
+        "camera models (pinhole in hip/cam1, rational in knee/cam1); calibrate it in one model"
+    ) in run.warnings, run.warnings
+
+
 def test_rig_clock_offsets_are_estimated_and_warned_about(tmp_path: Path) -> None:
     """Cameras on separate clocks (issue 10): with estimate_time_offset each camera's offset
     to the reference is estimated and its poses interpolated; without it, the joints whose
