@@ -797,7 +797,8 @@ def _adjust(
     """:func:`bundle_adjust_rig` on checked input, every camera's intrinsics ``hold`` or
     refined."""
     model, x0 = _initial(topology, views, poses, initial, frames, rec, present, hold, static)
-    model.priors = _bundle_priors(model, priors or {})
+    k_ref = int(np.flatnonzero(frames == initial.reference_frame)[0])
+    model.priors = _bundle_priors(model, priors or {}, k_ref)
     L = model.L
     row_frame = model.row_frames()
 
@@ -850,7 +851,6 @@ def _adjust(
         sigma2 = float(sol.fun @ sol.fun / dof)
         scale = sigma2
     x = sol.x
-    k_ref = int(np.flatnonzero(frames == initial.reference_frame)[0])
     cols = list(range(L.n_shared)) + L.frame_columns(k_ref, slice(0, L.block))
     cov = scale * _inverse_columns(sol.jac, cols)
     where = {c: i for i, c in enumerate(cols)}
@@ -890,14 +890,15 @@ def _adjust(
 
 
 def _bundle_priors(
-    model: _Model, priors: dict[str, EdgePrior]
+    model: _Model, priors: dict[str, EdgePrior], k: int
 ) -> list[tuple[RigJoint, int, FloatArray, FloatArray]]:
     """The rows of joints known beforehand, as the pose-based solve takes them
     (:func:`~acs_cli.core.rig_solve.edge_prior_rows`: points, a hinge's lines and axes, in
     metres: every body of the bundle is metric); a point without a covariance has the
-    engine's default std, its share of the reference body's travel over the frames
-    adjusted."""
-    t = model.G0[:, :3, 3]
+    engine's default std, its share of the reference body's travel over the frames adjusted
+    in the reference instant's (``k``) recording (the others' are placed in the reference
+    world by a choice of gauge, or are virtual poses)."""
+    t = model.G0[model.rec == model.rec[k], :3, 3]
     travel = float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
     return [
         (model.topo.joint(name), at, value, W)
