@@ -887,8 +887,8 @@ def rig_time_offsets(
             path=config.path,
         )
     notes.append(
-        "every camera's poses are interpolated (SE(3) splines) at the reference camera's "
-        "times plus its clock offset; no bundle adjustment on the corners"
+        f"every camera's poses are interpolated (SE(3) splines) at {root}'s times plus its "
+        "clock offset; no bundle adjustment on the corners"
     )
     return offsets, notes
 
