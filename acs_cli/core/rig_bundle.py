@@ -59,6 +59,17 @@ diagonal; measured: at most 6e-13 where a ball's centre is undetermined, at leas
 the determined rigs of the tests). So a rigid pair seeing one board needs 1 frame, a
 hinge 2 and a ball 3 (a joint's articulation at every frame leaves fewer rows for its
 centre); in separate worlds each camera's board adds 6 unknowns.
+
+Several recordings (the estimate's :class:`~acs_cli.core.rig_solve.Recordings`): the
+joints' geometry and the intrinsics are shared, each (recording, body) has its own board
+(its world), and each recording's boards are fixed up to one rigid motion with its frames'
+poses ``G[i]``: the gauge holds the reference's world in its recording and, in every other
+one, the board of its body nearest the reference in the tree (every board of a shared
+world). A recording that did not see the reference body has a virtual ``G[i]`` (the pose
+that puts its first body where the estimate has it), and the articulations of the joints a
+frame's recording did not see are held by rows of their own. A recording none of whose
+frames is adjusted adds no unknowns. A static reference body (``static``, the world of a
+joint held still: :func:`bundle_adjust_fixed_joint`) has no pose unknowns.
 """
 
 from __future__ import annotations
@@ -197,9 +208,9 @@ class RigBundle:
     estimate : RigEstimate
         The rig with the bundle's ``T_cam_ref`` (and covariances), joints and boards'
         frames. Each body's ``poses_in_reference_world`` ``(n, 4, 4)`` holds at the instants
-        adjusted (``bundle_frames``, the same as ``frames``) the bundle's per-frame fit
-        ``G[i] T_ref_c[i]``, and at the others its measured poses mapped by its refined
-        board frame (``world_to_reference_world``), as the pose-based solve maps them. The
+        adjusted (``bundle_frames``, the same as ``frames``) where its recording saw it the
+        bundle's per-frame fit ``G[i] T_ref_c[i]``, and at the others its measured poses
+        mapped by its recording's refined board frame, as the pose-based solve maps them. The
         joints' ``residual_rms``, frame counts, inliers and noise stay those of the
         pose-based solve.
     intrinsics, intrinsics_std : dict of camera to ndarray (p,)
@@ -414,7 +425,8 @@ class _Model:
 
     def residuals(self, x: FloatArray) -> FloatArray:
         """Whitened residuals (the order of :meth:`row_frames`): pixels, then each pose-only
-        body's rotation and translation rows frame by frame, then the joint priors' rows."""
+        body's rotation and translation rows frame by frame, the joint priors' rows, and the
+        held articulations' rows (:attr:`held`)."""
         px, pose = self.raw(x)
         out = [self.w_px * r.ravel() for r in px]
         for b in self.bodies:
@@ -438,7 +450,7 @@ class _Model:
         return np.concatenate(rows)
 
     def prior_rows(self) -> np.ndarray:
-        """The joint priors' rows in :meth:`residuals` (the last ones)."""
+        """The joint priors' rows in :meth:`residuals` (before the held articulations')."""
         total = self.row_frames().size - self.held.size
         return np.arange(total - sum(Wh.shape[0] for *_, Wh in self.priors), total)
 
@@ -523,17 +535,23 @@ def _recordings(
     topo: RigTopology, est: RigEstimate, frames: np.ndarray
 ) -> tuple[np.ndarray, list[frozenset[str]]]:
     """The recording of each adjusted frame ``(n,)`` and, per recording, the bodies it names
-    (its worlds' bodies; every body in a one-recording estimate); ``InputError`` for a
-    recording whose bodies the rig's tree does not join through bodies it saw (each would
-    need a pose of its own, which the bundle does not carry)."""
+    (its worlds' bodies; every body in a one-recording estimate; none in a recording without
+    frames adjusted, e.g. one that holds a joint still: nothing there has unknowns, and its
+    poses stay mapped by the pose-based estimate's worlds); ``InputError`` for a recording
+    whose bodies the rig's tree does not join through bodies it saw (each would need a pose
+    of its own, which the bundle does not carry)."""
     recs = est.recordings
     if recs is None or not est.worlds:
         return np.zeros(frames.size, int), [frozenset(topo.cameras)] * (
             1 if recs is None else len(recs.names)
         )
-    present = []
+    present: list[frozenset[str]] = []
     parent = {s.target: s.source for s in topo.tree_order()}
-    for name in recs.names:
+    adjusted = set(recs.of_frame[frames].tolist())
+    for r, name in enumerate(recs.names):
+        if r not in adjusted:
+            present.append(frozenset())
+            continue
         here = frozenset(c for w in est.worlds if w.recording == name for c in w.cameras)
         roots = [c for c in here if parent.get(c) not in here]
         if len(roots) > 1:
@@ -689,8 +707,8 @@ def bundle_adjust_rig(
         The pose-based estimate (:func:`acs_cli.core.rig_solve.estimate_rig`) on the same
         timeline, metric (every camera of known scale).
     frames : ndarray of int
-        The instants to adjust (every camera sees its board there, every pose-only body
-        has a pose); they must include the reference instant.
+        The instants to adjust (every body of the instant's recording sees its board
+        there, or has a pose); they must include the reference instant.
     poses : dict of CameraTrack, optional
         The measured poses (``T_world_body`` in the body's own world, metres) of every
         body without corners (a robot's flange, a motion-capture segment, an INS).
@@ -791,7 +809,8 @@ def _adjust(
     """:func:`bundle_adjust_rig` on checked input, every camera's intrinsics ``hold`` or
     refined."""
     model, x0 = _initial(topology, views, poses, initial, frames, rec, present, hold, static)
-    model.priors = _bundle_priors(model, priors or {})
+    k_ref = int(np.flatnonzero(frames == initial.reference_frame)[0])
+    model.priors = _bundle_priors(model, priors or {}, k_ref)
     L = model.L
     row_frame = model.row_frames()
 
@@ -844,7 +863,6 @@ def _adjust(
         sigma2 = float(sol.fun @ sol.fun / dof)
         scale = sigma2
     x = sol.x
-    k_ref = int(np.flatnonzero(frames == initial.reference_frame)[0])
     cols = list(range(L.n_shared)) + L.frame_columns(k_ref, slice(0, L.block))
     cov = scale * _inverse_columns(sol.jac, cols)
     where = {c: i for i, c in enumerate(cols)}
@@ -884,14 +902,15 @@ def _adjust(
 
 
 def _bundle_priors(
-    model: _Model, priors: dict[str, EdgePrior]
+    model: _Model, priors: dict[str, EdgePrior], k: int
 ) -> list[tuple[RigJoint, int, FloatArray, FloatArray]]:
     """The rows of joints known beforehand, as the pose-based solve takes them
     (:func:`~acs_cli.core.rig_solve.edge_prior_rows`: points, a hinge's lines and axes, in
     metres: every body of the bundle is metric); a point without a covariance has the
-    engine's default std, its share of the reference body's travel over the frames
-    adjusted."""
-    t = model.G0[:, :3, 3]
+    engine's default std, its share of the reference body's travel over the frames adjusted
+    in the reference instant's (``k``) recording (the others' are placed in the reference
+    world by a choice of gauge, or are virtual poses)."""
+    t = model.G0[model.rec == model.rec[k], :3, 3]
     travel = float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
     return [
         (model.topo.joint(name), at, value, W)

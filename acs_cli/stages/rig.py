@@ -891,8 +891,8 @@ def rig_time_offsets(
             path=config.path,
         )
     notes.append(
-        "every camera's poses are interpolated (SE(3) splines) at the reference camera's "
-        "times plus its clock offset; no bundle adjustment on the corners"
+        f"every camera's poses are interpolated (SE(3) splines) at {root}'s times plus its "
+        "clock offset; no bundle adjustment on the corners"
     )
     return offsets, notes
 
@@ -997,10 +997,20 @@ def rig_bundle(
     notes: list[str] = []
     sources: dict[str, CornerViews] = {}
     n = est.cameras[config.reference_camera].poses_in_reference_world.shape[0]
-    labels: dict[str, list[str]] = {}  # each body's labels, one per recording that saw it
-    for r, rec in config.recordings.items():
+    # the recordings whose frames the bundle adjusts: one that holds a joint still gives it
+    # its prior and no frames (as in the pose-based solve), and one that has no world in the
+    # estimate (no joint it moves, e.g. of one body) none either
+    named = {w.recording for w in est.worlds}
+    moving = [r for r in config.recordings.values() if not r.fixed_joints and r.name in named]
+    if config.reference_recording not in {r.name for r in moving}:
+        return est, {}, ["no bundle adjustment of the rig: the reference recording "
+                         f"{config.reference_recording} holds joint(s) "
+                         f"{', '.join(config.recording_of_reference().fixed_joints)} still, "
+                         "and such a recording's frames stay out of the bundle"]  # fmt: skip
+    labels: dict[str, list[str]] = {}  # each body's labels, one per recording adjusted
+    for rec in moving:
         for c in rec.cameras:
-            labels.setdefault(c, []).append(label(config, r, c))
+            labels.setdefault(c, []).append(label(config, rec.name, c))
     for name, labs in labels.items():
         got: dict[str, CornerViews] = {}
         for lab in labs:
@@ -1030,6 +1040,12 @@ def rig_bundle(
             return est, {}, [*notes, "no bundle adjustment of the rig: camera "
                              f"{name} saw different boards (or board orders) in its "
                              "recordings"]  # fmt: skip
+        models = {g.model for g in got.values()}
+        if len(models) > 1:  # one camera, one model: the bundle fits one set of intrinsics
+            return est, {}, [*notes, f"no bundle adjustment of the rig: camera {name}'s "
+                             "recordings were posed with different camera models ("
+                             + ", ".join(f"{g.model} in {lab}" for lab, g in got.items())
+                             + "); calibrate it in one model"]  # fmt: skip
         corners = np.full((n, *first.corners.shape[1:]), np.nan)  # NaN: not seen
         for lab, g in got.items():
             rows = index[lab]
@@ -1055,14 +1071,13 @@ def rig_bundle(
             T[at] = trajectories[lab].T_world_cam[rows[at]]
             valid |= at
         poses[name] = CameraTrack(T, valid)
-    # the frames every joint its recording moves kept (a recording that holds a joint still
-    # gives it its prior, and no frames)
+    # the frames of the recordings adjusted that every joint its recording moves kept
     recs = est.recordings
     of = np.zeros(n, int) if recs is None else recs.of_frame
     use = np.ones(n, bool)
     for i, spec in enumerate(config.recordings.values()):
         here = of == i
-        if spec.fixed_joints:
+        if spec.name not in {r.name for r in moving}:
             use &= ~here
         for e in est.edges.values():
             if set(e.joint.between) <= set(spec.cameras):
@@ -1079,7 +1094,7 @@ def rig_bundle(
         ba = bundle_adjust_rig(
             config.topology, views, est, np.flatnonzero(mask), poses, priors=priors
         )
-    except DegenerateMotionError as exc:
+    except (DegenerateMotionError, InputError) as exc:  # e.g. a recording in two parts
         return est, {}, [*notes, f"no bundle adjustment of the rig: {exc.message}; the "
                          "pose-based estimate is kept"]  # fmt: skip
     if not ba.success:

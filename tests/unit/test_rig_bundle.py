@@ -332,3 +332,99 @@ def test_two_recordings_of_a_chain_share_its_joints_and_intrinsics() -> None:
         bundle_adjust_rig(
             topo, views, dataclasses.replace(est, worlds=worlds), np.flatnonzero(common)
         )
+
+
+def test_a_recording_without_frames_adjusted_has_no_unknowns() -> None:
+    """A recording none of whose frames is adjusted (one that holds a joint still: the rig
+    stage leaves its frames out) adds no boards to the bundle: it is the bundle of the other
+    recording alone, and the recording's worlds and poses stay the pose-based estimate's
+    (its boards used to be unknowns without rows: the bundle was refused as singular)."""
+    n = 120
+    rec = rig_corner_recording(np.random.default_rng(2), n, joints=(JOINTS[0],), noise_px=NOISE_PX)
+    topo, tracks, views = rec.rig.topology, rec.tracks(), rec.views()
+    of = np.repeat([0, 1], n // 2)
+    frames = np.flatnonzero(rec.common & (of == 0))
+    ref = int(frames[0])
+    est = estimate_rig(
+        topo, tracks, reference_frame=ref, recordings=Recordings(("a", "b"), of, (False, False))
+    )
+    ba = bundle_adjust_rig(topo, views, est, frames)
+    # the same frames as one recording
+    first = {c: dataclasses.replace(t, valid=t.valid & (of == 0)) for c, t in tracks.items()}
+    alone = bundle_adjust_rig(topo, views, estimate_rig(topo, first, reference_frame=ref), frames)
+    assert ba.success and alone.success
+    for c in ("cam0", "cam1"):
+        got, want = (
+            ba.estimate.edges["j01"].position_in[c],
+            alone.estimate.edges["j01"].position_in[c],
+        )
+        std = np.sqrt(np.diag(alone.estimate.edges["j01"].position_cov_in[c]))
+        assert np.all(np.abs(got - want) < 1e-3 * std), (c, got - want, std)
+    for w0, w in zip(est.worlds, ba.estimate.worlds, strict=True):
+        if w.recording == "b":
+            np.testing.assert_array_equal(w.T_ref_world, w0.T_ref_world)
+    b = np.flatnonzero(of == 1)
+    for c in topo.cameras:
+        np.testing.assert_array_equal(
+            ba.estimate.cameras[c].poses_in_reference_world[b],
+            est.cameras[c].poses_in_reference_world[b],
+        )
+
+
+def test_a_default_prior_std_does_not_depend_on_where_another_recording_is_placed() -> None:
+    """A joint point given without a covariance has the engine's default std, a share of the
+    reference body's travel in the reference recording: moving the knee recording's worlds
+    (untied to the reference's: a choice of gauge) 5 m changes nothing (the travel was taken
+    over every recording's frames, and the hip's centre moved by 0.4 mm, 7 of its stds)."""
+    from acs_cli.core.rig_solve import EdgePrior
+
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    n = 160
+    rec = rig_corner_recording(np.random.default_rng(2), n, joints=joints, noise_px=NOISE_PX)
+    topo = rec.rig.topology
+    of = np.repeat([0, 1], n // 2)
+    absent = {"cam2": of == 0, "cam0": of == 1}
+    tracks = {
+        c: dataclasses.replace(t, valid=t.valid & ~absent.get(c, False))
+        for c, t in rec.tracks().items()
+    }
+    views = {
+        c: dataclasses.replace(v, valid=v.valid & ~absent.get(c, np.zeros(n, bool))[:, None])
+        for c, v in rec.views().items()
+    }
+    common = np.ones(n, bool)
+    for c in topo.cameras:
+        common &= views[c].valid.any(axis=1) | absent.get(c, np.zeros(n, bool))
+    ref = int(np.flatnonzero(common & (of == 0))[0])
+    recs = Recordings(("hip", "knee"), of, (False, False))
+    est = estimate_rig(topo, tracks, reference_frame=ref, recordings=recs)
+    D = np.eye(4)
+    D[0, 3] = 5.0
+    knee = (of == 1)[:, None, None]
+    moved = dataclasses.replace(
+        est,
+        cameras={
+            c: dataclasses.replace(
+                e,
+                poses_in_reference_world=np.where(
+                    knee, np.matmul(D, e.poses_in_reference_world), e.poses_in_reference_world
+                ),
+            )
+            for c, e in est.cameras.items()
+        },
+        worlds=[
+            dataclasses.replace(w, T_ref_world=D @ w.T_ref_world) if w.recording == "knee" else w
+            for w in est.worlds
+        ],
+    )
+    o = rec.rig.edges["hip"].o_p + np.array([0.005, 0.0, 0.0])
+    priors = {"hip": EdgePrior(position_in={"cam0": o}, units="metre")}
+    frames = np.flatnonzero(common)
+    a, b = (
+        bundle_adjust_rig(topo, views, e, frames, priors=priors, hold_intrinsics=True)
+        for e in (est, moved)
+    )
+    for name, c in (("hip", "cam0"), ("hip", "cam1"), ("knee", "cam2")):
+        got, want = b.estimate.edges[name].position_in[c], a.estimate.edges[name].position_in[c]
+        std = np.sqrt(np.diag(a.estimate.edges[name].position_cov_in[c]))
+        assert np.all(np.abs(got - want) < 1e-3 * std), (name, c, got - want, std)

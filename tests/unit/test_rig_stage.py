@@ -158,6 +158,134 @@ def test_a_rig_of_board_cameras_is_bundle_adjusted_and_a_mixed_one_is_warned(
     assert np.all(got.position_std_in["cam0"] < 0.0005)
 
 
+def test_recordings_without_frames_in_the_bundle_do_not_stop_it(tmp_path: Path) -> None:
+    """A board-camera rig's general recording with a recording that holds its joint still
+    (TUM sessions, no corners: Algorithm II's priors) or with a recording of one camera
+    (no joint it moves): neither recording's frames enter the bundle, which runs on the
+    general recording's corners (the first made both cameras pose-only bodies with no
+    bundle at all, the second's boards left the bundle singular: refused)."""
+    import yaml
+
+    from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    rng = np.random.default_rng(3)
+    rec = rig_corner_recording(rng, 60, joints=(("j", ("cam0", "cam1"), "ball"),))
+    for d in ("gen", "solo"):
+        (tmp_path / d).mkdir()
+    write_corner_poses(tmp_path / "gen", rec)
+    write_corner_poses(tmp_path / "solo", rig_corner_recording(rng, 30, joints=(JOINTS[0],)))
+    e = rec.rig.edges["j"]
+    for c, o in (("cam0", e.o_p), ("cam1", e.o_q)):
+        T = fixed_joint_motion(rng, o)
+        write_tum(tmp_path / f"fixed_{c}.tum", np.arange(T.shape[0]) * 0.1, T)
+    head = (
+        "schema_version: 2\noutput: out\nreference: {camera: cam0, recording: general}\n"
+        "joints:\n  j: {between: [cam0, cam1], type: ball}\nrecordings:\n  general:\n"
+        "    cameras: {cam0: {poses: gen/cam0.npz}, cam1: {poses: gen/cam1.npz}}\n"
+    )
+    for name, other in (
+        ("held", "    fixed_joints: [j]\n"
+                 "    cameras: {cam0: {poses: fixed_cam0.tum}, cam1: {poses: fixed_cam1.tum}}\n"),
+        ("solo", "    cameras: {cam1: {poses: solo/cam1.npz}}\n"),
+    ):  # fmt: skip
+        text = head + f"  {name}:\n" + other
+        (tmp_path / f"{name}.yaml").write_text(text, encoding="utf-8")
+        cfg = parse_rig_config(yaml.safe_load(text), tmp_path / f"{name}.yaml")
+        run = run_rig(cfg, output=tmp_path / f"{name}_rig.yaml")
+        assert set(run.artifact.bundle_adjustment) == {"cam0", "cam1"}, (name, run.warnings)
+        assert not any("bundle" in w for w in run.warnings), (name, run.warnings)
+        b = run.artifact.bundle_adjustment["cam1"]
+        assert b.frames == run.artifact.bundle_adjustment["cam0"].frames <= 60, name
+        j = run.artifact.joints["j"]
+        err = np.linalg.norm(j.position_in["cam0"] - e.o_p)
+        assert err < 4 * np.linalg.norm(j.position_std_in["cam0"]), (name, err)
+
+
+def test_a_recording_the_bundle_does_not_take_keeps_the_pose_based_rig(tmp_path: Path) -> None:
+    """A recording whose bodies are two parts of the rig (cam0 absent from a star's second
+    recording): the pose-based solve takes it, the bundle adjustment does not, and the run
+    keeps the pose-based estimate with a warning (it failed with the bundle's InputError)."""
+    import yaml
+
+    from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    joints = (("r01", ("cam0", "cam1"), "rigid"), ("r02", ("cam0", "cam2"), "rigid"),
+              ("b13", ("cam1", "cam3"), "ball"), ("b24", ("cam2", "cam4"), "ball"))  # fmt: skip
+    n = 100
+    rec = rig_corner_recording(np.random.default_rng(5), n, joints=joints)
+    for name, out in {"all": range(n // 2, n), "part": range(n // 2)}.items():
+        (tmp_path / name).mkdir()
+        write_corner_poses(
+            tmp_path / name, rec, drop={c: list(out) for c in rec.rig.topology.cameras}
+        )
+
+    def cams(r: str, cs: list[str]) -> str:
+        return "{" + ", ".join(f"{c}: {{poses: {r}/{c}.npz}}" for c in cs) + "}"
+
+    text = (
+        "schema_version: 2\noutput: out\nreference: {camera: cam0, recording: all}\n"
+        f"recordings:\n  all:\n    cameras: {cams('all', [f'cam{i}' for i in range(5)])}\n"
+        f"  part:\n    cameras: {cams('part', [f'cam{i}' for i in range(1, 5)])}\njoints:\n"
+        + "".join(f"  {j}: {{between: [{a}, {b}], type: {t}}}\n" for j, (a, b), t in joints)
+    )
+    (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+    run = run_rig(parse_rig_config(yaml.safe_load(text), tmp_path / "rig.yaml"))
+    assert not run.artifact.bundle_adjustment
+    assert any(
+        w.startswith("no bundle adjustment of the rig: recordings.part: bodies cam1, cam2")
+        for w in run.warnings
+    ), run.warnings
+
+
+def test_a_camera_posed_in_two_models_is_not_bundle_adjusted(tmp_path: Path) -> None:
+    """cam1 of a chain from two recordings, its knee recording's poses solved with rational
+    intrinsics and its hip recording's with pinhole ones: the bundle, which fits one set of
+    intrinsics per camera, is not run, and says why (it fitted the knee's corners with the
+    hip's pinhole model, and reported the hip's intrinsics file only)."""
+    import dataclasses
+
+    import yaml
+
+    from acs_cli.io.intrinsics import IntrinsicsArtifact
+    from sample_data_gen.rig_sim import rig_corner_recording
+    from sample_data_gen.writer import write_corner_poses
+
+    joints = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
+    n = 160
+    rec = rig_corner_recording(np.random.default_rng(5), n, joints=joints)
+    for name, out in {"hip": range(n // 2, n), "knee": range(n // 2)}.items():
+        (tmp_path / name).mkdir()
+        write_corner_poses(
+            tmp_path / name, rec, drop={c: list(out) for c in rec.rig.topology.cameras}
+        )
+    path = tmp_path / "knee" / "cam1_intrinsics.yaml"
+    pinhole = IntrinsicsArtifact.load(path)
+    rational = dataclasses.replace(
+        pinhole,
+        model="rational",
+        distortion=np.concatenate([pinhole.distortion, np.zeros(3)]),
+        distortion_names=["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
+    )
+    rational.save(path)
+    text = (
+        "schema_version: 2\noutput: out\nreference: {camera: cam0, recording: hip}\n"
+        "recordings:\n"
+        "  hip:\n    cameras: {cam0: {poses: hip/cam0.npz}, cam1: {poses: hip/cam1.npz}}\n"
+        "  knee:\n    cameras: {cam1: {poses: knee/cam1.npz}, cam2: {poses: knee/cam2.npz}}\n"
+        "joints:\n  hip: {between: [cam0, cam1], type: ball}\n"
+        "  knee: {between: [cam1, cam2], type: hinge}\n"
+    )
+    (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+    run = run_rig(parse_rig_config(yaml.safe_load(text), tmp_path / "rig.yaml"))
+    assert not run.artifact.bundle_adjustment
+    assert (
+        "no bundle adjustment of the rig: camera cam1's recordings were posed with different "
+        "camera models (pinhole in hip/cam1, rational in knee/cam1); calibrate it in one model"
+    ) in run.warnings, run.warnings
+
+
 def test_rig_clock_offsets_are_estimated_and_warned_about(tmp_path: Path) -> None:
     """Cameras on separate clocks (issue 10): with estimate_time_offset each camera's offset
     to the reference is estimated and its poses interpolated; without it, the joints whose
