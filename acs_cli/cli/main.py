@@ -2,14 +2,17 @@
 
 Errors the user can cause (:class:`acs_cli.errors.AcsError`) become one line on stderr and
 an exit code: 2 for bad input, 3 for motion that cannot determine the answer. Anything
-else is a bug and keeps its traceback.
+else is a bug and keeps its traceback. A library warning that escapes (NumPy's, SciPy's: a
+bug too, each is fixed where it arises) is one line of acscal's, never Python's two.
 """
 
 from __future__ import annotations
 
 import sys
+import warnings
 from enum import Enum
 from pathlib import Path
+from types import FrameType
 from typing import Annotated, Any
 
 import typer
@@ -526,12 +529,48 @@ _register_report(app)
 INTERRUPTED = 130
 
 
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
+    """A warning the filters let through, as ``acscal: warning: numerical trouble in
+    FUNCTION (FILE:LINE): MESSAGE``: FUNCTION is acscal's innermost, FILE:LINE the
+    warning's (often in NumPy or SciPy)."""
+    frame: FrameType | None = sys._getframe(1)
+    where = "acscal"
+    while frame is not None:
+        module = str(frame.f_globals.get("__name__", ""))
+        if module.startswith("acs_cli."):
+            where = f"{module}.{frame.f_code.co_name}"
+            break
+        frame = frame.f_back
+    kind = "numerical trouble" if issubclass(category, RuntimeWarning) else category.__name__
+    source = "/".join(Path(filename).parts[-3:])
+    err.print(
+        f"acscal: warning: {kind} in {where} ({source}:{lineno}): {message}",
+        markup=False,
+        soft_wrap=True,
+    )
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acscal`` console script."""
     args = sys.argv[1:] if argv is None else argv
     if not args:  # a bare `acscal`: the help (the command list), as git and kubectl do
         args = ["--help"]
     reset()
+    # only how a warning is shown changes, not which are: `-W error` and pytest's
+    # filterwarnings still raise them
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        _main(args)
+
+
+def _main(args: list[str]) -> None:
     try:
         # not standalone, Typer turns Ctrl-C into a returned 130 (and typer.Exit into its
         # code): returned, not raised, so it must become the exit status here

@@ -82,6 +82,9 @@ STENCIL_INTERVALS = 1.0 / 16.0
 SCORE_BLOCK_FRAMES = 10
 #: ... and at least this many runs (shorter runs on short recordings).
 MIN_SCORE_BLOCKS = 10
+#: The refinement's cost where the calibration fails: finite (Brent's parabolic step
+#: subtracts costs, and inf - inf is NaN) and above any profile cost (under 400 a residual).
+FAILED_COST = 1e100
 
 
 def _timed_poses(
@@ -352,8 +355,13 @@ def estimate_time_offset(
         )
     best = int(np.argmin(values))
     lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-    res = minimize_scalar(c, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6})
-    dt = float(res.x)
+
+    def c_finite(dt: float) -> float:
+        return min(c(dt), FAILED_COST)
+
+    res = minimize_scalar(c_finite, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6})
+    # the calibration failed at every offset the refinement tried: the grid's minimum
+    dt = float(res.x) if res.fun < FAILED_COST else float(grid[best])
     # the residuals at three offsets about dt (inside the range) for the standard deviation
     h = STENCIL_INTERVALS * interp.interval
     mid = float(np.clip(dt, -max_offset + h, max_offset - h))

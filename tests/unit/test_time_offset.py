@@ -8,6 +8,7 @@ import pytest
 from acs_cli.core import se3
 from acs_cli.core.relpose import JointPrior, estimate_relpose
 from acs_cli.core.time_offset import (
+    COARSE_FRAMES,
     PoseInterpolator,
     PoseSmoother,
     estimate_time_offset,
@@ -69,6 +70,28 @@ def test_an_offset_beyond_the_range_is_at_its_limit() -> None:
     t = seq.timestamps
     off = estimate_time_offset(t, Ta, t, Tb, _fit, 0.05)
     assert off.at_limit
+
+
+@pytest.mark.parametrize("failures", [1, 10**6])
+def test_offsets_where_the_calibration_fails_do_not_upset_the_refinement(failures: int) -> None:
+    # the first `failures` calibrations on all the frames (the refinement's, not the
+    # grid's on COARSE_FRAMES) fail: an infinite cost made Brent's step NaN, with a
+    # RuntimeWarning from SciPy (a real knee recording); all failing leave the grid's minimum
+    seq, Ta, Tb = _recording(0, 0.037)
+    calls = []
+
+    def holey_fit(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        if len(A) > COARSE_FRAMES:
+            calls.append(len(A))
+            if len(calls) <= failures:
+                raise DegenerateMotionError("not at this offset")
+        return _fit(A, B)
+
+    t = seq.timestamps
+    off = estimate_time_offset(t, Ta, t, Tb, holey_fit, 0.2)
+    step = float(off.profile[1, 0] - off.profile[0, 0])
+    assert abs(off.offset_s - 0.037) < (1e-3 if failures == 1 else step)
+    assert np.isfinite(off.std_s) == (failures == 1)
 
 
 def test_synchronisation_check_flags_an_offset_and_not_a_synchronised_pair() -> None:
