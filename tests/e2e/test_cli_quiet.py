@@ -26,7 +26,7 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def left_leg(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The left pelvis, thigh and shank over the whole trial as TUM files."""
+    """The left thigh and shank over the whole trial as TUM files."""
     spec = importlib.util.spec_from_file_location("mocap_trc", ROOT / "benchmarks" / "mocap_trc.py")
     assert spec is not None and spec.loader is not None
     trc = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
@@ -34,15 +34,15 @@ def left_leg(tmp_path_factory: pytest.TempPathFactory) -> Path:
     run = trc.read_trc(DATA / "subject02_running.trc")
     ref = trc.reference_positions(trc.read_trc(DATA / "subject02_static.trc"))
     out = tmp_path_factory.mktemp("leg")
-    for segment in ("pelvis", "thigh", "shank"):
+    for segment in ("thigh", "shank"):
         track = trc.segment_track(run, ref, segment, "L")
         write_tum(out / f"{segment}.tum", run.times, track.T_lab_seg)
     return out
 
 
-@pytest.mark.parametrize("joint", [("pelvis", "thigh"), ("thigh", "shank")], ids=["hip", "knee"])
-def test_a_real_recording_leaves_no_library_warning(left_leg: Path, joint: tuple) -> None:
-    a, b = joint
+def test_a_real_recording_leaves_no_library_warning(left_leg: Path) -> None:
+    """The left knee (the hip gave none before the fix either; the suite's time is kept)."""
+    a, b = "thigh", "shank"
     r = acscal("joint", "--overlap", "--poses-a", left_leg / f"{a}.tum",
                "--poses-b", left_leg / f"{b}.tum", "-o", left_leg / f"{a}_{b}.yaml")  # fmt: skip
     assert r.returncode == 0, r.stderr
