@@ -36,7 +36,7 @@ import numpy as np
 
 from acs_cli.core.rig import rig_topology
 from acs_cli.core.rig_bundle import bundle_adjust_rig
-from acs_cli.core.rig_solve import Recordings, estimate_rig
+from acs_cli.core.rig_solve import estimate_rig
 from sample_data_gen.rig_sim import rig_corner_recording
 
 JOINTS = (("hip", ("cam0", "cam1"), "ball"), ("knee", ("cam1", "cam2"), "hinge"))
@@ -46,19 +46,8 @@ def trial(seed: int, n: int) -> dict[str, dict[str, tuple[float, float]]]:
     """``{method: {quantity: (error, std)}}`` of one simulated chain."""
     rec = rig_corner_recording(np.random.default_rng(seed), n, joints=JOINTS)
     topo = rec.rig.topology
-    of = np.repeat([0, 1], [n // 2, n - n // 2])
-    absent = {"cam2": of == 0, "cam0": of == 1}
-    tracks = {
-        c: dataclasses.replace(t, valid=t.valid & ~absent[c]) if c in absent else t
-        for c, t in rec.tracks().items()
-    }
-    views = {
-        c: dataclasses.replace(v, valid=v.valid & ~absent[c][:, None]) if c in absent else v
-        for c, v in rec.views().items()
-    }
-    common = np.ones(n, bool)
-    for c in topo.cameras:
-        common &= views[c].valid.any(axis=1) | absent.get(c, np.zeros(n, bool))
+    tracks, views, recs, common, ref = rec.two_trials("cam0", "cam2")
+    of = recs.of_frame
     out: dict[str, dict[str, tuple[float, float]]] = {"two recordings": {}, "alone": {}}
 
     def record(method: str, name: str, ba: object, cams: tuple[str, str]) -> None:
@@ -75,8 +64,6 @@ def trial(seed: int, n: int) -> dict[str, dict[str, tuple[float, float]]]:
             key = f"fx {c} ({name} trial)" if method == "alone" else f"fx {c}"
             out[method][key] = (abs(d), float(ba.intrinsics_std[c][0]))  # type: ignore[attr-defined]
 
-    recs = Recordings(("hip", "knee"), of, (False, False))
-    ref = int(np.flatnonzero(common & (of == 0))[0])
     est = estimate_rig(topo, tracks, reference_frame=ref, recordings=recs)
     ba = bundle_adjust_rig(topo, views, est, np.flatnonzero(common))
     for name, cams, _ in JOINTS:

@@ -17,6 +17,7 @@ for a camera with unknown scale, with its translations multiplied by ``mu_c``.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from acs_cli.core import se3
 from acs_cli.core.rig import RigTopology, rig_topology
 from acs_cli.core.rig_bundle import CameraViews
-from acs_cli.core.rig_solve import CameraTrack
+from acs_cli.core.rig_solve import CameraTrack, Recordings
 from sample_data_gen.acs_sim import (
     add_pose_noise,
     random_rotations,
@@ -331,6 +332,32 @@ class CornerRecording:
             c: CameraViews(got[c], self.valid[c], self.board_points, self.intrinsics0[c])
             for c in self.rig.topology.cameras
         }
+
+    def two_trials(
+        self, first: str, second: str
+    ) -> tuple[dict[str, CameraTrack], dict[str, CameraViews], Recordings, np.ndarray, int]:
+        """The recording as two trials, its halves: ``second`` (a camera) not recorded in
+        the first, ``first`` not in the second. Returns the tracks and views, the
+        ``Recordings`` (``hip``, ``knee``; separate worlds), the instants where every camera
+        its trial recorded sees its board, and the first of them in the first trial (a
+        reference instant)."""
+        n = next(iter(self.valid.values())).shape[0]
+        of = np.repeat([0, 1], [n // 2, n - n // 2])
+        absent = {second: of == 0, first: of == 1}
+        none = np.zeros(n, bool)
+        tracks = {
+            c: CameraTrack(t.T_w_c, t.valid & ~absent.get(c, none), t.unknown_scale)
+            for c, t in self.tracks().items()
+        }
+        views = {
+            c: dataclasses.replace(v, valid=v.valid & ~absent.get(c, none)[:, None])
+            for c, v in self.views().items()
+        }
+        common = np.ones(n, bool)
+        for c in self.rig.topology.cameras:
+            common &= views[c].valid.any(axis=1) | absent.get(c, none)
+        ref = int(np.flatnonzero(common & (of == 0))[0])
+        return tracks, views, Recordings(("hip", "knee"), of, (False, False)), common, ref
 
 
 def rig_corner_recording(

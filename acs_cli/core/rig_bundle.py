@@ -565,7 +565,7 @@ def _recordings(
 
 
 def _world_starts(
-    topo: RigTopology, est: RigEstimate, present: list[frozenset[str]]
+    est: RigEstimate, present: list[frozenset[str]]
 ) -> dict[tuple[int, str], FloatArray]:
     """Each (recording, body)'s board in the reference world, from the pose-based
     estimate's worlds (a one-world estimate: each body's ``world_to_reference_world``)."""
@@ -663,7 +663,7 @@ def _initial(
         rec=rec,
         present=present,
         G0=G[topo.reference].copy(),
-        W0=_world_starts(topo, est, present),
+        W0=_world_starts(est, present),
         R0=R0,
         geom0=geom0,
         obs=obs,

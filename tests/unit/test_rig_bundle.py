@@ -292,21 +292,7 @@ def test_two_recordings_of_a_chain_share_its_joints_and_intrinsics() -> None:
     n = 160
     rec = rig_corner_recording(np.random.default_rng(2), n, joints=joints, noise_px=NOISE_PX)
     topo = rec.rig.topology
-    of = np.repeat([0, 1], n // 2)
-    absent = {"cam2": of == 0, "cam0": of == 1}
-    tracks = {
-        c: dataclasses.replace(t, valid=t.valid & ~absent[c]) if c in absent else t
-        for c, t in rec.tracks().items()
-    }
-    views = {
-        c: dataclasses.replace(v, valid=v.valid & ~absent[c][:, None]) if c in absent else v
-        for c, v in rec.views().items()
-    }
-    common = np.ones(n, bool)
-    for c in topo.cameras:
-        common &= views[c].valid.any(axis=1) | absent.get(c, np.zeros(n, bool))
-    ref = int(np.flatnonzero(common & (of == 0))[0])
-    recs = Recordings(("hip", "knee"), of, (False, False))
+    tracks, views, recs, common, ref = rec.two_trials("cam0", "cam2")
     est = estimate_rig(topo, tracks, reference_frame=ref, recordings=recs)
     ba = bundle_adjust_rig(topo, views, est, np.flatnonzero(common))
     assert ba.success
@@ -382,21 +368,8 @@ def test_a_default_prior_std_does_not_depend_on_where_another_recording_is_place
     n = 160
     rec = rig_corner_recording(np.random.default_rng(2), n, joints=joints, noise_px=NOISE_PX)
     topo = rec.rig.topology
-    of = np.repeat([0, 1], n // 2)
-    absent = {"cam2": of == 0, "cam0": of == 1}
-    tracks = {
-        c: dataclasses.replace(t, valid=t.valid & ~absent.get(c, False))
-        for c, t in rec.tracks().items()
-    }
-    views = {
-        c: dataclasses.replace(v, valid=v.valid & ~absent.get(c, np.zeros(n, bool))[:, None])
-        for c, v in rec.views().items()
-    }
-    common = np.ones(n, bool)
-    for c in topo.cameras:
-        common &= views[c].valid.any(axis=1) | absent.get(c, np.zeros(n, bool))
-    ref = int(np.flatnonzero(common & (of == 0))[0])
-    recs = Recordings(("hip", "knee"), of, (False, False))
+    tracks, views, recs, common, ref = rec.two_trials("cam0", "cam2")
+    of = recs.of_frame
     est = estimate_rig(topo, tracks, reference_frame=ref, recordings=recs)
     D = np.eye(4)
     D[0, 3] = 5.0
