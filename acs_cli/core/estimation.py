@@ -57,6 +57,7 @@ from math import comb
 import numpy as np
 
 from acs_cli.core import lsq
+from acs_cli.core.correlated import NOT_TESTED, CorrelatedErrors, covariance_with_correlated_errors
 from acs_cli.core.se3 import FloatArray
 
 NDArrayBool = np.ndarray
@@ -240,7 +241,8 @@ class LeastSquaresResult:
     ----------
     x : ndarray, shape (p,)
     covariance : ndarray, shape (p, p)
-        Inverse of the final information matrix (noise levels estimated).
+        Inverse of the final information matrix (noise levels estimated), grown where the
+        frames' errors are correlated over time (:mod:`acs_cli.core.correlated`).
     theta : ndarray, shape (k,)
         Estimated variance components.
     residuals : ndarray, shape (n, 3)
@@ -261,6 +263,16 @@ class LeastSquaresResult:
     iterations: int
     converged: bool
     information: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: what the test for errors correlated over time found; ``covariance`` includes it
+    correlated: CorrelatedErrors = NOT_TESTED
+    #: the covariance under independent noise (before the growth): what the motion's
+    #: geometry determines, for the tests of degenerate motion (empty: ``covariance``)
+    model_covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    @property
+    def motion_covariance(self) -> FloatArray:
+        """``model_covariance`` when there is one, else ``covariance``."""
+        return self.model_covariance if self.model_covariance.size else self.covariance
 
 
 def _rows(a: FloatArray, mask: NDArrayBool) -> FloatArray:
@@ -761,9 +773,14 @@ def solve(
     r, J = _with_jacobian(problem, x)
     H = _information(problem, x, r, J, W, mask)
     cov = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
+    # errors correlated over time: the block sandwich on the kept frames' scores J^T W r
+    scores = np.einsum("nai,nab,nb->ni", _rows(J, mask), _rows(W, mask), _rows(r, mask))
+    grown, found = covariance_with_correlated_errors(cov, scores)
     return LeastSquaresResult(
         x=x,
-        covariance=cov,
+        covariance=grown,
+        model_covariance=cov,
+        correlated=found,
         theta=np.asarray(th, dtype=float),
         residuals=r,
         mahalanobis_sq=mahalanobis_sq(r, W),

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from acs_cli.core import estimation, se3
+from acs_cli.core.correlated import NOT_TESTED, CorrelatedErrors
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
@@ -95,6 +96,9 @@ class JointEstimate:
     #: a hinge's unit axis in each camera's frame (``"a"``, ``"b"``) and its std (deg)
     axis_in: dict[str, FloatArray] = field(default_factory=dict)
     axis_std_deg_in: dict[str, float] = field(default_factory=dict)
+    #: per key (``"a"``, ``"b"``; ``"ab"``), the test for errors correlated over time
+    #: (:mod:`acs_cli.core.correlated`); the covariances include what it found
+    correlated: dict[str, CorrelatedErrors] = field(default_factory=dict)
 
     @property
     def std_a(self) -> FloatArray:
@@ -121,6 +125,7 @@ class PivotEstimate:
     inliers: np.ndarray
     noise: dict[str, float]
     motion: MotionSummary | None = None
+    correlated: CorrelatedErrors = NOT_TESTED
 
 
 def _check_method(method: str) -> None:
@@ -396,6 +401,11 @@ def joint_motion_warnings(est: JointEstimate, unit: str) -> list[str]:
             out.append(hinge + ("" if misfit is None else f"; {misfit}"))
         elif misfit is not None and fixed:
             out.append(f"{what}: {misfit}")
+    for key, found in est.correlated.items():
+        what = f"camera {key.upper()}" if fixed else "the joint"
+        note = found.message(what)
+        if note is not None:
+            out.append(note)
     return out
 
 
@@ -715,7 +725,9 @@ def estimate_pivot(
     x0, *_ = np.linalg.lstsq(J.reshape(-1, 6), -t.reshape(-1), rcond=None)
     sol = estimation.solve(estimation.LeastSquaresProblem(residuals, noise_shapes), x0)
     inl = sol.inliers
-    if hinge_explains(spread, sol.covariance[:3, :3], sol.x[:3], float(np.sqrt(sol.theta[1]))):
+    # whether a hinge explains the motion is a question of its geometry: the model's covariance
+    cov_model = sol.motion_covariance[:3, :3]
+    if hinge_explains(spread, cov_model, sol.x[:3], float(np.sqrt(sol.theta[1]))):
         raise hinge()
     step, cov_step = pivot_bias_correction(sol.x, sol.theta, R[inl], sol.information)
     x = sol.x + step
@@ -728,6 +740,7 @@ def estimate_pivot(
         inliers=inl,
         noise=_noise_dict(sol.theta),
         motion=motion_summary(spread),
+        correlated=sol.correlated,
     )
 
 
@@ -758,7 +771,9 @@ def joint_of_pivots(a: PivotEstimate, b: PivotEstimate | None, method: str) -> J
     noise = {"a": a.noise} if a.noise else {}
     world = {"a": a.position_in_world}
     motion = {} if a.motion is None else {"a": a.motion}
+    correlated = {"a": a.correlated}
     if b is not None:
+        correlated["b"] = b.correlated
         rms["b"], inl["b"], world["b"] = b.residual_rms, b.inliers, b.position_in_world
         if b.noise:
             noise["b"] = b.noise
@@ -776,6 +791,7 @@ def joint_of_pivots(a: PivotEstimate, b: PivotEstimate | None, method: str) -> J
         noise=noise,
         position_in_world=world,
         motion=motion,
+        correlated=correlated,
     )
 
 

@@ -139,7 +139,7 @@ def estimate_overlap_rig(
     e = est.edges[JOINT]
     # the articulation carries both cameras' rotation noise
     sigma_rel = float(np.sqrt(2.0) * np.radians(e.noise.get("sigma_rot_deg", 0.0)))
-    if hinge_explains(motion.spread, e.position_cov_in["b"], e.position_in["b"], sigma_rel):
+    if hinge_explains(motion.spread, e.motion_cov_in("b"), e.position_in["b"], sigma_rel):
         raise motion.hinge_error()
     return est
 
@@ -188,6 +188,7 @@ def joint_of_rig(est: RigEstimate, n: int) -> JointEstimate:
         joint_type=e.joint.type,
         axis_in={c: np.asarray(u, float) for c, u in e.axis_in.items()},
         axis_std_deg_in={c: float(v) for c, v in e.axis_std_deg_in.items()},
+        correlated={"ab": est.correlated},
     )
 
 

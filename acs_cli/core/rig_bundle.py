@@ -84,6 +84,11 @@ import scipy.sparse
 from acs_cli.core import lsq, se3
 from acs_cli.core.bundle import check_frame_corners, information, observed
 from acs_cli.core.camera_models import camera_model
+from acs_cli.core.correlated import (
+    NOT_TESTED,
+    CorrelatedErrors,
+    covariance_with_correlated_errors,
+)
 from acs_cli.core.intrinsics import MIN_VIEWS, degenerate_distortion
 from acs_cli.core.joints import JointModel, joint_model
 from acs_cli.core.rig import RigJoint, RigTopology, rig_topology
@@ -865,8 +870,13 @@ def _adjust(
     x = sol.x
     cols = list(range(L.n_shared)) + L.frame_columns(k_ref, slice(0, L.block))
     cov = scale * _inverse_columns(sol.jac, cols)
+    cov, found = _correlated(model, sol.jac, sol.fun / scale, row_frame, cov)
     where = {c: i for i, c in enumerate(cols)}
     est = _assemble(model, x, cov, where, k_ref, initial)
+    est = dataclasses.replace(est, correlated=found)
+    note = found.message("the bundle adjustment")
+    if note:
+        est.warnings.append(note)
     intr = {c: model.intrinsics(x, c) for c in model.cams}
     std: dict[str, FloatArray] = {}
     icov: dict[str, FloatArray] = {}
@@ -899,6 +909,35 @@ def _adjust(
         est, intr, std, icov, rms, float(np.sqrt(sigma2)), frames, bool(sol.success), bodies,
         per_frame, "held as asked" if hold else None,
     )  # fmt: skip
+
+
+def _correlated(
+    model: _Model, J: object, r: FloatArray, row_frame: np.ndarray, cov: FloatArray
+) -> tuple[FloatArray, CorrelatedErrors]:
+    """``cov`` (the shared unknowns first) grown for errors correlated over time
+    (:mod:`acs_cli.core.correlated`): per adjusted frame, the scores ``J^T r`` of its corner
+    and pose rows for the shared unknowns (``r`` the residuals over their variance),
+    tested per camera's intrinsics, per board and per joint's geometry."""
+    L = model.L
+    n_rows = sum(2 * model.obs[c][0].size for c in model.cams)
+    n_rows += sum(6 * model.meas[b][2].size for b in model.bodies)
+    Js = scipy.sparse.csr_matrix(J)[:n_rows, : L.n_shared]
+    S = Js.multiply(r[:n_rows, None]).tocsr()
+    frame = row_frame[:n_rows]
+    used = np.unique(frame)
+    P = scipy.sparse.csr_matrix(
+        (np.ones(n_rows), (np.searchsorted(used, frame), np.arange(n_rows))),
+        shape=(used.size, n_rows),
+    )
+    scores = np.asarray((P @ S).toarray())
+    groups: dict[str, list[int]] = {}
+    for c, sl in L.intr.items():
+        groups[f"intrinsics of {c}"] = list(range(sl.start, sl.stop))
+    for (rec, body), sl in L.world.items():
+        groups[f"the board of {body} (recording {rec})"] = list(range(sl.start, sl.stop))
+    for name, sl in L.geom.items():
+        groups[f"joint {name}"] = list(range(sl.start, sl.stop))
+    return covariance_with_correlated_errors(cov, scores, list(range(L.n_shared)), groups)
 
 
 def _bundle_priors(
@@ -1268,6 +1307,8 @@ class FixedJointBundle:
     per_frame_rms_px: FloatArray
     sigma_px: float
     success: bool
+    #: the test for errors correlated over time (the covariances include what it found)
+    correlated: CorrelatedErrors = NOT_TESTED
 
     @property
     def intrinsics_std(self) -> FloatArray:
@@ -1392,4 +1433,5 @@ def bundle_adjust_fixed_joint(
         per_frame_rms_px=ba.per_frame_rms_px["camera"],
         sigma_px=ba.sigma_px,
         success=ba.success,
+        correlated=ba.estimate.correlated,
     )

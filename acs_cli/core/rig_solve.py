@@ -51,6 +51,7 @@ Covariances come from the final whitened Jacobian.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -60,6 +61,11 @@ from scipy.sparse import coo_matrix, csr_matrix
 
 from acs_cli.core import estimation, lsq, se3
 from acs_cli.core.bundle import right_jacobians
+from acs_cli.core.correlated import (
+    NOT_TESTED,
+    CorrelatedErrors,
+    covariance_with_correlated_errors,
+)
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import (
     MIN_ROTATION_SPREAD,
@@ -82,6 +88,10 @@ from acs_cli.core.rig_start import ball_similarity, similarity_from_lifted
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import DegenerateMotionError, InputError
 
+#: An edge whose mean whitened residual power per row is below this fits its poses exactly
+#: (a thousandth of the noise floors): rounding, not noise, and no frame is tested as an
+#: outlier on it.
+EXACT_POWER = 1e-6
 #: Fewest frames an edge needs in common (as for a self-calibrated pair).
 MIN_EDGE_FRAMES = 14
 #: ... or, for a joint whose position is given (a prior): the relative pose alone.
@@ -426,6 +436,14 @@ class EdgeEstimate:
     #: ``position_in`` and ``position_cov_in`` in each camera's own trajectory units (they
     #: differ from the reference's under unknown scale): camera -> (position, covariance)
     position_own_in: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    #: ``position_cov_in`` under independent noise, before the growth for correlated errors
+    #: (:mod:`acs_cli.core.correlated`): what the motion's geometry determines, for the tests
+    #: of degenerate motion; empty when nothing grew
+    position_cov_model_in: dict[str, FloatArray] = field(default_factory=dict)
+
+    def motion_cov_in(self, c: str) -> FloatArray:
+        """``position_cov_model_in[c]`` when the covariance grew, else ``position_cov_in[c]``."""
+        return self.position_cov_model_in.get(c, self.position_cov_in[c])
 
 
 @dataclass(frozen=True)
@@ -447,6 +465,8 @@ class RigEstimate:
     #: (:func:`acs_cli.core.rig_bundle.bundle_adjust_rig`) rather than measured poses mapped
     #: into the reference world; empty for the pose-based solve
     bundle_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    #: what the test for errors correlated over time found (:mod:`acs_cli.core.correlated`)
+    correlated: CorrelatedErrors = NOT_TESTED
 
 
 # --------------------------------------------------------------------------- layout
@@ -1154,7 +1174,7 @@ def _reject(st: _State, x: FloatArray) -> int:
         p_eff = float(np.trace(Hii[m], axis1=1, axis2=2).sum())
         nu = dim * k - p_eff - (n_noise - 1)
         S = float(np.sum(e[m] ** 2))
-        if nu - dim < estimation.MIN_TEST_DOF or not S > 0:
+        if nu - dim < estimation.MIN_TEST_DOF or not S > EXACT_POWER * dim * k:
             continue
         stat = T / dim / (np.maximum(S - T, 1e-12 * S) / (nu - dim))
         thr = estimation.outlier_threshold(n, nu - dim, dim, shape=estimation.tail_shape(T[m], dim))
@@ -1243,7 +1263,7 @@ def _reject_left_out(
         e, G, Hinv, S, nu = fits[name]
         m = st.mask[name]
         dim = joint_model(st.topo.joint(name).type).outlier_dim
-        if nu < estimation.MIN_TEST_DOF or not S > 0:
+        if nu < estimation.MIN_TEST_DOF or not S > EXACT_POWER * dim * m.sum():
             m[f] = True
             continue
         Gs = G[f]
@@ -1655,9 +1675,15 @@ def estimate_rig(
     J = _jacobian(st, x)
     JtJ = J.T @ J
     H = np.asarray(JtJ.toarray() if hasattr(JtJ, "toarray") else JtJ)
-    cov = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
+    cov_model = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
+    # errors correlated over time (skin markers, kinematics, drift): the block sandwich
+    cov, found = _correlated(st, x, J, cov_model, ~delta_cols)
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev, wg, recs)
+    est = dataclasses.replace(est, correlated=found)
     est.warnings.extend(check_joint_types(st, x))
+    note = found.message("the rig")
+    if note:
+        est.warnings.append(note)
     # the information from the measurements alone (the priors' rows are the last ones):
     # what the null test normalises by, so that a tight prior on one combination of unknowns
     # (a joint given in a camera's own units: its position and that camera's scale) does
@@ -1665,8 +1691,57 @@ def estimate_rig(
     n_prior = sum(int(row[3].shape[0]) for row in st.priors)
     Jm = J[: J.shape[0] - n_prior]
     H_data = np.asarray((Jm.T @ Jm).toarray()) if n_prior else H
-    _check_determined(st, x, H, cov, est, travel, accept_weak, H_data)
+    # whether the motion determines the rig is a question of its geometry and the fitted
+    # noise: asked of the model's covariance (correlated errors are a warning, not a refusal)
+    judged = est if not found.detected else _assemble(st, x, cov_model, noise, 0.0, 0, wg, recs)
+    _check_determined(st, x, H, cov_model, judged, travel, accept_weak, H_data)
+    if found.detected:
+        for name, e in est.edges.items():
+            e.position_cov_model_in.update(judged.edges[name].position_cov_in)
     return est
+
+
+def _correlated(
+    st: _State, x: FloatArray, J: csr_matrix, cov: FloatArray, free: np.ndarray
+) -> tuple[FloatArray, CorrelatedErrors]:
+    """``cov`` grown for errors correlated over time (:mod:`acs_cli.core.correlated`): the
+    per-instant scores of the edges' inlier rows (the reference instant's, made hard, left
+    out), tested per joint's geometry and per world."""
+    r = _residuals(st, x)
+    rows_of = _edge_rows(st)
+    row_idx: list[np.ndarray] = []
+    frame_idx: list[np.ndarray] = []
+    for j in st.topo.joints:
+        f = st.frames[j.name]
+        keep = st.mask[j.name] & (f != st.ref_frame)
+        rows = rows_of[j.name][keep]
+        row_idx.append(rows.ravel())
+        frame_idx.append(np.repeat(f[keep], rows.shape[1]))
+    rr = np.concatenate(row_idx)
+    ff = np.concatenate(frame_idx)
+    used = np.unique(ff)
+    if used.size == 0:
+        return cov, NOT_TESTED
+    S = J[rr].multiply(r[rr][:, None]).tocsr()
+    P = csr_matrix(
+        (np.ones(rr.size), (np.searchsorted(used, ff), np.arange(rr.size))),
+        shape=(used.size, rr.size),
+    )
+    cols = np.flatnonzero(free)
+    scores = np.asarray((P @ S)[:, cols].toarray())
+    where = {int(c): i for i, c in enumerate(cols)}
+    L = st.L
+    groups: dict[str, list[int]] = {
+        f"joint {name}": [where[c] for c in L.edge_columns(name) if c in where] for name in L.edge
+    }
+    for w in sorted(set(L.rot) | set(L.logs)):
+        on = [c for c in st.topo.cameras if bool(np.any(st.widx[c] == w))]
+        groups[f"the world of {', '.join(on)}"] = [
+            where[c] for c in L.world_columns(w) if c in where
+        ]
+    if L.metre is not None and L.metre in where:
+        groups["units per metre"] = [where[L.metre]]
+    return covariance_with_correlated_errors(cov, scores, cols, groups)
 
 
 def _own_world(st: _State, c: str) -> int:

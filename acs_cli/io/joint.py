@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from acs_cli.core.correlated import CorrelatedErrors
 from acs_cli.core.intrinsics import DISTORTION_NAMES
 from acs_cli.errors import InputError
 from acs_cli.io.base import Section, YamlArtifact, header_of
@@ -249,6 +250,66 @@ class MotionQuality(Section):
             k: cls.parse(v, f"{key}.{k}", path)
             for k, v in as_mapping(value or {}, key, path).items()
         }
+
+
+@dataclass(frozen=True)
+class UncertaintySection(Section):
+    """How an estimate's stds were made (:class:`acs_cli.core.correlated.CorrelatedErrors`):
+    ``joint.yaml``'s ``quality.uncertainty.<a/b/ab>``, ``relpose.yaml``'s
+    ``quality.uncertainty`` and ``rig.yaml``'s ``uncertainty``.
+
+    Attributes
+    ----------
+    method : str
+        The covariance: the model's (independent frames, noise levels fitted), grown by the
+        block sandwich where consecutive frames' errors are correlated.
+    blocks : int
+        Blocks of consecutive frames the test cut the recording into (0: too few frames, not
+        tested).
+    frames : int
+        Frames the test used.
+    std_factor : float
+        The largest factor a std grew by (1.0: the model's covariance stands).
+    grown : list of str
+        The quantities whose stds grew (joints, worlds, intrinsics), by name.
+    """
+
+    method: str
+    blocks: int
+    frames: int
+    std_factor: float
+    grown: list[str] = field(default_factory=list)
+
+    @classmethod
+    def of(cls, found: CorrelatedErrors) -> UncertaintySection:
+        if not found.tested:
+            how = "independent frames, noise levels fitted (too few frames for the block test)"
+        elif found.detected:
+            how = (
+                "independent frames, noise levels fitted, grown by the block sandwich: "
+                "the residuals are correlated over consecutive frames"
+            )
+        else:
+            how = (
+                "independent frames, noise levels fitted (the block test over consecutive "
+                "frames found no correlated errors)"
+            )
+        return cls(how, found.blocks, found.frames, round(found.std_factor, 4), list(found.grown))
+
+    @classmethod
+    def parse(cls, value: Any, key: str, path: Source) -> UncertaintySection:
+        d = as_mapping(value, key, path)
+        return cls(
+            str(d.get("method", "")),
+            as_int(d.get("blocks", 0), f"{key}.blocks", path, minimum=0),
+            as_int(d.get("frames", 0), f"{key}.frames", path, minimum=0),
+            as_number(d.get("std_factor", 1.0), f"{key}.std_factor", path),
+            as_str_list(d.get("grown") or [], f"{key}.grown", path),
+        )
+
+    @classmethod
+    def parse_optional(cls, value: Any, key: str, path: Source) -> UncertaintySection | None:
+        return None if value is None else cls.parse(value, key, path)
 
 
 @dataclass(frozen=True)
@@ -588,6 +649,8 @@ class JointQuality:
     motion : dict of str to MotionQuality
         Ball joints: how each camera turned (fixed joint) or how the joint bent (overlap),
         in each camera's frame, and where the joint is weakest.
+    uncertainty : dict of str to UncertaintySection
+        Per key, how the stds were made (errors correlated over time).
     """
 
     frames: dict[str, FramesUsed] = field(default_factory=dict)
@@ -597,6 +660,7 @@ class JointQuality:
     estimated_pose_noise: dict[str, PoseNoise] = field(default_factory=dict)
     bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
     motion: dict[str, MotionQuality] = field(default_factory=dict)
+    uncertainty: dict[str, UncertaintySection] = field(default_factory=dict)
 
     @classmethod
     def parse(cls, value: Any, path: Source) -> JointQuality:
@@ -629,6 +693,12 @@ class JointQuality:
             },
             _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
             MotionQuality.parse_all(d.get("motion"), "quality.motion", path),
+            {
+                k: UncertaintySection.parse(v, f"quality.uncertainty.{k}", path)
+                for k, v in as_mapping(
+                    d.get("uncertainty") or {}, "quality.uncertainty", path
+                ).items()
+            },
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -649,6 +719,8 @@ class JointQuality:
             }
         if self.motion:
             out["motion"] = {k: m.to_plain() for k, m in self.motion.items()}
+        if self.uncertainty:
+            out["uncertainty"] = {k: u.to_plain() for k, u in self.uncertainty.items()}
         return out
 
 

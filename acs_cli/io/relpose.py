@@ -27,6 +27,7 @@ from acs_cli.io.joint import (
     MotionQuality,
     Pairing,
     PoseNoise,
+    UncertaintySection,
     _bundles,
     _fmt,
 )
@@ -172,6 +173,8 @@ class RelposeQuality:
     motion : dict of str to MotionQuality
         A ball joint: how it bent, in each camera's frame (``a``, ``b``), and where it is
         weakest (the schema of ``joint.yaml``'s ``quality.motion``).
+    uncertainty : UncertaintySection or None
+        How the stds were made (errors correlated over time); None for the paper's method.
     """
 
     residual_rms: float | None = None
@@ -180,6 +183,7 @@ class RelposeQuality:
     estimated_pose_noise: PoseNoise | None = None
     bundle_adjustment: dict[str, BundleSection] = field(default_factory=dict)
     motion: dict[str, MotionQuality] = field(default_factory=dict)
+    uncertainty: UncertaintySection | None = None
 
     @classmethod
     def parse(cls, value: Any, path: Source) -> RelposeQuality:
@@ -194,6 +198,7 @@ class RelposeQuality:
             None if not noise else PoseNoise.parse(noise, "quality.estimated_pose_noise", path),
             _bundles(d.get("bundle_adjustment"), "quality.bundle_adjustment", path),
             MotionQuality.parse_all(d.get("motion"), "quality.motion", path),
+            UncertaintySection.parse_optional(d.get("uncertainty"), "quality.uncertainty", path),
         )
 
     def to_plain(self) -> dict[str, Any]:
@@ -209,6 +214,8 @@ class RelposeQuality:
             out["bundle_adjustment"] = {k: s.to_plain() for k, s in self.bundle_adjustment.items()}
         if self.motion:
             out["motion"] = {k: m.to_plain() for k, m in self.motion.items()}
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty.to_plain()
         return out
 
 

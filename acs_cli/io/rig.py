@@ -41,6 +41,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
     bundle_adjustment:                  # when every camera's poses carried board corners
       <name>: {intrinsics_file, rms_px, sigma_px, frames, camera_matrix, distortion,
                intrinsics_std, intrinsics_held}  # as joint.yaml's quality.bundle_adjustment
+    uncertainty: {method, blocks, frames, std_factor, grown}  # how the stds were made:
+                                        # grown where consecutive frames' errors correlate
     recordings:                         # each recording of the rig and its worlds
       <name>:
         world: shared | separate        # one world for every body, or one per body
@@ -78,7 +80,7 @@ from acs_cli.core.joints import JOINT_MODELS, JointModel, joint_model
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
-from acs_cli.io.joint import BundleSection, MotionQuality
+from acs_cli.io.joint import BundleSection, MotionQuality, UncertaintySection
 from acs_cli.io.validate import (
     as_int,
     as_mapping,
@@ -292,6 +294,8 @@ class RigArtifact(YamlArtifact):
     #: with several recordings: the recording of the reference instant (``reference_frame``
     #: is then a frame of that recording)
     reference_recording: str | None = None
+    #: how the stds were made (errors correlated over time; None in older files)
+    uncertainty: UncertaintySection | None = None
 
     KIND: ClassVar[str] = KIND
     REQUIRED: ClassVar[tuple[str, ...]] = ("reference.camera", "cameras", "joints")
@@ -446,6 +450,8 @@ class RigArtifact(YamlArtifact):
         }
         if self.bundle_adjustment:
             out["bundle_adjustment"] = {c: b.to_plain() for c, b in self.bundle_adjustment.items()}
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty.to_plain()
         if self.verdict is not None:
             out["verdict"] = self.verdict.to_plain()
         if self.recordings:
@@ -643,6 +649,7 @@ class RigArtifact(YamlArtifact):
             joints=joints,
             warnings=[str(w) for w in warnings],
             bundle_adjustment=bundle,
+            uncertainty=UncertaintySection.parse_optional(doc.get("uncertainty"), "uncertainty", p),
             verdict=None if doc.get("verdict") is None else VerdictSection.parse(doc["verdict"], p),
             header=header_of(doc),
             source=str(p),

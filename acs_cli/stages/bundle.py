@@ -245,11 +245,13 @@ def bundle_fixed_joint(
     notes += degenerate_warning(cam.upper(), ba.model, ba.intrinsics, ba.intrinsics_covariance)
     cov = ba.joint_covariance
     inliers = {**est.inliers, cam: inl}
+    correlated = {**est.correlated, cam: ba.correlated}
     refined = (
         replace(est, position_in_a=ba.joint_in_cam, covariance_a=cov, inliers=inliers)
         if cam == "a"
         else replace(est, position_in_b=ba.joint_in_cam, covariance_b=cov, inliers=inliers)
     )
+    refined = replace(refined, correlated=correlated)
     refined.position_in_world[cam] = ba.joint_in_world
     section = bundle_section(
         views, ba.intrinsics, ba.intrinsics_std, ba.rms_px, ba.sigma_px, int(inl.sum())

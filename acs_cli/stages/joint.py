@@ -48,6 +48,7 @@ from acs_cli.io.joint import (
     MotionQuality,
     Pairing,
     PoseNoise,
+    UncertaintySection,
 )
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact, load_joint_artifact, load_joint_section
@@ -285,6 +286,7 @@ def run_joint(
         },
         bundle_adjustment=bundles,
         motion=MotionQuality.of(est.motion, {k: est.covariance_of(k) for k in est.motion}),
+        uncertainty={k: UncertaintySection.of(v) for k, v in est.correlated.items()},
     )
     header = make_header(
         "joint",

@@ -38,7 +38,7 @@ from acs_cli.core.time_offset import (
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
-from acs_cli.io.joint import FramesUsed, JointSection, MotionQuality, PoseNoise
+from acs_cli.io.joint import FramesUsed, JointSection, MotionQuality, PoseNoise, UncertaintySection
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import (
     RelativePose,
@@ -312,6 +312,8 @@ def run_relpose(
             {"A": "A units", "B": "B units"} if config.unknown_scale else config.length_unit,
         )
         warnings += [] if near is None else [near]
+    note = None if est.rig is None else est.rig.correlated.message("the relative pose")
+    warnings += [] if note is None else [note]
     findings = relpose_findings(est, pair, prior, config, timed=offset is None)
     verdict = judge(relpose_verdict_measures(est, pair), config.accept_weak, findings)
     warnings += verdict.warnings()
@@ -326,6 +328,7 @@ def run_relpose(
         else None,
         bundle_adjustment=bundle_section or {},
         motion=MotionQuality.of(est.motion, {"a": est.covariance_a, "b": est.covariance_b}),
+        uncertainty=None if est.rig is None else UncertaintySection.of(est.rig.correlated),
     )
     mode = (
         "a rigid mount (constant T_b_a: hand-eye calibration; no joint point)"

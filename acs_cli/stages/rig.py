@@ -75,7 +75,7 @@ from acs_cli.io.config import RigJointSpec as RigJointSpec
 from acs_cli.io.config import RigRecordingSpec, RigRunConfig
 from acs_cli.io.config import is_rig_config as is_rig_config
 from acs_cli.io.config import parse_rig_config as parse_rig_config
-from acs_cli.io.joint import BundleSection, MotionQuality
+from acs_cli.io.joint import BundleSection, MotionQuality, UncertaintySection
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.rig import (
     PoseOnlySection,
@@ -332,6 +332,7 @@ def rig_artifact(
         joints=joints,
         warnings=list(warnings),
         recordings=recs,
+        uncertainty=UncertaintySection.of(est.correlated),
         # a header of its own, so that an artifact built from arrays saves and loads back;
         # run_rig replaces it with the run's inputs
         header=make_header(
@@ -475,6 +476,8 @@ def run_rig(
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     warnings += near_hinge_warnings(est, unit, priors)
+    note = est.correlated.message("the rig")
+    warnings += [] if note is None else [note]
     verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
     warnings += verdict.warnings()
     art = dataclasses.replace(

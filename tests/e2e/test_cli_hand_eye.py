@@ -70,7 +70,10 @@ def test_eye_in_hand_on_a_kuka_robot(tmp_path: Path) -> None:
     Z = po.T_world_board["cam"]  # the board in the robot's base, metres away
     assert 0.5 < np.linalg.norm(Z[:3, 3]) < 5 and np.all(po.T_world_board_std["cam"][1] < 2e-3)
     assert rig.bundle_adjustment["cam"].rms_px < 0.2
-    assert not rig.warnings, rig.warnings
+    # the robot's kinematic error follows its configuration, alike at neighbouring stations:
+    # the block test sees it and the stds grow to cover it (issue 20), the one warning
+    assert len(rig.warnings) == 1 and "correlated over time" in rig.warnings[0], rig.warnings
+    assert rig.uncertainty is not None and "joint handeye" in rig.uncertainty.grown
     # the joint written the other way round: T_q_p is then T_cam_flange, the same X
     swapped = _run(tmp_path, "flange, cam", "out_swapped").joints["handeye"]
     assert swapped.T_q_p is not None
