@@ -16,6 +16,7 @@ levels. ``docs/degeneracy.md`` lists the rules; :data:`RULES` holds them.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -53,6 +54,12 @@ class Rule:
         The value's unit when not a fraction.
     advice : str
         What to do about it.
+    alone : bool
+        Past its refusal level, the measure refuses the result on its own. False for the
+        residual: a large residual with a determined estimate (every std within its levels)
+        is noise the stds include, a warning; it refuses only with a diagnosis that finds a
+        reading of the inputs that fits much better (:func:`judge`'s ``findings``) or with
+        another measure refused.
     """
 
     key: str
@@ -62,6 +69,7 @@ class Rule:
     percent: bool = True
     unit: str = ""
     advice: str = ""
+    alone: bool = True
 
     def format(self, value: float) -> str:
         """``value`` as the messages print it."""
@@ -80,13 +88,21 @@ JOINT_STD = Rule(
     0.10,
     advice="record the rig turning about two or more axes by tens of degrees",
 )
+#: The same measure for a joint declared a hinge: only its line is located, and what
+#: locates it is the hinge's own range of angles.
+HINGE_STD = dataclasses.replace(
+    JOINT_STD,
+    advice="record the hinge turning through tens of degrees (its whole working range), with "
+    "more frames, while the rig moves",
+)
 RESIDUAL = Rule(
     "residual_fraction",
     "the joint-constraint residual RMS against the rig's length scale",
     0.03,
     0.25,
-    advice="the poses do not fit one joint: check the trajectories' format (quaternion "
-    "order, T_world_cam against T_cam_world), their units and their clocks",
+    advice="the poses scatter about one joint by that much (pose noise, skin or kinematic "
+    "error, or a joint that slips): the stds include it",
+    alone=False,
 )
 REJECTED = Rule(
     "rejected_fraction",
@@ -168,23 +184,37 @@ class Measure:
     rule: Rule
     value: float
     subject: str = ""
+    #: past the refusal level of a rule that does not refuse alone, with nothing else to
+    #: refuse the result (:func:`judge`): weak, not refused
+    capped: bool = False
+
+    @property
+    def past_refusal(self) -> bool:
+        return not np.isfinite(self.value) or self.value > self.rule.refuse
 
     @property
     def level(self) -> str:
         """``good``, ``weak`` or ``refused``."""
-        if not np.isfinite(self.value) or self.value > self.rule.refuse:
-            return "refused"
+        if self.past_refusal:
+            return "weak" if self.capped else "refused"
         return "weak" if self.value > self.rule.warn else "good"
 
     def sentence(self) -> str:
         """One sentence: what, its value, the level passed and the advice."""
-        limit = self.rule.refuse if self.level == "refused" else self.rule.warn
+        limit = self.rule.refuse if self.past_refusal else self.rule.warn
         head = f"{self.subject}: " if self.subject else ""
-        return (
+        said = (
             f"{head}{self.rule.what} is {self.rule.format(self.value)} (above "
-            f"{'the refusal level' if self.level == 'refused' else 'the warning level'} "
+            f"{'the refusal level' if self.past_refusal else 'the warning level'} "
             f"{self.rule.format(limit)}); {self.rule.advice}"
         )
+        if self.capped:
+            said += (
+                "; the estimate is still determined (its stds are within their levels), and "
+                "no reading of the inputs (quaternion order, inversion, units, clocks) fits "
+                "much better: written, as a weak result"
+            )
+        return said
 
     def to_plain(self) -> dict[str, Any]:
         return {
@@ -271,7 +301,13 @@ def judge(
         A measure is past its refusal level and ``accept_weak`` is false (exit 3); the
         message names each such measure with its advice, then :data:`OVERRIDE_HINT`.
     """
-    v = Verdict(tuple(measures), accepted_weak=accept_weak, findings=tuple(findings))
+    given = tuple(measures)
+    alone = [m for m in given if m.past_refusal and m.rule.alone]
+    if not findings and not alone:
+        # only measures that do not refuse alone are past their levels: the estimate is
+        # determined and no diagnosis found a better reading; noise, not a failure
+        given = tuple(dataclasses.replace(m, capped=True) if m.past_refusal else m for m in given)
+    v = Verdict(given, accepted_weak=accept_weak, findings=tuple(findings))
     refused = [m for m in v.measures if m.level == "refused"]
     if refused and not accept_weak:
         raise DegenerateMotionError(
@@ -315,6 +351,11 @@ def largest_std(covariance: FloatArray) -> float:
     return float(np.sqrt(max(float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]), 0.0)))
 
 
+def std_rule(joint_type: str) -> Rule:
+    """The joint-std rule whose advice fits the declared joint type."""
+    return HINGE_STD if joint_type == "hinge" else JOINT_STD
+
+
 def joint_measures(
     position: FloatArray,
     covariance: FloatArray,
@@ -322,6 +363,7 @@ def joint_measures(
     residual_rms: float | None,
     inliers: Sequence[bool] | np.ndarray | None,
     subject: str,
+    joint_type: str = "ball",
 ) -> list[Measure]:
     """The measures of a joint seen from one camera.
 
@@ -338,9 +380,11 @@ def joint_measures(
         The frames used.
     subject : str
         "the joint in A", ...
+    joint_type : str
+        The declared joint (a hinge's advice speaks of hinges, :data:`HINGE_STD`).
     """
     scale = length_scale(position, T_world_cam)
-    out = [Measure(JOINT_STD, largest_std(covariance) / scale, subject)]
+    out = [Measure(std_rule(joint_type), largest_std(covariance) / scale, subject)]
     if residual_rms is not None:
         out.append(Measure(RESIDUAL, float(residual_rms) / scale, subject))
     if inliers is not None and len(inliers):

@@ -2001,6 +2001,9 @@ def check_joint_types(st: _State, x: FloatArray) -> list[str]:
         if fit is None:
             continue
         rms, text = fit
+        if joint_model(j.type).constant_transform:
+            # a rigid mount that turns: a clock offset of whole frames does that too
+            text = _timing_note(st, j) or text
         if rms > MODEL_REFUSE_DEG:
             refused.append(text)
         elif rms > MODEL_WARN_DEG:
@@ -2011,6 +2014,63 @@ def check_joint_types(st: _State, x: FloatArray) -> list[str]:
             details={"model_refuse_deg": MODEL_REFUSE_DEG},
         )
     return warnings
+
+
+#: Whole-frame clock offsets the timing check of a misfit rigid joint tries, each way.
+TIMING_SHIFTS = 3
+
+
+def _turn_deg(R: FloatArray, a: np.ndarray, b: np.ndarray) -> FloatArray:
+    """``(m,)`` deg: how far each body turned from instant ``a`` to ``b`` (``|R_a^T R_b|``)."""
+    rel = np.einsum("nji,njk->nik", R[a], R[b])
+    return np.degrees(np.linalg.norm(se3.rotvec_from_matrix(rel), axis=1))
+
+
+def _timing_note(st: _State, j: RigJoint) -> str:
+    """For a rigid joint whose bodies turn relative to each other: the words for a clock
+    offset when shifting one body's poses by whole frames (at most :data:`TIMING_SHIFTS`)
+    makes them turn alike, ``""`` otherwise.
+
+    Two bodies on one rigid mount turn by the same angle between any two instants, whatever
+    their worlds and the mount (the hand-eye consistency ``|A| = |B|``); the angles are
+    compared over pairs of instants 1 and 5 frames apart. A shift is named when it brings
+    their RMS difference under half of what it is as recorded and under
+    :data:`MODEL_WARN_DEG`."""
+    p, q = j.between
+    f = np.sort(st.frames[j.name][st.mask[j.name]])
+    on_q = st.frames_of(q)
+    Rp, Rq = st.R[p], st.R[q]  # as measured (the angles are the same in any world)
+
+    def mismatch(k: int) -> tuple[float, int]:
+        pairs = [(f[:-s], f[s:]) for s in (1, 5) if f.size > s]
+        if not pairs:
+            return np.inf, 0
+        a = np.concatenate([x for x, _ in pairs])
+        b = np.concatenate([y for _, y in pairs])
+        ok = (a + k >= 0) & (b + k < on_q.size) & (a + k < on_q.size) & (b + k >= 0)
+        a, b = a[ok], b[ok]
+        ok = on_q[a + k] & on_q[b + k]
+        a, b = a[ok], b[ok]
+        if a.size < 3:
+            return np.inf, 0
+        d = _turn_deg(Rp, a, b) - _turn_deg(Rq, a + k, b + k)
+        return float(np.sqrt(np.mean(d**2))), int(a.size)
+
+    as_given, m0 = mismatch(0)
+    best = min(
+        ((mismatch(k), k) for k in range(-TIMING_SHIFTS, TIMING_SHIFTS + 1) if k),
+        key=lambda t: t[0][0],
+    )
+    (rms, used), k = best
+    if not (used >= m0 // 2 and rms < 0.5 * as_given and rms < MODEL_WARN_DEG):
+        return ""
+    return (
+        f"joint {j.name} ({p}-{q}) is declared rigid, and fits it when {q}'s poses are taken "
+        f"{abs(k)} frame{'s' if abs(k) > 1 else ''} {'later' if k > 0 else 'earlier'} than "
+        f"{p}'s (the two bodies then turn alike to {rms:.2f} deg RMS, against {as_given:.2f} "
+        "deg as recorded): the two clocks are offset; correct the timestamps, or set "
+        "estimate_time_offset: true"
+    )
 
 
 def _motion_words(R: FloatArray, what: str, hinge_ok: bool) -> str:
@@ -2134,7 +2194,7 @@ def _check_determined(
         )
         if "hardly turns" in bends:
             bends += f"; if {p} and {q} are on one body, declare it type: rigid"
-        why = [_motion_words(G[p][0][f], f"camera {p}", False), bends]
+        why = [_motion_words(G[p][0][f], f"body {p}", False), bends]
         why += model.motion_advice(j, Rst)
         because = "; ".join(w for w in why if w) or "the motion is too narrow for the noise"
         advice = (

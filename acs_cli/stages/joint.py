@@ -431,11 +431,12 @@ def joint_verdict_measures(est: JointEstimate, poses: dict[str, np.ndarray]) -> 
             est.residual_rms.get(key),
             est.inliers.get(key),
             f"the joint in {cam.upper()}",
+            est.joint_type,
         )
     if "ab" in poses and est.position_in_b is not None and est.covariance_b is not None:
         T_b_a = np.linalg.inv(poses["ab"])
         out += joint_measures(
-            est.position_in_b, est.covariance_b, T_b_a, None, None, "the joint in B"
+            est.position_in_b, est.covariance_b, T_b_a, None, None, "the joint in B", est.joint_type
         )
     return out
 

@@ -438,10 +438,14 @@ def relpose_verdict_measures(est: RelposeEstimate, pair: PairedTrajectories) -> 
     Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
     out: list[Measure] = []
     if est.has_point:
-        out += joint_measures(est.position_in_a, est.covariance_a, Ta, None, None, "the joint in A")
+        kind = est.joint_type
         out += joint_measures(
-            est.position_in_b, est.covariance_b, Tb, est.residual_rms, est.inliers, "the joint in B"
+            est.position_in_a, est.covariance_a, Ta, None, None, "the joint in A", kind
         )
+        out += joint_measures(
+            est.position_in_b, est.covariance_b, Tb, est.residual_rms, est.inliers,
+            "the joint in B", kind,
+        )  # fmt: skip
     out += relative_pose_measures(
         est.T_b_a,
         est.covariance,

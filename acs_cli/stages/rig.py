@@ -33,13 +33,13 @@ from acs_cli.core import se3
 from acs_cli.core.joints import joint_model
 from acs_cli.core.pairing import common_timeline
 from acs_cli.core.quality import (
-    JOINT_STD,
     REJECTED,
     RESIDUAL,
     Measure,
     judge,
     largest_std,
     length_scale,
+    std_rule,
 )
 from acs_cli.core.rig import RigJoint, rig_topology
 from acs_cli.core.rig_bundle import (
@@ -146,7 +146,7 @@ def tracks_on_timeline(
             frames = [n for n, t in trajectories.items() if t.time_unit == "frame"]
             raise InputError(
                 f"cameras {', '.join(frames)} have frame numbers for times and the others "
-                "seconds: give those cameras fps or timestamps",
+                f"seconds: {'; '.join(time_advice(config, n) for n in frames)}",
                 path=config.path,
             )
         slots, index = common_timeline(
@@ -191,7 +191,7 @@ def tracks_on_timeline(
         T[valid] = t.T_world_cam[idx[valid]]
         left = len(t) - int(valid.sum())
         if left:
-            warnings.append(f"camera {name}: {left} of {len(t)} poses share no instant")
+            warnings.append(f"{member(config, name)}: {left} of {len(t)} poses share no instant")
         tracks[name] = CameraTrack(T, valid, config.cameras[name].unknown_scale)
     return tracks, slots, index, warnings
 
@@ -387,7 +387,8 @@ def rig_verdict_measures(est: RigEstimate, reference: CameraTrack) -> list[Measu
             continue
         for c, o in e.position_in.items():
             std = largest_std(e.position_cov_in[c])
-            out.append(Measure(JOINT_STD, std / length_scale(o, T_ref), f"joint {name} in {c}"))
+            rule = std_rule(e.joint.type)
+            out.append(Measure(rule, std / length_scale(o, T_ref), f"joint {name} in {c}"))
         # the joint's residual (reference units) against its distance from its first camera
         o_p = e.position_in[e.joint.between[0]]
         scale = length_scale(o_p, T_ref)
@@ -821,6 +822,25 @@ def _edge_fit(
     return fit
 
 
+def member(config: RigRunConfig, name: str) -> str:
+    """How messages name rig member ``name``: "camera X" for an image folder, "body X" for a
+    poses-only entry (a mocap segment, a robot flange, an INS)."""
+    spec = config.cameras.get(name)
+    return f"body {name}" if spec is not None and spec.images is None else f"camera {name}"
+
+
+def time_advice(config: RigRunConfig, name: str) -> str:
+    """How camera ``name`` gets times in seconds, in the keys its kind of entry takes: an
+    image folder takes ``fps`` or ``timestamps``; a ``poses:`` file carries its own times."""
+    spec = config.cameras.get(name)
+    if spec is not None and spec.images is None:
+        return (
+            f"cameras.{name}.poses: give its poses with times in seconds (a TUM file's first "
+            "column; an NPZ's timestamps)"
+        )
+    return f"give cameras.{name} fps or timestamps"
+
+
 def _need_timestamps(config: RigRunConfig, trajectories: dict[str, Trajectory]) -> None:
     for name, t in trajectories.items():
         if not t.has_timestamps:
@@ -832,7 +852,7 @@ def _need_timestamps(config: RigRunConfig, trajectories: dict[str, Trajectory]) 
         if t.time_unit != "s":
             raise InputError(
                 f"estimate_time_offset: camera {name}'s times are frame numbers, not "
-                "seconds; give it fps or timestamps",
+                f"seconds; {time_advice(config, name)}",
                 path=config.path,
             )
 

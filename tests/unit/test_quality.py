@@ -33,15 +33,33 @@ def test_levels_and_not_determined() -> None:
 
 
 def test_judge_refuses_naming_each_measure_and_the_flag() -> None:
-    ms = [Measure(JOINT_STD, 0.01, "the joint in A"), Measure(RESIDUAL, 0.6, "the joint in A")]
+    ms = [Measure(JOINT_STD, 0.2, "the joint in A"), Measure(RESIDUAL, 0.01, "the joint in A")]
     with pytest.raises(DegenerateMotionError) as err:
         judge(ms)
-    assert "residual RMS" in err.value.message and ACCEPT_WEAK_FLAG in err.value.message
-    assert "standard deviation" not in err.value.message  # only the refused measure
+    assert "standard deviation" in err.value.message and ACCEPT_WEAK_FLAG in err.value.message
+    assert "residual RMS" not in err.value.message  # only the refused measure
     assert err.value.details["verdict"]["level"] == "refused"
     v = judge(ms, accept_weak=True)
     assert v.level == "refused" and v.weak
     assert any(ACCEPT_WEAK_FLAG in w for w in v.warnings())
+
+
+def test_a_large_residual_with_a_determined_estimate_is_a_warning() -> None:
+    """Noisy poses about a well-determined joint: weak, written, no format advice; with a
+    diagnosis that finds a better reading, or a std past its level too, refused."""
+    ms = [Measure(JOINT_STD, 0.01, "the joint in A"), Measure(RESIDUAL, 0.31, "the joint in A")]
+    v = judge(ms)
+    assert v.level == "weak" and v.weak
+    (note,) = v.warnings()
+    assert "31%" in note and "refusal level 25%" in note and "weak result" in note
+    assert "check the trajectories" not in note and "stds include it" in note
+    finding = "camera A's quaternions look written in w-x-y-z order"
+    with pytest.raises(DegenerateMotionError) as err:
+        judge(ms, findings=[finding])
+    assert err.value.message.startswith(finding) and "residual RMS" in err.value.message
+    with pytest.raises(DegenerateMotionError) as err:
+        judge([Measure(JOINT_STD, 0.2, "the joint in A"), ms[1]])
+    assert "residual RMS" in err.value.message and "standard deviation" in err.value.message
 
 
 def test_a_good_verdict_has_no_warnings() -> None:

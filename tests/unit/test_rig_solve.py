@@ -234,3 +234,23 @@ def test_every_planar_edge_is_named_downstream_too(rng: np.random.Generator) -> 
     text = err.value.message
     for name in ("h01 (cam0-cam1)", "h12 (cam1-cam2)", "r03 (cam0-cam3)"):
         assert f"joint {name}" in text, text
+
+
+def test_a_rigid_mount_whose_clocks_are_a_frame_apart_is_told_so(
+    rng: np.random.Generator,
+) -> None:
+    """A hand-eye pair whose second body's poses are one frame late: the diagnosis names the
+    clocks, not another joint type (issue 20)."""
+    rec = rig_recording(
+        rng, 60, joints=(("r", ("cam0", "cam1"), "rigid"),), sigma_rot_deg=0.05,
+        sigma_trans=0.001,
+    )  # fmt: skip
+    tracks = _tracks(rec)
+    T1 = tracks["cam1"].T_w_c.copy()
+    T1[1:] = T1[:-1].copy()  # cam1's pose at each instant is the one of the instant before
+    tracks["cam1"] = CameraTrack(T1, np.ones(60, dtype=bool), False)
+    with pytest.raises(DegenerateMotionError) as err:
+        estimate_rig(rec.topology, tracks)
+    msg = err.value.message
+    assert "clocks are offset" in msg and "1 frame later" in msg, msg
+    assert "a ball or a hinge" not in msg

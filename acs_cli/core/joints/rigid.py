@@ -133,7 +133,7 @@ class Rigid(JointModel):
         rms = float(np.degrees(np.sqrt(np.mean(np.sum(blocks["rot"][mask] ** 2, axis=1)))))
         p, q = joint.between
         return rms, (
-            f"joint {joint.name} ({p}-{q}) is declared rigid, but the two cameras turn "
+            f"joint {joint.name} ({p}-{q}) is declared rigid, but the two bodies turn "
             f"relative to each other by {rms:.2f} deg RMS: a ball or a hinge?"
         )
 
