@@ -302,8 +302,9 @@ def run_joint(
         ),
         units={"length": config.length_unit, "angles": "deg"},
         frames={
-            "position_in_a": "camera A's optical frame",
-            "position_in_b": "camera B's optical frame",
+            "position_in_a": "the frame of A's poses (camera A's optical frame; a body's own "
+            "frame when A's poses are a body's: a mocap segment, a robot flange)",
+            "position_in_b": "the frame of B's poses (likewise)",
             "joint_in_world": "each trajectory's own world frame (fixed joint only)",
         },
     )
