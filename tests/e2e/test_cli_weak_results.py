@@ -55,6 +55,10 @@ def test_a_good_calibration_says_good(files: dict[str, Path], tmp_path: Path) ->
         measures
     )
     assert all(m["level"] == "good" for m in measures.values())
+    # independent pose noise: the block test for correlated errors ran and grew nothing
+    for key in ("a", "b"):
+        u = doc["quality"]["uncertainty"][key]
+        assert u["blocks"] > 0 and u["grown"] == [] and u["std_factor"] == 1.0
 
 
 def test_a_joint_from_another_rig_is_refused_then_accepted_and_marked(

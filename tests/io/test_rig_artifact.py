@@ -160,3 +160,25 @@ def test_an_artifact_built_from_arrays_saves_and_loads(tmp_path: Path) -> None:
     back = RigArtifact.load(tmp_path / "rig.yaml")
     assert set(back.cameras) == set(rec.topology.cameras)
     assert back.header["schema"] == "acscal/rig"
+
+
+def test_the_uncertainty_section_round_trips(artifact: RigArtifact, tmp_path: Path) -> None:
+    """rig.yaml's ``uncertainty`` (issue 20): how the stds were made, written and read back;
+    a file without it (older) reads as None."""
+    from acs_cli.core.correlated import CorrelatedErrors
+    from acs_cli.io.joint import UncertaintySection
+
+    assert artifact.uncertainty is not None and artifact.uncertainty.blocks > 0
+    grown = UncertaintySection.of(CorrelatedErrors(12, 600, 3.25, ("joint j01",)))
+    art = dataclasses.replace(artifact, uncertainty=grown)
+    art.save(tmp_path / "rig.yaml")
+    back = RigArtifact.load(tmp_path / "rig.yaml")
+    assert back.uncertainty == grown and "grown by the block sandwich" in grown.method
+    doc = yaml.safe_load((tmp_path / "rig.yaml").read_text())
+    del doc["uncertainty"]
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(doc))
+    assert RigArtifact.load(tmp_path / "old.yaml").uncertainty is None
+    doc["uncertainty"] = {"blocks": "many"}
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError, match="uncertainty.blocks"):
+        RigArtifact.load(tmp_path / "bad.yaml")
