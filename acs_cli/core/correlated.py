@@ -64,7 +64,7 @@ MIN_BLOCKS = 6
 MIN_BLOCK_FRAMES = 2
 #: Per group of unknowns, the chance that independent noise alone grows its covariance (the
 #: largest whitened block variance beyond the Wishart tail).
-FALSE_ALARM = 0.002
+FALSE_ALARM = 0.0005
 #: The largest lag-one autocorrelation of the block sums corrected for (a factor of 9 on the
 #: variance): beyond, blocks this few cannot tell the correlation time.
 MAX_BLOCK_RHO = 0.8

@@ -180,5 +180,5 @@ def test_the_uncertainty_section_round_trips(artifact: RigArtifact, tmp_path: Pa
     assert RigArtifact.load(tmp_path / "old.yaml").uncertainty is None
     doc["uncertainty"] = {"blocks": "many"}
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(doc))
-    with pytest.raises(InputError, match="uncertainty.blocks"):
+    with pytest.raises(InputError, match=r"uncertainty\.blocks"):
         RigArtifact.load(tmp_path / "bad.yaml")

@@ -40,18 +40,20 @@ def test_independent_noise_keeps_the_models_covariance(rng: np.random.Generator)
         grown += found.detected
         if not found.detected:
             np.testing.assert_array_equal(C, G)
-    # 0.2% a group for blocks of equal information; these blocks differ (a line fit's ends
+    # 0.05% a group for blocks of equal information; these blocks differ (a line fit's ends
     # weigh more), which fattens the tail a little
     assert grown <= 6
 
 
 def test_errors_correlated_over_time_get_stds_that_cover_them(rng: np.random.Generator) -> None:
-    model, block = [], []
+    model, block, seen = [], [], 0
     for _ in range(150):
         beta, (C, G), found = _line_fit(rng, 600, 0.9)
-        assert found.detected and found.std_factor > 1.5
+        seen += found.detected
+        assert not found.detected or found.std_factor > 1.5
         model.append(_z2(beta, C))
         block.append(_z2(beta, G))
+    assert seen >= 0.95 * 150
     assert np.sqrt(np.mean(model)) > 2.5  # the model's stds claim far too much
     # 11 degrees of freedom and blocks about 2.5 correlation times long: the stds cover most
     # of the correlation (measured 1.70 against the model's 4.4 on these seeds)
