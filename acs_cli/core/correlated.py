@@ -17,19 +17,22 @@ consecutive frames and sum the scores within each block, ``G_b``; their scatter
 estimates the covariance of the scores' sum whatever the correlation within a block (the
 batch-means, or block, estimate of a long-run covariance: Conway, *Batch means*; Newey &
 West's sandwich with blocks as the kernel), so that ``C Omega C`` is the estimate's
-covariance under correlated errors. In ``C``'s whitened coordinates
+covariance under correlated errors. It is tested per group ``g`` of unknowns reported
+together (a joint's geometry, a world's pose and scale, a camera's intrinsics, a board): the
+group's estimate moves by ``D_b = C[g, :] G_b`` under block ``b`` (through every unknown's
+scores, by their correlation with the group), and in the group's whitened coordinates
 
-    M = C^(1/2) Omega C^(1/2)
+    M = C_g^(-1/2) [B / (B - 1) sum_b (D_b - mean D) (D_b - mean D)^T] C_g^(-1/2)
 
 is the identity under the model. Its eigenvalues ``lambda`` are the variance factors of the
-block scatter against the model along its eigenvectors. Under independent noise, ``M``
-follows a Wishart distribution ``W_d(B - 1, I) / (B - 1)``, whose largest eigenvalue has a
-known tail (computed once, by a seeded simulation). Per group of unknowns that are reported
-together (a joint's geometry, a world's pose and scale, a camera's intrinsics), when the
+block scatter against the model along its eigenvectors. Under independent noise (and blocks
+of equal information), ``M`` follows a Wishart distribution ``W_d(B - 1, I) / (B - 1)``,
+whose largest eigenvalue has a known tail (computed once, by a seeded simulation). When the
 largest eigenvalue is beyond that tail at a false-alarm rate :data:`FALSE_ALARM`, the group's
-covariance is grown along every eigenvector whose factor exceeds 1,
+covariance is grown along every eigenvector whose factor exceeds 1 (each factor first
+corrected for block sums still correlated with their neighbours, :data:`MAX_BLOCK_RHO`),
 
-    C_new = C + C^(1/2) V max(Lambda - 1, 0) V^T C^(1/2),
+    C_g,new = C_g + C_g^(1/2) V max(Lambda - 1, 0) V^T C_g^(1/2),
 
 and unchanged otherwise: independent noise keeps the model's covariance (its stds stay as
 calibrated as before), a recording whose blocks scatter more than the model allows gets the

@@ -2065,10 +2065,11 @@ def _timing_note(st: _State, j: RigJoint) -> str:
     if not (used >= m0 // 2 and rms < 0.5 * as_given and rms < MODEL_WARN_DEG):
         return ""
     return (
-        f"joint {j.name} ({p}-{q}) is declared rigid, and fits it when {q}'s poses are taken "
-        f"{abs(k)} frame{'s' if abs(k) > 1 else ''} {'later' if k > 0 else 'earlier'} than "
-        f"{p}'s (the two bodies then turn alike to {rms:.2f} deg RMS, against {as_given:.2f} "
-        "deg as recorded): the two clocks are offset; correct the timestamps, or set "
+        f"joint {j.name} ({p}-{q}) is declared rigid, and fits it when {p}'s pose at each "
+        f"instant is paired with {q}'s {abs(k)} frame{'s' if abs(k) > 1 else ''} "
+        f"{'later' if k > 0 else 'earlier'} (the two bodies then turn alike to {rms:.2f} deg "
+        f"RMS, against {as_given:.2f} deg as recorded): the two clocks are offset by "
+        f"{abs(k)} frame{'s' if abs(k) > 1 else ''}; correct the timestamps, or set "
         "estimate_time_offset: true"
     )
 

@@ -252,5 +252,5 @@ def test_a_rigid_mount_whose_clocks_are_a_frame_apart_is_told_so(
     with pytest.raises(DegenerateMotionError) as err:
         estimate_rig(rec.topology, tracks)
     msg = err.value.message
-    assert "clocks are offset" in msg and "1 frame later" in msg, msg
+    assert "clocks are offset by 1 frame" in msg and "cam1's 1 frame later" in msg, msg
     assert "a ball or a hinge" not in msg
