@@ -322,9 +322,10 @@ def run_trajectory(
             "position_in_b": "B units" if art.unknown_scale else rec.length_unit,
         },
         frames={
-            "world": "camera A's optical frame at the reference instant",
-            "cam_a.tum": "T_world_a: camera A's pose",
-            "cam_b.tum": "T_world_b: camera B's pose",
+            "world": "the frame of A's poses at the reference instant (camera A's optical "
+            "frame; a body's own frame when A's poses are a body's)",
+            "cam_a.tum": "T_world_a: A's pose (camera or body)",
+            "cam_b.tum": "T_world_b: B's pose (camera or body)",
             "joint.tum": "T_world_joint: the joint (as camera A sees it), camera A's orientation",
             "consistency.frames.distance": "|joint from A - joint from B| in the world frame",
         },
