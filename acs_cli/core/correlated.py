@@ -54,6 +54,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy import sparse
 
 from acs_cli.core.se3 import FloatArray
 
@@ -107,10 +108,6 @@ class CorrelatedErrors:
     def detected(self) -> bool:
         return bool(self.grown)
 
-    def method(self) -> str:
-        """The method's name for artifacts."""
-        return "block sandwich over consecutive frames"
-
     def message(self, what: str) -> str | None:
         """The one warning of every command when the covariance grew, else None."""
         if not self.detected:
@@ -149,6 +146,30 @@ def largest_eigenvalue_tail(dim: int, blocks: int, alpha: float = FALSE_ALARM) -
     return float(np.quantile(lam, 1.0 - alpha))
 
 
+def frame_scores(
+    J: object, r: FloatArray, frame: np.ndarray, cols: Sequence[int] | np.ndarray
+) -> FloatArray:
+    """``(k, len(cols))``: per frame (the ``k`` distinct values of ``frame``, sorted), the sum
+    of its rows' scores ``J_row^T r_row`` for the unknowns ``cols``.
+
+    Parameters
+    ----------
+    J : ndarray or scipy.sparse matrix, shape (m, p)
+        Whitened Jacobian rows.
+    r : ndarray, shape (m,)
+        Their whitened residuals.
+    frame : ndarray of int, shape (m,)
+        The frame of each row.
+    cols : sequence of int
+    """
+    S = sparse.csr_matrix(J).multiply(np.asarray(r, dtype=float)[:, None]).tocsr()
+    used, at = np.unique(frame, return_inverse=True)
+    P = sparse.csr_matrix(
+        (np.ones(frame.size), (at, np.arange(frame.size))), shape=(used.size, frame.size)
+    )
+    return np.asarray((P @ S)[:, np.asarray(cols, dtype=int)].toarray())
+
+
 def block_sums(scores: FloatArray, blocks: int) -> FloatArray:
     """``(blocks, q)``: the scores ``(n, q)`` summed over ``blocks`` runs of consecutive
     frames of near-equal length."""
@@ -167,13 +188,11 @@ def _roots(C: FloatArray) -> tuple[FloatArray, FloatArray, int]:
     return np.asarray((U * root) @ U.T), np.asarray((U * inv) @ U.T), int(keep.sum())
 
 
-def excess_covariance(
-    C: FloatArray, D: FloatArray, alpha: float = FALSE_ALARM
-) -> tuple[FloatArray, float, bool]:
+def excess_covariance(C: FloatArray, D: FloatArray) -> tuple[FloatArray, float, bool]:
     """The growth ``Delta`` of one group's covariance ``C`` ``(d, d)`` from the blocks'
     deflections of its estimate ``D`` ``(B, d)`` (``D_b = C[g, :] G_b``: what block ``b``'s
     scores move the group by): zero unless the largest whitened block variance is beyond
-    the Wishart tail at the false-alarm rate ``alpha``.
+    the Wishart tail at the false-alarm rate :data:`FALSE_ALARM`.
 
     Returns
     -------
@@ -189,7 +208,7 @@ def excess_covariance(
     Z = (D - D.mean(axis=0)) @ Si  # whitened, centred (the scores sum to ~0)
     M = B / (B - 1) * (Z.T @ Z)
     lam, V = np.linalg.eigh(0.5 * (M + M.T))
-    if not lam[-1] > largest_eigenvalue_tail(rank, B, alpha):
+    if not lam[-1] > largest_eigenvalue_tail(rank, B):
         return np.zeros((d, d)), 1.0, False
     # blocks shorter than the errors' correlation time leave the block sums themselves
     # correlated: along each direction, their lag-one autocorrelation rho (AR(1), clipped

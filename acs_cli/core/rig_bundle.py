@@ -88,6 +88,7 @@ from acs_cli.core.correlated import (
     NOT_TESTED,
     CorrelatedErrors,
     covariance_with_correlated_errors,
+    frame_scores,
 )
 from acs_cli.core.intrinsics import MIN_VIEWS, degenerate_distortion
 from acs_cli.core.joints import JointModel, joint_model
@@ -921,15 +922,9 @@ def _correlated(
     L = model.L
     n_rows = sum(2 * model.obs[c][0].size for c in model.cams)
     n_rows += sum(6 * model.meas[b][2].size for b in model.bodies)
-    Js = scipy.sparse.csr_matrix(J)[:n_rows, : L.n_shared]
-    S = Js.multiply(r[:n_rows, None]).tocsr()
-    frame = row_frame[:n_rows]
-    used = np.unique(frame)
-    P = scipy.sparse.csr_matrix(
-        (np.ones(n_rows), (np.searchsorted(used, frame), np.arange(n_rows))),
-        shape=(used.size, n_rows),
-    )
-    scores = np.asarray((P @ S).toarray())
+    shared = list(range(L.n_shared))
+    rows = scipy.sparse.csr_matrix(J)[:n_rows]
+    scores = frame_scores(rows, r[:n_rows], row_frame[:n_rows], shared)
     groups: dict[str, list[int]] = {}
     for c, sl in L.intr.items():
         groups[f"intrinsics of {c}"] = list(range(sl.start, sl.stop))
@@ -937,7 +932,7 @@ def _correlated(
         groups[f"the board of {body} (recording {rec})"] = list(range(sl.start, sl.stop))
     for name, sl in L.geom.items():
         groups[f"joint {name}"] = list(range(sl.start, sl.stop))
-    return covariance_with_correlated_errors(cov, scores, list(range(L.n_shared)), groups)
+    return covariance_with_correlated_errors(cov, scores, shared, groups)
 
 
 def _bundle_priors(

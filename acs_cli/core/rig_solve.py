@@ -65,6 +65,7 @@ from acs_cli.core.correlated import (
     NOT_TESTED,
     CorrelatedErrors,
     covariance_with_correlated_errors,
+    frame_scores,
 )
 from acs_cli.core.estimation import fit_variance_components
 from acs_cli.core.joint import (
@@ -1677,7 +1678,7 @@ def estimate_rig(
     H = np.asarray(JtJ.toarray() if hasattr(JtJ, "toarray") else JtJ)
     cov_model = np.linalg.pinv(H, rcond=1e-15, hermitian=True)
     # errors correlated over time (skin markers, kinematics, drift): the block sandwich
-    cov, found = _correlated(st, x, J, cov_model, ~delta_cols)
+    cov, found = _correlated(st, J, sol.fun, cov_model, ~delta_cols)
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev, wg, recs)
     est = dataclasses.replace(est, correlated=found)
     est.warnings.extend(check_joint_types(st, x))
@@ -1702,12 +1703,12 @@ def estimate_rig(
 
 
 def _correlated(
-    st: _State, x: FloatArray, J: csr_matrix, cov: FloatArray, free: np.ndarray
+    st: _State, J: csr_matrix, r: FloatArray, cov: FloatArray, free: np.ndarray
 ) -> tuple[FloatArray, CorrelatedErrors]:
     """``cov`` grown for errors correlated over time (:mod:`acs_cli.core.correlated`): the
-    per-instant scores of the edges' inlier rows (the reference instant's, made hard, left
-    out), tested per joint's geometry and per world."""
-    r = _residuals(st, x)
+    per-instant scores of the edges' inlier rows (residuals ``r`` and Jacobian ``J`` at the
+    solution; the reference instant's rows, made hard, left out), tested per joint's
+    geometry and per world."""
     rows_of = _edge_rows(st)
     row_idx: list[np.ndarray] = []
     frame_idx: list[np.ndarray] = []
@@ -1718,17 +1719,10 @@ def _correlated(
         row_idx.append(rows.ravel())
         frame_idx.append(np.repeat(f[keep], rows.shape[1]))
     rr = np.concatenate(row_idx)
-    ff = np.concatenate(frame_idx)
-    used = np.unique(ff)
-    if used.size == 0:
+    if rr.size == 0:
         return cov, NOT_TESTED
-    S = J[rr].multiply(r[rr][:, None]).tocsr()
-    P = csr_matrix(
-        (np.ones(rr.size), (np.searchsorted(used, ff), np.arange(rr.size))),
-        shape=(used.size, rr.size),
-    )
     cols = np.flatnonzero(free)
-    scores = np.asarray((P @ S)[:, cols].toarray())
+    scores = frame_scores(J[rr], r[rr], np.concatenate(frame_idx), cols)
     where = {int(c): i for i, c in enumerate(cols)}
     L = st.L
     groups: dict[str, list[int]] = {
