@@ -56,6 +56,7 @@ __all__ = [
     "JointPrior",
     "RelposeEstimate",
     "estimate_relpose",
+    "in_pair_words",
     "motion_diagnosis",
     "paper_pose_std",
 ]
@@ -412,7 +413,8 @@ def _refined(
         )
     except DegenerateMotionError as e:
         if "model_refuse_deg" in (e.details or {}):
-            raise  # the poses do not fit the declared joint type: the rig's words say which
+            # the poses do not fit the declared joint type: the rig's words say which
+            raise DegenerateMotionError(in_pair_words(e.message), details=e.details) from None
         # what the motion lacks, with the worlds' rotation from the linear start
         R_w = se3.project_to_rotation(similarity_from_lifted(Ta, Tb, None)[0])[0]
         notes = motion_diagnosis(Ta, Tb, R_w)
@@ -431,6 +433,18 @@ def _refined(
     if est.has_point:
         _check_spread(se3.transform_points(Ta, est.position_in_a)[est.inliers])
     return est
+
+
+def in_pair_words(text: str) -> str:
+    """A message of the two-body rig's solve (:func:`two_body_rig`) in the pair's words:
+    its joint is "the joint (A-B)" and its bodies A and B, as the two-camera commands name
+    them, not the rig's internal keys."""
+    return (
+        text.replace(f"joint {_JOINT} ({_A}-{_B})", "the joint (A-B)")
+        .replace(f"when {_A}'s pose", "when A's pose")
+        .replace(f"paired with {_B}'s", "paired with B's")
+        .replace("declare it type: ", "--joint-type ")
+    )
 
 
 def relpose_from_rig(

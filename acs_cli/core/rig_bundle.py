@@ -875,9 +875,6 @@ def _adjust(
     where = {c: i for i, c in enumerate(cols)}
     est = _assemble(model, x, cov, where, k_ref, initial)
     est = dataclasses.replace(est, correlated=found)
-    note = found.message("the bundle adjustment")
-    if note:
-        est.warnings.append(note)
     intr = {c: model.intrinsics(x, c) for c in model.cams}
     std: dict[str, FloatArray] = {}
     icov: dict[str, FloatArray] = {}

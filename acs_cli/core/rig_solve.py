@@ -457,6 +457,9 @@ class RigEstimate:
     edges: dict[str, EdgeEstimate]
     cost: float
     iterations: int
+    #: joints that fit their declared type poorly but not past refusal
+    #: (:func:`check_joint_types`); the test for correlated errors speaks through
+    #: ``correlated``, the stds through the verdict
     warnings: list[str] = field(default_factory=list)
     recordings: Recordings | None = None
     #: every world of every recording (see :class:`WorldEstimate`)
@@ -1682,9 +1685,6 @@ def estimate_rig(
     est = _assemble(st, x, cov, noise, float(sol.cost), nfev, wg, recs)
     est = dataclasses.replace(est, correlated=found)
     est.warnings.extend(check_joint_types(st, x))
-    note = found.message("the rig")
-    if note:
-        est.warnings.append(note)
     # the information from the measurements alone (the priors' rows are the last ones):
     # what the null test normalises by, so that a tight prior on one combination of unknowns
     # (a joint given in a camera's own units: its position and that camera's scale) does
@@ -2001,7 +2001,7 @@ def check_joint_types(st: _State, x: FloatArray) -> list[str]:
         if rms > MODEL_REFUSE_DEG:
             refused.append(text)
         elif rms > MODEL_WARN_DEG:
-            warnings.append(text + " (or the poses are noisy)")
+            warnings.append(text + "; unless the poses are that noisy")
     if refused:
         raise DegenerateMotionError(
             "the joints do not fit their types: " + " | ".join(refused) + ".",

@@ -35,6 +35,7 @@ from acs_cli.core.overlap import (
 )
 from acs_cli.core.paper import algorithm_1_overlap, algorithm_2_fixed_joint
 from acs_cli.core.quality import Measure, joint_measures, judge, length_scale
+from acs_cli.core.relpose import in_pair_words
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
@@ -228,6 +229,7 @@ def run_joint(
             est = algorithm_1_overlap(Ta, Tb)
         else:
             rig = estimate_overlap_rig(Ta, Tb, joint_type=config.joint_type)
+            warnings += [in_pair_words(w) for w in rig.warnings]  # fits its type poorly
             if config.bundle:
                 rig, sections, notes = bundle_overlap((pa, pb), pair, rig, turned)
                 warnings += notes

@@ -25,6 +25,7 @@ from acs_cli.core.relpose import (
     RelposeEstimate,
     check_joint_type,
     estimate_relpose,
+    in_pair_words,
     paper_pose_std,
 )
 from acs_cli.core.rig_solve import TEST_SETTLED_NOISE
@@ -312,6 +313,8 @@ def run_relpose(
             {"A": "A units", "B": "B units"} if config.unknown_scale else config.length_unit,
         )
         warnings += [] if near is None else [near]
+    if est.rig is not None:  # a joint that fits its declared type poorly
+        warnings += [in_pair_words(w) for w in est.rig.warnings]
     note = None if est.rig is None else est.rig.correlated.message("the relative pose")
     warnings += [] if note is None else [note]
     findings = relpose_findings(est, pair, prior, config, timed=offset is None)

@@ -476,6 +476,7 @@ def run_rig(
         warnings += notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
+    warnings += est.warnings  # joints that fit their declared type poorly
     warnings += near_hinge_warnings(est, unit, priors)
     note = est.correlated.message("the rig")
     warnings += [] if note is None else [note]
