@@ -56,6 +56,7 @@ from functools import lru_cache
 import numpy as np
 from scipy import sparse
 
+from acs_cli.core.correlated_tail import TAIL_TABLE
 from acs_cli.core.se3 import FloatArray
 
 #: The most blocks a recording is cut into: long blocks cover errors correlated over many
@@ -138,12 +139,29 @@ def largest_eigenvalue_tail(dim: int, blocks: int, alpha: float = FALSE_ALARM) -
     """The ``1 - alpha`` quantile of the largest eigenvalue of ``W_dim(blocks - 1, I) /
     (blocks - 1)``: the largest whitened block variance independent noise gives.
 
-    By a seeded simulation (the same value on every run and machine)."""
+    By a seeded simulation (the same value on every run and machine), looked up in
+    :data:`acs_cli.core.correlated_tail.TAIL_TABLE` where it was precomputed."""
+    if alpha == FALSE_ALARM and (dim, blocks) in TAIL_TABLE:
+        return TAIL_TABLE[(dim, blocks)]
+    return simulated_tail(dim, blocks, alpha)
+
+
+def simulated_tail(dim: int, blocks: int, alpha: float = FALSE_ALARM) -> float:
+    """:func:`largest_eigenvalue_tail` by its seeded simulation, never from the table."""
     nu = blocks - 1
     rng = np.random.default_rng([20261126, dim, blocks])
     Z = rng.standard_normal((_TAIL_DRAWS, nu, dim))
     lam = np.linalg.eigvalsh(np.einsum("kni,knj->kij", Z, Z) / nu)[:, -1]
     return float(np.quantile(lam, 1.0 - alpha))
+
+
+def tail_table_source(dims: int = 16) -> str:
+    """The entries of :data:`acs_cli.core.correlated_tail.TAIL_TABLE`, as Python source."""
+    return "\n".join(
+        f"    ({d}, {b}): {simulated_tail(d, b)!r},"
+        for d in range(1, dims + 1)
+        for b in range(MIN_BLOCKS, MAX_BLOCKS + 1)
+    )
 
 
 def frame_scores(

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 from math import comb
 
 import numpy as np
+from scipy import special
 
 from acs_cli.core import lsq
 from acs_cli.core.correlated import NOT_TESTED, CorrelatedErrors, covariance_with_correlated_errors
@@ -280,6 +281,16 @@ def _rows(a: FloatArray, mask: NDArrayBool) -> FloatArray:
     return a if mask.all() else a[mask]
 
 
+def f_isf(tail: float, d1: float, d2: float) -> float:
+    """The upper ``tail`` quantile of Fisher's ``F(d1, d2)``, exact for tails of 1e-12 too.
+
+    Through the regularised incomplete beta function: ``P(F > x) = I_w(d2/2, d1/2)`` with
+    ``w = d2 / (d2 + d1 x)`` (scipy.special, as scipy.stats's ``f.isf``, without the
+    ~0.6-1 s that importing scipy.stats adds to every command)."""
+    w = float(special.betaincinv(d2 / 2.0, d1 / 2.0, tail))
+    return d2 * (1.0 - w) / (d1 * w) if w > 0.0 else float("inf")
+
+
 def outlier_threshold(
     n: int,
     dof: float,
@@ -325,8 +336,6 @@ def outlier_threshold(
         and ``F(g shape, dof)`` at ``share OUTLIER_ALPHA_HEAVY / C(n, g)``; ``inf`` when
         ``dof <= 0``.
     """
-    from scipy.stats import chi2, f  # lazily: importing scipy.stats costs ~0.6 s a command
-
     if not dof > 0 or not share > 0:
         return float("inf")
     g = max(int(group), 1)
@@ -336,11 +345,11 @@ def outlier_threshold(
     for d1, alpha in ((dim, OUTLIER_ALPHA), (min(max(shape, 1.0), dim), OUTLIER_ALPHA_HEAVY)):
         tail = alpha / tests
         dg = g * d1
-        q = chi2.isf(tail, dg) / dg if np.isinf(dof) else f.isf(tail, dg, dof)
+        q = special.chdtri(dg, tail) / dg if np.isinf(dof) else f_isf(tail, dg, dof)
         if trimmed > 0.0:
             # E[X 1(X < q)] = d1 F_{d1+2}(q) for X ~ chi2(d1)
             keep = 1.0 - trimmed
-            q /= chi2.cdf(chi2.ppf(keep, d1), d1 + 2) / keep
+            q /= special.chdtr(d1 + 2, special.chdtri(d1, trimmed)) / keep
         out = max(out, float(q))
     return out
 
@@ -387,15 +396,13 @@ def tail_shape(T: FloatArray, dim: int) -> float:
     gross outliers of 5-6 sigma go unnoticed when the noise is Gaussian (their error at
     2.4 deg / 0.1 m was 1.5 times the bound). 1 when fewer than ``TAIL_SHAPE_MIN_FRAMES``.
     """
-    from scipy.stats import chi2
-
     if T.size < TAIL_SHAPE_MIN_FRAMES or dim <= 1:
         return 1.0
     q50, q75 = np.quantile(T, [0.5, 0.75])
     if not q50 > 0:
         return 1.0
     d = np.linspace(1.0, dim, 41)
-    ratio = chi2.ppf(0.75, d) / chi2.ppf(0.5, d)  # decreasing in d
+    ratio = special.chdtri(d, 0.25) / special.chdtri(d, 0.5)  # quartile / median, decreasing
     estimate = float(np.interp(-q75 / q50, -ratio, d))
     return max(estimate - TAIL_SHAPE_MARGIN, 1.0)
 

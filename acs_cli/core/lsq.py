@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 from scipy import sparse
-from scipy.optimize import least_squares
 
 from acs_cli.core.se3 import FloatArray
 
@@ -397,6 +396,10 @@ def _converged_at_start(
 def _least_squares(f: Callable[[FloatArray], FloatArray], d0: FloatArray, options: dict) -> Any:
     """``scipy.optimize.least_squares``; MINPACK's "tolerance too small" endings (which
     scipy cannot translate) mean the cost cannot decrease further: finish with "trf"."""
+    # lazily: scipy.optimize (and scipy.spatial, which it imports) costs ~0.5 s a command,
+    # and the engine's own method ("normal") needs neither
+    from scipy.optimize import least_squares
+
     try:
         return least_squares(f, d0, **options)
     except KeyError:  # pragma: no cover - MINPACK info 6-8, seen only at machine precision

@@ -12,12 +12,10 @@ Conventions (see ``docs/conventions.md``):
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from acs_cli.errors import InputError
 
@@ -182,8 +180,85 @@ def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
     arr = np.asarray(rotvec, dtype=float)
     if arr.shape == (3,):
         return _exp1(arr)
-    return np.asarray(Rotation.from_rotvec(arr.reshape(-1, 3)).as_matrix()).reshape(
-        *arr.shape[:-1], 3, 3
+    w = arr.reshape(-1, 3)
+    th2 = np.einsum("ni,ni->n", w, w)
+    small = th2 < 1e-8
+    th = np.sqrt(np.where(small, 1.0, th2))
+    # Rodrigues, R = I + a K + b K^2, with its series near the identity
+    a = np.where(small, 1.0 - th2 / 6.0, np.sin(th) / th)
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
+    # K^2 = w w^T - |w|^2 I
+    R = b[:, None, None] * (w[:, :, None] * w[:, None, :])
+    d = 1.0 - b * th2
+    aw = a[:, None] * w
+    R[:, 0, 0] += d
+    R[:, 1, 1] += d
+    R[:, 2, 2] += d
+    R[:, 0, 1] -= aw[:, 2]
+    R[:, 1, 0] += aw[:, 2]
+    R[:, 0, 2] += aw[:, 1]
+    R[:, 2, 0] -= aw[:, 1]
+    R[:, 1, 2] -= aw[:, 0]
+    R[:, 2, 1] += aw[:, 0]
+    return R.reshape(*arr.shape[:-1], 3, 3)
+
+
+def _quat_xyzw(R: FloatArray) -> FloatArray:
+    """Unit quaternions ``(n, 4)`` ``(x, y, z, w)`` of matrices ``(n, 3, 3)``, either sign.
+
+    Shepperd's method, as scipy's ``Rotation.from_matrix``: from the largest of the trace
+    and the diagonal, so that no square root or division is of a small number; a matrix
+    that is not orthogonal to 1e-12 is first replaced by its nearest rotation (``U V^T``
+    of its SVD), as scipy does.
+
+    Raises
+    ------
+    ValueError
+        A matrix of non-positive determinant (a reflection or a null frame), as scipy.
+    """
+    n = R.shape[0]
+    det = np.einsum("ni,ni->n", R[:, 0], np.cross(R[:, 1], R[:, 2]))
+    if np.any(det <= 0):
+        i = int(np.flatnonzero(det <= 0)[0])
+        raise ValueError(f"non-positive determinant in rotation matrix {i}: {R[i]}")
+    gap = np.abs(np.einsum("nij,nkj->nik", R, R) - np.eye(3))
+    # scipy's test: within 1e-12, and 1e-5 relative on the diagonal
+    off = np.any(gap > 1e-12 + 1e-5 * np.eye(3), axis=(-2, -1))
+    if np.any(off):
+        U, _, Vt = np.linalg.svd(R[off])
+        R = R.copy()
+        R[off] = U @ Vt
+    d = np.stack([R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)
+    tr = d.sum(axis=1)
+    choice = np.argmax(np.concatenate([d, tr[:, None]], axis=1), axis=1)
+    q = np.empty((n, 4))
+    on_trace = choice == 3
+    t = np.flatnonzero(on_trace)
+    q[t, 0] = R[t, 2, 1] - R[t, 1, 2]
+    q[t, 1] = R[t, 0, 2] - R[t, 2, 0]
+    q[t, 2] = R[t, 1, 0] - R[t, 0, 1]
+    q[t, 3] = 1.0 + tr[t]
+    m = np.flatnonzero(~on_trace)
+    i = choice[m]
+    j = (i + 1) % 3
+    k = (j + 1) % 3
+    q[m, i] = 1.0 - tr[m] + 2.0 * R[m, i, i]
+    q[m, j] = R[m, j, i] + R[m, i, j]
+    q[m, k] = R[m, k, i] + R[m, i, k]
+    q[m, 3] = R[m, k, j] - R[m, j, k]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _matrix_from_unit_quat(q: FloatArray) -> FloatArray:
+    """Rotation matrices ``(n, 3, 3)`` of quaternions ``(n, 4)`` ``(x, y, z, w)``, normalised."""
+    x, y, z, w = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
     )
 
 
@@ -198,15 +273,26 @@ def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
             th = np.arctan2(s, c)
             f = 0.5 + th * th / 12.0 if th < 1e-4 else th / (2.0 * s)
             return f * v
-    return np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_rotvec()).reshape(
-        *arr.shape[:-2], 3
+    q = _quat_xyzw(arr.reshape(-1, 3, 3))
+    q = np.where(q[:, 3:4] < 0, -q, q)  # the angle in [0, pi]
+    v = q[:, :3]
+    s = np.linalg.norm(v, axis=1)
+    angle = 2.0 * np.arctan2(s, q[:, 3])
+    small = angle <= 1e-3
+    a2 = angle * angle
+    # angle / sin(angle / 2), with its series near the identity (as scipy's as_rotvec)
+    scale = np.where(
+        small,
+        2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0,
+        angle / np.sin(np.where(small, 1.0, angle) / 2.0),
     )
+    return (scale[:, None] * v).reshape(*arr.shape[:-2], 3)
 
 
 def quat_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
     """Unit quaternions ``(x, y, z, w)`` with ``w >= 0`` from rotation matrices ``(n, 3, 3)``."""
     arr = np.asarray(R, dtype=float)
-    q = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_quat())
+    q = _quat_xyzw(arr.reshape(-1, 3, 3))
     q = np.where(q[:, 3:4] < 0, -q, q)
     return q.reshape(*arr.shape[:-2], 4)
 
@@ -226,26 +312,47 @@ def matrix_from_quat_xyzw(q: ArrayLike, tol: float = 1e-3) -> FloatArray:
         raise InputError(
             f"quaternion {bad[0]} has norm {norm[bad[0]]:.6f}, not 1 ({bad.size} such)"
         )
-    return np.asarray(Rotation.from_quat(arr / norm[:, None]).as_matrix())
+    return _matrix_from_unit_quat(arr)
+
+
+def matrix_from_checked_quat_xyzw(q: FloatArray) -> FloatArray:
+    """:func:`matrix_from_quat_xyzw` for quaternions ``(n, 4)`` a reader has checked
+    already (finite, of norm near 1): normalised, no second check."""
+    return _matrix_from_unit_quat(np.asarray(q, dtype=float).reshape(-1, 4))
 
 
 def rpy_deg_from_matrix(R: ArrayLike) -> FloatArray:
-    """Roll, pitch, yaw (deg) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``."""
+    """Roll, pitch, yaw (deg) with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; ``(n, 3)`` or ``(3,)``.
+
+    At pitch +-90 deg (gimbal lock) roll and yaw are not unique: roll is 0 and yaw takes
+    the whole turn about the vertical."""
     arr = np.asarray(R, dtype=float)
-    with warnings.catch_warnings():
-        # at pitch +-90 deg roll and yaw are not unique; scipy picks one and warns
-        warnings.filterwarnings("ignore", message="Gimbal lock", category=UserWarning)
-        ypr = np.asarray(Rotation.from_matrix(arr.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True))
-    return ypr[:, ::-1].reshape(*arr.shape[:-2], 3)
+    M = arr.reshape(-1, 3, 3)
+    cp = np.hypot(M[:, 0, 0], M[:, 1, 0])
+    pitch = np.arctan2(-M[:, 2, 0], cp)
+    locked = cp < 1e-7
+    roll = np.where(locked, 0.0, np.arctan2(M[:, 2, 1], M[:, 2, 2]))
+    # locked, R = Rz(yaw) Ry(+-90): yaw from the first two rows' second column
+    yaw = np.where(locked, np.arctan2(-M[:, 0, 1], M[:, 1, 1]), np.arctan2(M[:, 1, 0], M[:, 0, 0]))
+    rpy = np.degrees(np.stack([roll, pitch, yaw], axis=1))
+    return rpy.reshape(*arr.shape[:-2], 3)
 
 
 def matrix_from_rpy_deg(rpy: ArrayLike) -> FloatArray:
     """Inverse of :func:`rpy_deg_from_matrix`: roll, pitch, yaw (deg) to rotation matrices."""
     arr = np.asarray(rpy, dtype=float)
-    flat = arr.reshape(-1, 3)[:, ::-1]
-    return np.asarray(Rotation.from_euler("ZYX", flat, degrees=True).as_matrix()).reshape(
-        *arr.shape[:-1], 3, 3
+    r, p, y = np.radians(arr.reshape(-1, 3)).T
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    # Rz(yaw) @ Ry(pitch) @ Rx(roll)
+    R = np.stack(
+        [
+            np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+            np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+            np.stack([-sp, cp * sr, cp * cr], -1),
+        ],
+        axis=1,
     )
+    return R.reshape(*arr.shape[:-1], 3, 3)
 
 
 def rpy_right_jacobian(rpy_rad: ArrayLike) -> FloatArray:

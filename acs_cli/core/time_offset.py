@@ -36,9 +36,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.optimize import minimize_scalar
-from scipy.spatial.transform import Rotation, RotationSpline
 
 from acs_cli.core import se3
 from acs_cli.core.se3 import FloatArray
@@ -124,6 +121,11 @@ class PoseInterpolator:
         self.times = t
         self.interval = float(np.median(np.diff(t)))
         self.max_gap = MAX_GAP_INTERVALS * self.interval if max_gap is None else max_gap
+        # lazily: scipy.interpolate and scipy.spatial (with scipy.optimize, which they
+        # import) cost ~0.5-1 s a command, and only clock estimation and pairing need them
+        from scipy.interpolate import CubicSpline
+        from scipy.spatial.transform import Rotation, RotationSpline
+
         self._rot = RotationSpline(t, Rotation.from_matrix(T[:, :3, :3]))
         self._trans = CubicSpline(t, T[:, :3, 3], axis=0)
 
@@ -358,6 +360,8 @@ def estimate_time_offset(
 
     def c_finite(dt: float) -> float:
         return min(c(dt), FAILED_COST)
+
+    from scipy.optimize import minimize_scalar  # lazily (lsq._least_squares says why)
 
     res = minimize_scalar(c_finite, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6})
     # the calibration failed at every offset the refinement tried: the grid's minimum

@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
@@ -330,7 +329,7 @@ def _parse_tum(text: str, p: Path) -> Trajectory:
     t = table[:, 0].copy()
     _check_increasing(t, numbers, p)
     q = _check_quaternions(table[:, 4:8], numbers, p)
-    R = np.asarray(Rotation.from_quat(q).as_matrix(), dtype=float)
+    R = se3.matrix_from_checked_quat_xyzw(q)
     T = se3.transforms_from_rt(R, table[:, 1:4]).reshape(-1, 4, 4)
     return Trajectory(
         t,
@@ -556,7 +555,7 @@ def _parse_colmap(text: str, p: Path) -> Trajectory:
             )
         seen[name] = ln
     q_wxyz = _check_quaternions(table[:, 0:4], numbers, p)
-    R_cam_world = np.asarray(Rotation.from_quat(q_wxyz[:, [1, 2, 3, 0]]).as_matrix(), dtype=float)
+    R_cam_world = se3.matrix_from_checked_quat_xyzw(q_wxyz[:, [1, 2, 3, 0]])
     T_cam_world = se3.transforms_from_rt(R_cam_world, table[:, 4:7]).reshape(-1, 4, 4)
     with np.errstate(all="ignore"):
         T_world_cam = se3.invert_transforms(T_cam_world)

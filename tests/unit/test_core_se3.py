@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
 from acs_cli.errors import InputError
@@ -389,3 +390,48 @@ def test_check_vectors() -> None:
         se3.check_vectors(np.zeros((2, 2, 3)), name="pts")
     with pytest.raises(InputError, match="pts contains NaN"):
         se3.check_vectors([[0.0, np.nan, 1.0]], name="pts")
+
+
+# ------------------------------------------------- numpy conversions against scipy's Rotation
+
+
+def test_conversions_agree_with_scipy_everywhere(rng: np.random.Generator) -> None:
+    """se3's own Exp, Log, quaternions and roll-pitch-yaw (scipy.spatial costs every command
+    half a second to import) give scipy's numbers: near the identity, near a half turn, on
+    matrices that are not quite orthogonal."""
+    axes = rng.normal(size=(300, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        [
+            np.geomspace(1e-12, 1e-2, 100),
+            np.pi - np.geomspace(1e-12, 1e-2, 100),
+            rng.uniform(0.0, np.pi, 100),
+        ]
+    )
+    rv = axes * angles[:, None]
+    R = Rotation.from_rotvec(rv).as_matrix()
+    assert np.abs(se3.matrix_from_rotvec(rv) - R).max() < 1e-14
+    R = np.concatenate([R, Rotation.random(500, random_state=1).as_matrix()])
+    assert np.abs(se3.rotvec_from_matrix(R) - Rotation.from_matrix(R).as_rotvec()).max() < 1e-12
+    q = Rotation.from_matrix(R).as_quat()
+    q = np.where(q[:, 3:4] < 0, -q, q)
+    assert np.abs(se3.quat_xyzw_from_matrix(R) - q).max() < 1e-14
+    assert np.abs(se3.matrix_from_quat_xyzw(q) - R).max() < 1e-14
+    M = R + 1e-3 * rng.normal(size=R.shape)  # not orthogonal: its nearest rotation's
+    assert np.abs(se3.rotvec_from_matrix(M) - Rotation.from_matrix(M).as_rotvec()).max() < 1e-9
+    ypr = Rotation.from_matrix(R).as_euler("ZYX", degrees=True)
+    assert np.abs(se3.rpy_deg_from_matrix(R) - ypr[:, ::-1]).max() < 1e-9
+    assert np.abs(se3.matrix_from_rpy_deg(ypr[:, ::-1]) - R).max() < 1e-14
+
+
+@pytest.mark.parametrize("pitch", [90.0, -90.0])
+def test_roll_pitch_yaw_at_gimbal_lock_puts_the_turn_in_yaw(pitch: float) -> None:
+    R = se3.matrix_from_rpy_deg(np.array([20.0, pitch, 30.0]))
+    rpy = se3.rpy_deg_from_matrix(R)
+    assert rpy[0] == 0.0 and rpy[1] == pytest.approx(pitch)
+    assert np.abs(se3.matrix_from_rpy_deg(rpy) - R).max() < 1e-12
+
+
+def test_a_reflection_is_not_a_rotation() -> None:
+    with pytest.raises(ValueError, match="non-positive determinant"):
+        se3.rotvec_from_matrix(np.diag([1.0, 1.0, -1.0])[None])

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from acs_cli.core import correlated as cc
+from acs_cli.core.correlated import largest_eigenvalue_tail, simulated_tail
+from acs_cli.core.correlated_tail import TAIL_TABLE
 
 
 def _line_fit(rng: np.random.Generator, n: int, rho: float) -> tuple[np.ndarray, np.ndarray]:
@@ -92,3 +94,13 @@ def test_the_message_names_what_grew() -> None:
     found = cc.CorrelatedErrors(12, 600, 3.2, ("joint knee",))
     msg = found.message("the rig")
     assert msg is not None and "joint knee" in msg and "3.2x" in msg and "12 blocks" in msg
+
+
+@pytest.mark.parametrize(("dim", "blocks"), [(1, 6), (3, 12), (6, 9)])
+def test_the_precomputed_tail_is_the_simulation_bit_for_bit(dim: int, blocks: int) -> None:
+    """The table only saves time: the seeded simulation gives the same number."""
+    assert TAIL_TABLE[(dim, blocks)] == simulated_tail(dim, blocks)
+    assert largest_eigenvalue_tail(dim, blocks) == TAIL_TABLE[(dim, blocks)]
+    # outside the table (another rate, a larger group) it is simulated
+    assert largest_eigenvalue_tail(dim, blocks, 0.01) == simulated_tail(dim, blocks, 0.01)
+    assert (17, 6) not in TAIL_TABLE and largest_eigenvalue_tail(17, 6) > 1.0

@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 #: Modules the help and the version must not import (each costs 20 ms to seconds).
@@ -72,3 +74,26 @@ def test_the_version_is_read_only_when_asked() -> None:
 def test_a_command_that_runs_does_import_its_stage() -> None:
     """The guard above is not vacuous: running a command loads what it needs."""
     assert "acs_cli.stages" in imported_after(["joint", "--poses-a", "missing.tum", "-o", "x"])
+
+
+def test_a_solving_command_leaves_scipy_s_heavy_packages_alone(tmp_path: Path) -> None:
+    """A whole ``joint --overlap`` (engine, outlier test, correlated-error test, writing)
+    needs none of scipy.stats, scipy.spatial, scipy.optimize or scipy.interpolate: together
+    about 1.5 s of every command's start (only clock estimation imports them)."""
+    from acs_cli.io.trajectory import write_tum
+    from sample_data_gen.acs_sim import near_hinge_pair
+
+    p = near_hinge_pair(np.random.default_rng(3), 40, wobble_deg=15.0)
+    a, b = tmp_path / "a.tum", tmp_path / "b.tum"
+    write_tum(a, p.timestamps, p.T_w_a)
+    write_tum(b, p.timestamps, p.T_w_b)
+    code = SCRIPT.format(
+        argvs=[["joint", "--overlap", "--poses-a", str(a), "--poses-b", str(b),
+                "-o", str(tmp_path / "j.yaml")]],
+        heavy={"scipy.stats", "scipy.spatial", "scipy.optimize", "scipy.interpolate",
+               "acs_cli.stages"},
+    )  # fmt: skip
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "j.yaml").is_file(), res.stderr
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == ["acs_cli.stages"]
