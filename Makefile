@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 WORKERS ?= 2
 SERIAL_BLAS := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-.PHONY: install demo test lint typecheck unit fuzz bench clean
+.PHONY: install demo test lint typecheck unit slow fuzz bench clean
 
 install: $(STAMP)
 
@@ -28,8 +28,13 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
+# `make test` leaves out the statistical studies (the `slow` marker: an estimator's stds
+# against its error spread over many seeded trials); `make slow` runs them
 unit: install
-	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope
+	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope -m "not slow"
+
+slow: install
+	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope -m slow
 
 test: lint typecheck unit
 

@@ -8,8 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 REPO = Path(__file__).resolve().parents[2]
 NUMBER = r"[+-]\d+\.\d+"
 VECTOR = rf"\[{NUMBER}, {NUMBER}, {NUMBER}\]"
@@ -17,7 +15,7 @@ SEP = r"\s*│\s*"  # a table cell border, with the padding around it
 RATIO = r"\[?[+-]?\d+\.\d+\]?"  # a number, or a one-number vector
 
 
-@pytest.mark.slow
+# in `make test`, although it takes the longest: README's first command must work
 def test_demo_prints_both_tables(tmp_path: Path) -> None:
     out = tmp_path / "demo"
     env = dict(os.environ, COLUMNS="120", NO_COLOR="1")

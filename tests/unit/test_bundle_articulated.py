@@ -282,6 +282,7 @@ def test_an_overlapping_hinge_recovered_exactly(rng: np.random.Generator) -> Non
     assert abs(abs(float(j.axis_in["b"] @ s["axis_b"])) - 1) < 1e-10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overlap", [True, False], ids=["overlap", "general"])
 def test_reported_std_matches_the_spread(overlap: bool) -> None:
     """Over seeded trials, the joint's and T_b_a's errors divided by the reported standard

@@ -246,6 +246,7 @@ def test_fixed_joint_statistics() -> None:
     assert rejected <= 0.05 * N_TRIALS
 
 
+@pytest.mark.slow
 def test_overlap_statistics() -> None:
     err_ref, err_pap, bound = [], [], []
     for i in range(N_TRIALS):

@@ -196,6 +196,7 @@ def test_the_estimate_does_not_depend_on_the_offsets_fraction_of_a_frame() -> No
     assert np.all(np.abs(err) < 2e-3)
 
 
+@pytest.mark.slow
 def test_the_std_matches_the_spread_over_noise() -> None:
     """One motion under ten noise draws: the reported std agrees with the errors' spread."""
     res = _offsets((0.75 / 30.0,), range(10))[0]

@@ -98,6 +98,7 @@ QUANTITIES = [
 ]  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("quantity", QUANTITIES)
 def test_reported_std_matches_the_error_spread(
     pose_trials: dict[str, list[tuple[np.ndarray, np.ndarray]]], quantity: str
@@ -107,6 +108,7 @@ def test_reported_std_matches_the_error_spread(
     assert abs(ratio - 1.0) <= TOLERANCE, f"{quantity}: RMS error / RMS std = {ratio:.3f}"
 
 
+@pytest.mark.slow
 def test_bundle_adjustment_std_matches_the_error_spread() -> None:
     """The fixed-joint bundle adjustment's joint and focal-length standard deviations (from
     its Jacobian and the estimated pixel noise) over seeded trials of corner noise."""
