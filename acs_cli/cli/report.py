@@ -105,14 +105,25 @@ def trajectory(
             callback=positive_seconds,
         ),
     ] = None,
+    euler: Annotated[
+        str,
+        typer.Option(
+            "--euler",
+            help="Euler sequence of a ball joint's angles in angles.csv: XYZ ... ZYZ "
+            "(upper case intrinsic, lower case extrinsic).",
+        ),
+    ] = "ZXY",
     json_out: JsonOpt = False,
 ) -> None:
     """Recover the ACS's trajectory in one frame: camera A's at the reference instant.
 
     Writes camera A's and camera B's poses and the joint's path as TUM files (T_world_X,
     world = camera A at relpose.yaml's reference instant; the joint's orientation is camera
-    A's), and trajectory.yaml with the joint constraint's consistency per frame (distance
-    between the joint as A and as B see it). Under unknown scale B is brought to A's units.
+    A's), angles.csv with the joint's angles per frame (a hinge's angle about its axis, a
+    ball's rotation vector and Euler angles: B turning relative to A since the reference
+    instant, each with its std), and trajectory.yaml with the joint constraint's consistency
+    per frame (distance between the joint as A and as B see it). Under unknown scale B is
+    brought to A's units.
 
     Example:
 
@@ -137,7 +148,11 @@ def trajectory(
     from acs_cli.stages.trajectory import TrajectoryConfig, run_trajectory
 
     cfg = TrajectoryConfig(
-        format_a=format_a.value, format_b=format_b.value, pair_by=pair_by.value, max_dt=max_dt
+        format_a=format_a.value,
+        format_b=format_b.value,
+        pair_by=pair_by.value,
+        max_dt=max_dt,
+        euler=euler,
     )
     run = run_trajectory(relpose, poses_a, poses_b, output, cfg, joint=joint)
     rec = run.estimate
@@ -154,6 +169,11 @@ def trajectory(
     table.add_row(f"joint consistency RMS ({unit})", f"{cons['rms']:.4g}")
     table.add_row(f"joint consistency max ({unit})", f"{cons['max']:.4g}")
     table.add_row("rejected frames (by relpose)", str(int(rec.rejected.sum())))
+    ang = run.artifact["angles"]
+    if "angle_range_deg" in ang:
+        lo, hi = ang["angle_range_deg"]
+        table.add_row("hinge angle range (deg)", f"{lo:.2f} to {hi:.2f}")
+        table.add_row("hinge wobble RMS (deg)", f"{ang['wobble_rms_deg']:.3f}")
     out.print(table)
     warn(run.warnings)
     tums = [output / n for n in run.artifact["outputs"].values()]

@@ -17,7 +17,16 @@ from typing import Any
 import numpy as np
 
 from acs_cli.core.acs_trajectory import AcsTrajectory, recover_trajectory
+from acs_cli.core.angles import (
+    EULER_SEQUENCES,
+    BallAngles,
+    HingeAngles,
+    articulation_from_orientations,
+    ball_angles,
+    hinge_angles,
+)
 from acs_cli.errors import InputError
+from acs_cli.io.angles import JointAngleSeries, write_angles_csv
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.poses import PosesArtifact
@@ -48,6 +57,7 @@ OUTPUT_NAMES = {
     "cam_a": "cam_a.tum",
     "cam_b": "cam_b.tum",
     "joint": "joint.tum",
+    "angles": "angles.csv",
     "artifact": "trajectory.yaml",
 }
 
@@ -65,12 +75,16 @@ class TrajectoryConfig:
         pairing ``relpose.yaml`` records.
     max_dt : float, optional
         Largest timestamp difference of a pair, seconds.
+    euler : str
+        The Euler sequence of a ball joint's angles in ``angles.csv``
+        (:data:`acs_cli.core.angles.EULER_SEQUENCES`).
     """
 
     format_a: str = "auto"
     format_b: str = "auto"
     pair_by: str = "auto"
     max_dt: float | None = None
+    euler: str = "ZXY"
 
 
 @dataclass(frozen=True)
@@ -92,6 +106,10 @@ class RecoveredTrajectory:
         The unit of the outputs (``A units`` under unknown scale).
     mu_a : float or None
         A units per metre, when ``relpose.yaml`` knows it.
+    joint_type : str
+        ``ball`` or ``hinge``.
+    axis_in_a : ndarray (3,) or None
+        A hinge's axis in A's frame.
     """
 
     trajectory: AcsTrajectory
@@ -102,6 +120,8 @@ class RecoveredTrajectory:
     position_in_b: np.ndarray
     length_unit: str
     mu_a: float | None
+    joint_type: str = "ball"
+    axis_in_a: np.ndarray | None = None
 
 
 TrajectoryRun = StageRun[RecoveredTrajectory]
@@ -168,6 +188,7 @@ def recover_from_relpose(
     scale = relpose.scale
     mu_a = None if scale is None else scale.mu_a
     mu_b = None if scale is None else scale.mu_b
+    section = joint
     if joint_path is None:
         o_a, o_b = joint.position_in_a, joint.position_in_b
         if o_b is None:  # require_joint refuses this; the check keeps o_b's type
@@ -182,6 +203,7 @@ def recover_from_relpose(
                 path=joint_path,
             )
         o_a, o_b = given.position_in_a, given.position_in_b
+        section = given
         source = str(joint_path)
         if mu_a is not None and mu_b is not None:
             o_a, o_b = o_a * mu_a, o_b * mu_b
@@ -201,7 +223,11 @@ def recover_from_relpose(
         raise InputError(exc.message, path=relpose_path) from exc
     length_unit = "A units" if relpose.unknown_scale else relpose.length_unit
     rejected = relpose.quality.frames.mask(pair.a.timestamps)
-    return RecoveredTrajectory(traj, pair, rejected, source, o_a, o_b, length_unit, mu_a)
+    jtype = section.type or "ball"
+    axis = None if section.axis_in_a is None else np.asarray(section.axis_in_a, dtype=float)
+    return RecoveredTrajectory(
+        traj, pair, rejected, source, o_a, o_b, length_unit, mu_a, jtype, axis
+    )
 
 
 def _check_inputs_match(
@@ -217,6 +243,42 @@ def _check_inputs_match(
                 f"({rec.get('path')})"
             )
     return warnings
+
+
+def pair_angles(
+    rec: RecoveredTrajectory, relpose: RelposeArtifact, euler: str
+) -> HingeAngles | BallAngles:
+    """The joint's angles per paired frame (B relative to A since the reference instant):
+    a hinge's about its axis in A, a ball's as a rotation vector and Euler angles; stds from
+    ``relpose.yaml``'s estimated rotation noise of each camera (NaN when it has none)."""
+    traj = rec.trajectory
+    D = articulation_from_orientations(traj.T_r_a[:, :3, :3], traj.T_r_b[:, :3, :3], traj.reference)
+    noise = relpose.quality.estimated_pose_noise
+    sigma = float("nan") if noise is None else float(noise.sigma_rot_deg)
+    if rec.joint_type == "hinge" and rec.axis_in_a is not None:
+        return hinge_angles(D, rec.axis_in_a, sigma, traj.reference)
+    return ball_angles(D, sigma, traj.reference, euler)
+
+
+def angles_section(
+    angles: HingeAngles | BallAngles, rec: RecoveredTrajectory, relpose: RelposeArtifact
+) -> dict[str, Any]:
+    """``trajectory.yaml``'s ``angles``: what ``angles.csv`` holds and its zero."""
+    pair, k = rec.pair, rec.trajectory.reference
+    body: dict[str, Any] = {
+        "file": OUTPUT_NAMES["angles"],
+        "joint_type": rec.joint_type if isinstance(angles, HingeAngles) else "ball",
+        "zero": {"index": k, "timestamp_a": float(pair.a.timestamps[k])},
+        "std_from": "the poses' rotation noise of each camera "
+        "(quality.estimated_pose_noise of relpose.yaml); the calibration enters at second order",
+    }
+    if isinstance(angles, HingeAngles):
+        body["axis_in_a"] = None if rec.axis_in_a is None else rec.axis_in_a.tolist()
+        body["wobble_rms_deg"] = angles.wobble_rms_deg
+        body["angle_range_deg"] = [float(angles.angle_deg.min()), float(angles.angle_deg.max())]
+    else:
+        body["euler_sequence"] = angles.sequence
+    return body
 
 
 def run_trajectory(
@@ -236,6 +298,11 @@ def run_trajectory(
         Bad files or options; ``out_dir`` is a file; an output would overwrite an input.
     """
     cfg = config or TrajectoryConfig()
+    if cfg.euler not in EULER_SEQUENCES:  # before anything is written
+        raise InputError(
+            f"--euler {cfg.euler!r} is not an Euler sequence: one of "
+            f"{', '.join(EULER_SEQUENCES)} (upper case intrinsic, lower case extrinsic)"
+        )
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("is a file; -o takes a folder for the trajectory files", path=out_dir)
@@ -272,6 +339,8 @@ def run_trajectory(
         note = "; ".join(notes) or None
         write_tum(outputs[key], times.timestamps, T, timestamps_ns=times.timestamps_ns, note=note)
 
+    angles = pair_angles(rec, art, cfg.euler)
+    write_angles_csv(outputs["angles"], [JointAngleSeries("joint", pair.a.timestamps, angles)])
     d = traj.consistency
     used = ~rec.rejected if (~rec.rejected).any() else np.ones_like(rec.rejected)
     body: dict[str, Any] = {
@@ -294,6 +363,7 @@ def run_trajectory(
             "position_in_b": rec.position_in_b.tolist(),
         },
         "outputs": {key: name for key, name in OUTPUT_NAMES.items() if key != "artifact"},
+        "angles": angles_section(angles, rec, art),
         "consistency": {
             "rms": float(np.sqrt(np.mean(d[used] ** 2))),
             "median": float(np.median(d[used])),
@@ -319,6 +389,7 @@ def run_trajectory(
             if art.unknown_scale
             else rec.length_unit,
             "timestamps": "s (or frame numbers for trajectories without timestamps)",
+            "angles": "deg",
             "position_in_b": "B units" if art.unknown_scale else rec.length_unit,
         },
         frames={
@@ -328,6 +399,9 @@ def run_trajectory(
             "cam_b.tum": "T_world_b: B's pose (camera or body)",
             "joint.tum": "T_world_joint: the joint (as camera A sees it), camera A's orientation",
             "consistency.frames.distance": "|joint from A - joint from B| in the world frame",
+            "angles.csv": "B turning relative to A since the reference instant: a hinge's "
+            "angle about angles.axis_in_a (right-hand rule); a ball's rotation vector and "
+            "Euler angles in A's frame",
         },
     )
     write_yaml_artifact(outputs["artifact"], header, body)

@@ -125,7 +125,7 @@ def test_trajectory_json_lists_every_file_written(
     doc = result_of(calibrated["trajectory"], "trajectory")
     traj = recording["dir"] / "traj"
     assert sorted(Path(p).name for p in doc["written"]) == [
-        "cam_a.tum", "cam_b.tum", "joint.tum", "trajectory.yaml"
+        "angles.csv", "cam_a.tum", "cam_b.tum", "joint.tum", "trajectory.yaml"
     ]  # fmt: skip
     art = load(traj / "trajectory.yaml")
     assert doc["result"]["consistency"]["rms"] == pytest.approx(art["consistency"]["rms"])

@@ -1,0 +1,128 @@
+"""``angles.csv``: each joint's angles per frame, as ``acscal trajectory`` writes them.
+
+A header row, then one row per frame and joint, in time order per joint. The columns are
+fixed (pipelines read them by name):
+
+- ``time`` (s, or frame numbers for trajectories without times), ``joint`` (its name);
+- a hinge: ``angle_deg`` (the second body of ``between`` turning relative to the first about
+  the axis the artifact reports, right-hand rule, 0 at the zero instant), ``angle_std_deg``,
+  ``wobble_deg`` (the rotation off the axis);
+- a ball joint: ``rotvec_x_deg``, ``rotvec_y_deg``, ``rotvec_z_deg`` (the articulation since
+  the zero instant as a rotation vector in the first body's frame), ``rotvec_std_deg`` (per
+  component), ``euler_sequence`` and ``euler_1_deg`` ... ``euler_3_std_deg``.
+
+Cells that do not apply to a joint's type are empty.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from acs_cli.core.angles import BallAngles, HingeAngles
+from acs_cli.core.se3 import FloatArray
+from acs_cli.errors import InputError
+from acs_cli.io.atomic import atomic_path
+
+__all__ = ["ANGLE_COLUMNS", "JointAngleSeries", "read_angles_csv", "write_angles_csv"]
+
+ANGLE_COLUMNS = (
+    "time",
+    "joint",
+    "angle_deg",
+    "angle_std_deg",
+    "wobble_deg",
+    "rotvec_x_deg",
+    "rotvec_y_deg",
+    "rotvec_z_deg",
+    "rotvec_std_deg",
+    "euler_sequence",
+    "euler_1_deg",
+    "euler_2_deg",
+    "euler_3_deg",
+    "euler_1_std_deg",
+    "euler_2_std_deg",
+    "euler_3_std_deg",
+)
+
+
+@dataclass(frozen=True)
+class JointAngleSeries:
+    """One joint's angles over its frames' ``times`` ``(n,)``."""
+
+    joint: str
+    times: FloatArray
+    angles: HingeAngles | BallAngles
+
+
+def _num(x: float) -> str:
+    return "" if not np.isfinite(x) else f"{float(x):.6f}"
+
+
+def write_angles_csv(path: str | Path, series: list[JointAngleSeries]) -> None:
+    """Write ``angles.csv`` atomically (module doc)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(ANGLE_COLUMNS)
+    for s in series:
+        a = s.angles
+        for i, t in enumerate(np.asarray(s.times, dtype=float)):
+            row = dict.fromkeys(ANGLE_COLUMNS, "")
+            row["time"] = repr(float(t))
+            row["joint"] = s.joint
+            if isinstance(a, HingeAngles):
+                row["angle_deg"] = _num(a.angle_deg[i])
+                row["angle_std_deg"] = _num(a.angle_std_deg[i])
+                row["wobble_deg"] = _num(a.wobble_deg[i])
+            else:
+                for k, c in enumerate("xyz"):
+                    row[f"rotvec_{c}_deg"] = _num(a.rotvec_deg[i, k])
+                row["rotvec_std_deg"] = _num(a.rotvec_std_deg[i, 0])
+                row["euler_sequence"] = a.sequence
+                for k in range(3):
+                    row[f"euler_{k + 1}_deg"] = _num(a.euler_deg[i, k])
+                    row[f"euler_{k + 1}_std_deg"] = _num(a.euler_std_deg[i, k])
+            w.writerow([row[c] for c in ANGLE_COLUMNS])
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+
+
+def read_angles_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
+    """Per joint, each column of :data:`ANGLE_COLUMNS` as an array (floats; NaN for an empty
+    cell; ``euler_sequence`` as strings).
+
+    Raises
+    ------
+    InputError
+        Not an ``angles.csv``: another header, or a row of another length.
+    """
+    p = Path(path)
+    try:
+        rows = list(csv.reader(p.read_text(encoding="utf-8").splitlines()))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read ({exc})", path=p) from exc
+    if not rows or tuple(rows[0]) != ANGLE_COLUMNS:
+        raise InputError(f"not an angles.csv: its header is not {','.join(ANGLE_COLUMNS)}", path=p)
+    out: dict[str, dict[str, list[str]]] = {}
+    for n, row in enumerate(rows[1:], start=2):
+        if len(row) != len(ANGLE_COLUMNS):
+            raise InputError(f"{len(row)} cells, expected {len(ANGLE_COLUMNS)}", path=p, line=n)
+        cols = out.setdefault(row[1], {c: [] for c in ANGLE_COLUMNS})
+        for c, v in zip(ANGLE_COLUMNS, row, strict=True):
+            cols[c].append(v)
+    parsed: dict[str, dict[str, np.ndarray]] = {}
+    for joint, cols in out.items():
+        parsed[joint] = {}
+        for c, vals in cols.items():
+            if c in ("joint", "euler_sequence"):
+                parsed[joint][c] = np.asarray(vals, dtype=str)
+                continue
+            try:
+                parsed[joint][c] = np.asarray([float(v) if v else np.nan for v in vals])
+            except ValueError as exc:
+                raise InputError(f"column {c}: {exc}", path=p) from exc
+    return parsed
