@@ -137,7 +137,7 @@ def trajectory(
             raise InputError(
                 "--rig replaces --relpose, --poses-a and --poses-b: give one or the other"
             )
-        _rig_trajectory(rig, poses or [], output)
+        _rig_trajectory(rig, poses or [], output, euler)
         return
     if relpose is None or poses_a is None or poses_b is None:
         missing = [n for n, v in (("--relpose", relpose), ("--poses-a", poses_a),
@@ -221,13 +221,21 @@ def report(
     )
 
 
-def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
+def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) -> None:
     """``acscal trajectory --rig``: every camera and joint of a rig in the reference frame."""
+    from acs_cli.core.angles import EULER_SEQUENCES
+    from acs_cli.io.angles import write_angles_csv
     from acs_cli.io.rig import RigArtifact
     from acs_cli.io.trajectory import read_trajectory, write_tum
     from acs_cli.io.verdict import weak_marks
     from acs_cli.stages.rig import trajectories_from_rig
+    from acs_cli.stages.trajectory import rig_angles
 
+    if euler not in EULER_SEQUENCES:  # before anything is written
+        raise InputError(
+            f"--euler {euler!r} is not an Euler sequence: one of {', '.join(EULER_SEQUENCES)} "
+            "(upper case intrinsic, lower case extrinsic)"
+        )
     art = RigArtifact.load(rig_file)
     files: dict[str, Path] = {}
     for c, cam in art.cameras.items():
@@ -263,6 +271,10 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
         f = output / f"{name}.tum"
         write_tum(f, times, T, note="; ".join(marks) or None)
         written.append(f.name)
+    angles = rig_angles(art, paths, euler)
+    if angles:
+        write_angles_csv(output / "angles.csv", angles)
+        written.append("angles.csv")
     out.print(
         f"wrote {len(written)} trajectories to {output} ({', '.join(written)}), in "
         f"{art.reference_camera}'s frame at frame {art.reference_frame} ({art.length_unit})"
@@ -273,6 +285,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path) -> None:
             "reference_frame": art.reference_frame,
             "length_unit": art.length_unit,
             "trajectories": {name: output / f"{name}.tum" for name in paths},
+            "angles": None if not angles else output / "angles.csv",
         },
         written=[output / name for name in written],
         warnings=marks,

@@ -25,12 +25,14 @@ from acs_cli.core.angles import (
     ball_angles,
     hinge_angles,
 )
+from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 from acs_cli.io.angles import JointAngleSeries, write_angles_csv
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.atomic import check_distinct_output, check_writable
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
+from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, write_tum
 from acs_cli.io.validate import TIME_TOL
 from acs_cli.io.verdict import weak_marks
@@ -49,6 +51,7 @@ __all__ = [
     "TrajectoryRun",
     "read_relpose",
     "recover_from_relpose",
+    "rig_angles",
     "run_trajectory",
 ]
 
@@ -279,6 +282,45 @@ def angles_section(
     else:
         body["euler_sequence"] = angles.sequence
     return body
+
+
+def rig_angles(
+    rig: RigArtifact, paths: dict[str, tuple[np.ndarray, FloatArray]], euler: str = "ZXY"
+) -> list[JointAngleSeries]:
+    """Each ball and hinge joint's angles over the instants both its bodies have a pose
+    (``paths``: :func:`acs_cli.stages.rig.trajectories_from_rig`), zero at the instant
+    nearest the reference camera's reference frame. A hinge's std comes from its own
+    off-axis wobble (on a true hinge the wobble is the relative rotation noise across the
+    axis, which the angle carries along it: ``std^2 = mean(wobble^2) / 2``); a ball joint's
+    std is left empty, rig.yaml recording no pose noise of its bodies."""
+    series: list[JointAngleSeries] = []
+    ref_times = paths[rig.reference_camera][0] if rig.reference_camera in paths else None
+    for name, j in rig.joints.items():
+        p, q = j.between
+        if j.type not in ("ball", "hinge") or p not in paths or q not in paths:
+            continue
+        (tp, Tp), (tq, Tq) = paths[p], paths[q]
+        common, ip, iq = np.intersect1d(tp, tq, assume_unique=True, return_indices=True)
+        if common.size < 2:
+            continue
+        t0 = (
+            common[0]
+            if ref_times is None
+            else ref_times[min(rig.reference_frame, ref_times.size - 1)]
+        )
+        k = int(np.argmin(np.abs(common - t0)))
+        D = articulation_from_orientations(Tp[ip, :3, :3], Tq[iq, :3, :3], k)
+        angles: HingeAngles | BallAngles
+        if j.type == "hinge" and p in j.axis_in:
+            h = hinge_angles(D, j.axis_in[p], float("nan"), k)
+            others = np.arange(common.size) != k
+            sigma = float(np.sqrt(np.mean(h.wobble_deg[others] ** 2) / 8.0))
+            std = np.where(others, 2.0 * sigma, 0.0)
+            angles = HingeAngles(h.angle_deg, std, h.wobble_deg)
+        else:
+            angles = ball_angles(D, float("nan"), k, euler)
+        series.append(JointAngleSeries(name, common, angles))
+    return series
 
 
 def run_trajectory(

@@ -10,6 +10,7 @@ import yaml
 from cli_runner import acscal
 
 from acs_cli.core import se3
+from acs_cli.io.angles import read_angles_csv
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import read_trajectory, write_tum
 from sample_data_gen.writer import write_rig_recording
@@ -195,6 +196,15 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
         # every frame but the reference instant (corrected there by the joint constraints)
         np.testing.assert_allclose(mine[1:], run[1:], atol=1e-6)
         assert np.linalg.norm(mine[0, :3, 3] - run[0, :3, 3]) < 0.1
+    # every ball and hinge joint's angles (issue 22): a hinge's with its std, a ball's Euler
+    angles = read_angles_csv(tmp_path / "traj" / "angles.csv")
+    art = RigArtifact.load(rig_file)
+    assert set(angles) == {n for n, j in art.joints.items() if j.type in ("ball", "hinge")}
+    hinge = angles["j23"]
+    assert np.all(np.isfinite(hinge["angle_deg"])) and np.nanmax(np.abs(hinge["angle_deg"])) > 5
+    assert np.sum(hinge["angle_deg"] == 0.0) >= 1 and np.all(hinge["angle_std_deg"] >= 0.0)
+    assert np.all(np.isnan(angles["j02"]["angle_deg"]))
+    assert np.all(np.isfinite(angles["j02"]["euler_1_deg"]))
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr
 
