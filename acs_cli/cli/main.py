@@ -80,6 +80,7 @@ class ExportFormat(str, Enum):
     opencv = "opencv"
     ros = "ros"
     urdf = "urdf"
+    handeye = "handeye"
 
 
 MethodOpt = Annotated[
@@ -386,8 +387,9 @@ def export(
             "--format",
             help="kalibr (camchain YAML with every camera's intrinsics), opencv "
             "(cv2.FileStorage YAML: R, T of T_b_a and each camera's intrinsics; relpose only), "
-            "ros (a camera_info YAML per camera, in the folder -o) or urdf (a rig, for "
-            "robot_state_publisher).",
+            "ros (a camera_info YAML per camera, in the folder -o), urdf (a rig, for "
+            "robot_state_publisher) or handeye (a rig's camera on a robot's flange: "
+            "easy_handeye's YAML with static_transform_publisher lines).",
         ),
     ] = ExportFormat.kalibr,
     intrinsics: Annotated[
@@ -417,9 +419,15 @@ def export(
             "B's trajectory). Needed when they are not metric and have no metric joint.",
         ),
     ] = None,
-    robot_name: Annotated[str, typer.Option("--robot-name", help="urdf: the robot's name.")] = (
-        "acs_rig"
-    ),
+    robot_name: Annotated[
+        str, typer.Option("--robot-name", help="urdf: the robot's name; handeye: its namespace.")
+    ] = "acs_rig",
+    base_frame: Annotated[
+        str, typer.Option("--base-frame", help="handeye: the robot's base tf frame.")
+    ] = "base_link",
+    board_frame: Annotated[
+        str, typer.Option("--board-frame", help="handeye: the board's tf frame.")
+    ] = "board",
     json_out: JsonOpt = False,
 ) -> None:
     """Export a relative pose, or a whole rig, for other tools.
@@ -433,6 +441,9 @@ def export(
         acscal export relpose.yaml --format opencv --intrinsics a=a.yaml -o relpose_cv.yaml
 
         acscal export out/rig.yaml --format urdf -o rig.urdf
+
+        acscal export out/rig.yaml --format handeye --camera-name flange=tool0 \\
+            --camera-name cam=camera_color_optical_frame -o handeye.yaml
     """
     from acs_cli.stages.export import parse_named_option, run_export
 
@@ -445,7 +456,11 @@ def export(
         camera_names=parse_named_option(camera_name or [], "--camera-name", "NAME"),
         scale=scale,
         robot_name=robot_name,
+        base_frame=base_frame,
+        board_frame=board_frame,
     )
+    for line in info.get("static_transform_publisher", {}).get("ros1", []):
+        out.print(line)
     for cam, source in info["intrinsics"].items():
         out.print(f"intrinsics of {cam}: {source}")
     for w in info["warnings"]:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import load_yaml_file
 from acs_cli.io.atomic import check_distinct_output, check_writable
@@ -38,6 +39,7 @@ from acs_cli.io.export import (
     write_opencv_yaml,
     write_ros_camera_info,
 )
+from acs_cli.io.handeye_export import HandEyeExport, write_handeye
 from acs_cli.io.intrinsics import IntrinsicsArtifact
 from acs_cli.io.joint import BundleSection
 from acs_cli.io.relpose import RelposeArtifact
@@ -56,9 +58,9 @@ __all__ = [
     "run_rig_export",
 ]
 
-EXPORT_FORMATS = ("kalibr", "opencv", "ros", "urdf")
+EXPORT_FORMATS = ("kalibr", "opencv", "ros", "urdf", "handeye")
 #: The formats of a rig (``rig.yaml``).
-RIG_FORMATS = ("kalibr", "ros", "urdf")
+RIG_FORMATS = ("kalibr", "ros", "urdf", "handeye")
 #: A relative pose's cameras: the key by which options name them, and their default names.
 PAIR_CAMERAS = {"a": "cam_a", "b": "cam_b"}
 
@@ -371,8 +373,11 @@ def run_rig_export(
     scale: float | None = None,
     robot_name: str = "acs_rig",
     doc: Any = None,
+    base_frame: str = "base_link",
+    board_frame: str = "board",
 ) -> dict[str, Any]:
-    """Export ``rig.yaml`` as a Kalibr camchain, ROS camera_infos or a URDF.
+    """Export ``rig.yaml`` as a Kalibr camchain, ROS camera_infos, a URDF or a hand-eye
+    calibration (``handeye``: :func:`handeye_of_rig`).
 
     Intrinsics come per camera as :func:`find_intrinsics` finds them (``intrinsics``: camera
     name to ``intrinsics.yaml``; ``cam_<name>/intrinsics.yaml`` beside ``rig.yaml``).
@@ -431,6 +436,18 @@ def run_rig_export(
         info["written"] = [str(p) for p in _write_ros(output, cams, names, sources, notes)]
         return info
     m, how = rig_metres(rig.length_unit, scale, str(rig_file))
+    if fmt == "handeye":
+        names = {c: (camera_names or {}).get(c, c) for c in rig.cameras}
+        he, joint = handeye_of_rig(rig, m, names, base_frame, board_frame, robot_name)
+        head = (
+            f"acscal export (handeye) of {rig_file.name}, joint {joint}: the camera's pose in "
+            f"the robot's effector frame; lengths in metres ({how})"
+        )
+        notes = [head, *notes]
+        doc_out = write_handeye(output, he, notes)
+        info["written"] = [str(output)]
+        info["static_transform_publisher"] = doc_out["acscal"]["static_transform_publisher"]
+        return info
     notes = [f"lengths in metres ({how})", *notes]
     if fmt == "kalibr":
         notes = [f"intrinsics of {c}: {sources[c]}" for c in rig.cameras] + notes
@@ -444,6 +461,71 @@ def run_rig_export(
     )
     info["written"] = [str(output)]
     return info
+
+
+def handeye_of_rig(
+    rig: Any,
+    metres: float,
+    names: Mapping[str, str],
+    base_frame: str,
+    board_frame: str,
+    namespace: str,
+) -> tuple[HandEyeExport, str]:
+    """A rig's hand-eye calibration: its one rigid joint between a camera and a body with
+    poses only (the robot's flange: ``cameras.<body>.pose_only``), as the camera's pose in
+    the flange's frame, with the board in the robot's base when the bundle found it.
+
+    Raises
+    ------
+    InputError
+        No such joint, or several.
+    """
+    found = []
+    for name, j in rig.joints.items():
+        if j.type != "rigid" or j.T_q_p is None:
+            continue
+        p, q = j.between
+        bodies = [c for c in (p, q) if rig.cameras[c].pose_only is not None]
+        if len(bodies) == 1:
+            found.append((name, j, bodies[0]))
+    if len(found) != 1:
+        raise InputError(
+            "a hand-eye export needs the rig's one rigid joint between a camera and a body "
+            f"with poses only (a robot's flange in the bundle adjustment); found {len(found)}",
+            path=rig.source,
+        )
+    name, j, body = found[0]
+    p, q = j.between
+    camera = q if body == p else p
+    T = np.asarray(j.T_q_p, dtype=float).copy()  # maps p into q
+    std = j.T_q_p_std
+    if body == p:  # T_q_p = T_camera_flange: the other way round, and its std
+        R = T[:3, :3].copy()
+        T = se3.invert_transforms(T)
+        if std is not None:
+            # (R Exp(d), t + e)^-1 = (R' Exp(-R d), t' + [t']x d - R^T e) to first order; the
+            # stds as a diagonal covariance (rig.yaml keeps no correlations)
+            Cd, Ce = np.diag(np.radians(std[0]) ** 2), np.diag(np.asarray(std[1]) ** 2)
+            K = se3.skew(T[:3, 3])
+            rot = np.degrees(np.sqrt(np.diag(R @ Cd @ R.T)))
+            trans = np.sqrt(np.diag(K @ Cd @ K.T + R.T @ Ce @ R))
+            std = (rot, trans)
+    T[:3, 3] *= metres
+    if std is not None:
+        std = (np.asarray(std[0], float), metres * np.asarray(std[1], float))
+    po = rig.cameras[body].pose_only
+    Z = None if po is None else po.T_world_board.get(camera)
+    Z_std = None if po is None else po.T_world_board_std.get(camera)
+    if Z is not None:
+        Z = np.asarray(Z, dtype=float).copy()
+        Z[:3, 3] *= metres
+    if Z_std is not None:
+        Z_std = (np.asarray(Z_std[0], float), metres * np.asarray(Z_std[1], float))
+    he = HandEyeExport(
+        T, std, Z, Z_std, base_frame, names.get(body, body), names.get(camera, camera),
+        board_frame, f"{namespace}_eye_on_hand",
+    )  # fmt: skip
+    return he, name
 
 
 def _pair_overlap(art: RelposeArtifact, relpose: Path) -> bool:
@@ -470,6 +552,8 @@ def run_export(
     camera_names: Mapping[str, str] | None = None,
     scale: float | None = None,
     robot_name: str = "acs_rig",
+    base_frame: str = "base_link",
+    board_frame: str = "board",
 ) -> dict[str, Any]:
     """Export ``relpose.yaml`` (or a rig's ``rig.yaml``, see :func:`run_rig_export`).
 
@@ -524,9 +608,11 @@ def run_export(
             scale=scale,
             robot_name=robot_name,
             doc=doc,
+            base_frame=base_frame,
+            board_frame=board_frame,
         )
-    if fmt == "urdf":
-        raise InputError("urdf exports a rig (rig.yaml from acscal run)", path=relpose)
+    if fmt in ("urdf", "handeye"):
+        raise InputError(f"{fmt} exports a rig (rig.yaml from acscal run)", path=relpose)
     given = _pair_keys(intrinsics or {}, "--intrinsics")
     _check_output(output, fmt, [relpose, *given.values()])
     art = RelposeArtifact.from_parsed(doc, relpose)

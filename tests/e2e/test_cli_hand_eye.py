@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from cli_runner import acscal
 
 from acs_cli.core import se3
@@ -80,3 +81,27 @@ def test_eye_in_hand_on_a_kuka_robot(tmp_path: Path) -> None:
     d = swapped.T_q_p @ j.T_q_p  # X^-1 X
     assert np.linalg.norm(se3.rotvec_from_matrix(d[:3, :3])) < 1e-6
     assert np.linalg.norm(d[:3, 3]) < 1e-6
+    # exported for ROS (issue 22, item 3): easy_handeye's YAML with the user's frame names,
+    # the same X either way the joint is written, and the lines that publish it
+    for out, rig_dir in (("he.yaml", "out"), ("he_swapped.yaml", "out_swapped")):
+        res = acscal(
+            "export", tmp_path / rig_dir / "rig.yaml", "--format", "handeye",
+            "--camera-name", "flange=tool0", "--camera-name", "cam=camera_optical",
+            "--base-frame", "base_link", "-o", tmp_path / out,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        doc = yaml.safe_load((tmp_path / out).read_text())
+        p = doc["parameters"]
+        assert p["eye_on_hand"] is True and p["robot_effector_frame"] == "tool0"
+        assert p["tracking_base_frame"] == "camera_optical" and p["robot_base_frame"] == "base_link"
+        tr = doc["transformation"]
+        X = se3.transforms_from_rt(
+            se3.matrix_from_quat_xyzw(np.array([[tr[k] for k in ("qx", "qy", "qz", "qw")]]))[0],
+            np.array([tr["x"], tr["y"], tr["z"]]),
+        )
+        d = X @ se3.invert_transforms(j.T_q_p)  # j.T_q_p maps cam into flange: X itself
+        assert np.linalg.norm(d[:3, 3]) < 1e-6 and se3.rotation_angle_deg(d[:3, :3]) < 1e-6
+        ros1 = doc["acscal"]["static_transform_publisher"]["ros1"]
+        assert ros1[0].endswith("tool0 camera_optical") and ros1[1].endswith("base_link board")
+        assert ros1[0] in res.stdout
+        assert np.all(np.array(doc["acscal"]["transformation_std"]["translation_m"]) < 2e-3)
