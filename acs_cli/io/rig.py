@@ -31,6 +31,7 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         position_std_in: {p: [3], q: [3]}
         axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, largest component in p > 0
         axis_std_deg_in: {p: float, q: float}
+        wobble_rms_deg: float           # a hinge: its bodies' RMS rotation off the axis
         T_q_p: 4x4                      # rigid only: maps p's frame into q's (hand-eye X)
         T_q_p_std: {rotation_deg: [3], translation: [3]}   # when bundle-adjusted
         residual_rms: float             # of the joint constraint over the frames used
@@ -252,6 +253,8 @@ class RigJointResult:
     T_q_p_std: tuple[FloatArray, FloatArray] | None = None
     #: a ball joint: how it bent, in each body's frame, and where it is weakest
     motion: dict[str, MotionQuality] = field(default_factory=dict)
+    #: a hinge: the RMS rotation of its bodies off the axis over the frames used (deg)
+    wobble_rms_deg: float | None = None
 
     @property
     def model(self) -> JointModel:
@@ -431,6 +434,8 @@ class RigArtifact(YamlArtifact):
             if j.model.has_axis:
                 d["axis_in"] = dict(j.axis_in)
                 d["axis_std_deg_in"] = dict(j.axis_std_deg_in)
+                if j.wobble_rms_deg is not None:
+                    d["wobble_rms_deg"] = j.wobble_rms_deg
             if j.model.constant_transform and j.T_q_p is not None:
                 d["T_q_p"] = j.T_q_p
                 if j.T_q_p_std is not None:
@@ -623,6 +628,9 @@ class RigArtifact(YamlArtifact):
                 if not jm.constant_transform or j.get("T_q_p_std") is None
                 else _std_parse(j["T_q_p_std"], f"{k}.T_q_p_std", p),
                 motion=MotionQuality.parse_all(j.get("motion"), f"{k}.motion", p),
+                wobble_rms_deg=None
+                if j.get("wobble_rms_deg") is None
+                else as_number(j["wobble_rms_deg"], f"{k}.wobble_rms_deg", p, non_negative=True),
             )
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):

@@ -51,6 +51,7 @@ from acs_cli.core.rig_bundle import (
 from acs_cli.core.rig_solve import (
     TEST_SETTLED_NOISE,
     CameraTrack,
+    EdgeEstimate,
     EdgePrior,
     Recordings,
     RigEstimate,
@@ -252,6 +253,15 @@ def _priors(config: RigRunConfig) -> tuple[dict[str, EdgePrior], dict[str, Poses
     return out, sessions
 
 
+def hinge_wobble_deg(e: EdgeEstimate) -> float | None:
+    """A hinge's RMS rotation off its axis over the frames used (deg): its rotation rows,
+    the axis's direction in one body against the other's; None for another joint type."""
+    rot = e.residual_blocks.get("rot") if e.joint.type == "hinge" else None
+    if rot is None or rot.size == 0:
+        return None
+    return float(np.degrees(np.sqrt(np.mean(np.sum(rot**2, axis=1)))))
+
+
 def rig_artifact(
     est: RigEstimate, length_unit: str, warnings: list[str], recordings: str | None = None
 ) -> RigArtifact:
@@ -323,6 +333,7 @@ def rig_artifact(
             T_q_p=e.T_q_p if joint_model(e.joint.type).constant_transform else None,
             T_q_p_std=T_q_p_std,
             motion=MotionQuality.of(edge_motion(est, name), dict(e.position_cov_in)),
+            wobble_rms_deg=hinge_wobble_deg(e),
         )
     return RigArtifact(
         reference_camera=est.topology.reference,

@@ -204,6 +204,10 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
     assert np.all(np.isfinite(hinge["angle_deg"])) and np.nanmax(np.abs(hinge["angle_deg"])) > 5
     assert np.sum(hinge["angle_deg"] == 0.0) >= 1 and np.all(hinge["angle_std_deg"] >= 0.0)
     assert np.all(np.isnan(angles["j02"]["angle_deg"]))
+    # rig.yaml reports the hinge's wobble: the noise here, and the angles.csv's wobble's RMS
+    wobble = art.joints["j23"].wobble_rms_deg
+    assert wobble is not None and 0.0 < wobble < 3.0
+    assert art.joints["j02"].wobble_rms_deg is None
     assert np.all(np.isfinite(angles["j02"]["euler_1_deg"]))
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr

@@ -43,6 +43,8 @@ def test_round_trip(artifact: RigArtifact, tmp_path: Path) -> None:
         assert got_j.type == j.type and got_j.between == j.between
         for c, v in j.axis_in.items():
             np.testing.assert_allclose(got_j.axis_in[c], v)
+        assert got_j.wobble_rms_deg == j.wobble_rms_deg
+        assert (j.wobble_rms_deg is not None) == (j.type == "hinge")
     assert back.warnings == ["a warning"] and back.source == str(path)
     assert "cam4" in back.summary() and "scale" in back.summary()
     np.testing.assert_allclose(back.T_a_b("cam1", "cam1"), np.eye(4), atol=1e-12)
