@@ -41,12 +41,20 @@ from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
 from acs_cli.io.poses import PosesArtifact, SfmSummary
 from acs_cli.io.target import target_from_mapping, target_to_mapping
-from acs_cli.io.timestamps import ImageTimes, image_times, read_timestamps_file
+from acs_cli.io.timestamps import (
+    VIDEO_TIMES,
+    ImageTimes,
+    image_times,
+    read_timestamps_file,
+    times_from_ns,
+)
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
+from acs_cli.io.video import FrameSelection, is_video_path
 from acs_cli.stages.intrinsics import (
     TARGET_FRAMES,
     detect_folder,
     few_boards,
+    input_files,
     no_board_error,
     no_target_error,
 )
@@ -85,6 +93,8 @@ class PosesConfig:
         Pose on this target (identified corners, partial views) instead of a checkerboard;
         default: the intrinsics artifact's target when it records one (and no board option
         is given).
+    selection : FrameSelection
+        A video's frames to use (``--every``, ``--max-frames``).
     """
 
     cols: int | None = None
@@ -95,6 +105,7 @@ class PosesConfig:
     timestamps: Path | None = None
     fps: float | None = None
     target: MarkerTarget | None = None
+    selection: FrameSelection = field(default_factory=FrameSelection)
 
 
 @dataclass(frozen=True)
@@ -186,6 +197,28 @@ def _poses_target(
     return None if isinstance(target, Checkerboard) else target
 
 
+def video_times(ns: list[int]) -> ImageTimes:
+    """The times of a video's frames: their presentation timestamps (integer ns)."""
+    return times_from_ns(ns, VIDEO_TIMES)
+
+
+def _video_times_check(images: Path, config: _TimeOptions) -> bool:
+    """True for a video input; :class:`InputError` when ``--timestamps``/``--fps`` are
+    given for one (its frames carry their own times)."""
+    if not is_video_path(images):
+        return False
+    given = [
+        k for k, v in (("--timestamps", config.timestamps), ("--fps", config.fps)) if v is not None
+    ]
+    if given:
+        raise InputError(
+            f"{' and '.join(given)} apply to image folders: a video's frames carry their own "
+            "times (presentation timestamps); leave it out",
+            path=images,
+        )
+    return True
+
+
 def _board_option(value: Any, stored: Any, name: str, path: Path) -> Any:
     if value is not None:
         return value
@@ -226,8 +259,10 @@ def run_poses(
             raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
         if not (np.isfinite(square) and square > 0):
             raise InputError(f"--square must be a positive length in metres, got {square}")
+    video = _video_times_check(images_dir, config)
+    config.selection.check()
     outputs = [output] + ([config.tum] if config.tum is not None else [])
-    inputs = [images_dir, intrinsics, *list_images(images_dir)]
+    inputs = [intrinsics, *input_files(images_dir)]
     for o in outputs:
         check_distinct_output(o, inputs)
     if config.tum is not None and os.path.realpath(config.tum) == os.path.realpath(output):
@@ -244,6 +279,7 @@ def run_poses(
         workers=config.workers,
         progress=progress,
         target=target,
+        selection=config.selection,
     )
     if fd.image_size != cam.image_size:
         raise InputError(
@@ -284,9 +320,13 @@ def run_poses(
         board_note = few_boards(images_dir, fd.images, found, cols, rows, 1, part_is_error=True)
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
-    times = _image_times(names, all_names, stamps, config)
+    if fd.times_ns is not None:
+        by_name = dict(zip(all_names, fd.times_ns, strict=True))
+        times = video_times([by_name[n] for n in names])
+    else:
+        times = _image_times(names, all_names, stamps, config)
     t = times.seconds
-    warnings = [w for w in (board_note, times.note) if w is not None]
+    warnings = [*fd.notes] + [w for w in (board_note, times.note) if w is not None]
     # one board frame for the whole sequence: undo 180-degree relabellings of the board
     T_cb_arr = np.stack(T_cb)
     if target is None and cols != rows:
@@ -308,7 +348,7 @@ def run_poses(
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     header = make_header(
         "poses",
-        {"images": images_dir, "intrinsics": intrinsics},
+        {"video" if video else "images": images_dir, "intrinsics": intrinsics},
         method="cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on "
         f"{cols}x{rows} board corners; T_world_cam = inverse of T_cam_board",
         units={"length": "m", "reprojection_rms": "px"},
@@ -330,6 +370,8 @@ def run_poses(
         header["target"] = target_to_mapping(target)
     header["intrinsics_file"] = str(intrinsics)
     _time_header(header, times)
+    if fd.frames is not None:
+        header["video"] = fd.frames
     rms_arr = np.array(rms, dtype=float)
     PosesArtifact(
         trajectory=traj,
