@@ -96,7 +96,7 @@ class FrameSelection:
         """The rule in words."""
         parts = []
         if self.every > 1:
-            parts.append(f"every {self.every}th frame")
+            parts.append(f"1 frame in {self.every}")
         if self.max_frames is not None:
             parts.append(f"at most {self.max_frames} frames spread evenly")
         return ", then ".join(parts) if parts else "every frame"
@@ -213,6 +213,22 @@ def _short(exc: BaseException) -> str:
     return " ".join(str(text).split())[:160]
 
 
+def _ends_early(container: Any, first_ns: int | None, last_ns: int, n: int) -> str | None:
+    """Why the frames decoded stop well before the duration the container declares (a
+    truncated file whose header survived), or None."""
+    duration = container.duration  # microseconds, or None
+    if duration is None or first_ns is None or n < 2:
+        return None
+    step = (last_ns - first_ns) / (n - 1)
+    end = first_ns + int(duration) * 1000
+    if end - last_ns > 2.5 * step + 1e6:
+        return (
+            f"truncated: the frames stop at {last_ns / _NS:.3f} s of the "
+            f"{int(duration) / 1e6:.3f} s the file declares"
+        )
+    return None
+
+
 def count_frames(path: Path) -> tuple[int, str | None]:
     """The number of frames of a video's first video stream, by reading its packets
     without decoding them; with a note when the file ends in damage."""
@@ -283,6 +299,7 @@ def read_video_frames(
         step_ns = round(_NS / Fraction(rate)) if rate else None
         index = 0
         last_ns: int | None = None
+        first_ns: int | None = None
         kept_ns: int | None = None
         no_pts = repeated = bad_packets = 0
         first_error: str | None = None
@@ -313,6 +330,7 @@ def read_video_frames(
                     no_pts += 1
                 i = index
                 index += 1
+                first_ns = t_ns if first_ns is None else first_ns
                 last_ns = t_ns
                 rep.decoded = index
                 take = (i % selection.every == 0) if wanted is None else (i in wanted)
@@ -327,6 +345,9 @@ def read_video_frames(
                 yield DecodedFrame(VideoFrame(p, i, t_ns), np.ascontiguousarray(image))
             if last_wanted is not None and only is not None and index > last_wanted:
                 break
+        if only is None and first_error is None and last_ns is not None:
+            first_error = _ends_early(container, first_ns, last_ns, index)
+            bad_packets += first_error is not None
     finally:
         container.close()
     if only is None and rep.kept == 0:
@@ -334,8 +355,7 @@ def read_video_frames(
         raise InputError(f"no frame of the video decodes{why}", path=p)
     if bad_packets:
         rep.notes.append(
-            f"the video is damaged: {bad_packets} packet(s) did not decode ({first_error}); "
-            f"used the {rep.decoded} frames that did"
+            f"the video is damaged ({first_error}): used the {rep.decoded} frames that decode"
         )
     if no_pts:
         rep.notes.append(

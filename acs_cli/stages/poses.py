@@ -212,8 +212,9 @@ def _video_times_check(images: Path, config: _TimeOptions) -> bool:
     ]
     if given:
         raise InputError(
-            f"{' and '.join(given)} apply to image folders: a video's frames carry their own "
-            "times (presentation timestamps); leave it out",
+            f"{' and '.join(given)} {'apply' if len(given) > 1 else 'applies'} to image "
+            "folders: a video's frames carry their own times (presentation timestamps); "
+            "leave it out",
             path=images,
         )
     return True
