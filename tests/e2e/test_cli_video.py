@@ -1,0 +1,120 @@
+"""``acscal intrinsics`` and ``acscal poses`` on video files (issue 21), end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from cli_runner import acscal
+
+from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.trajectory import read_trajectory
+from sample_data_gen.render import render_scenario
+from sample_data_gen.video import folder_to_video
+
+FRAMES = 16
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    """One rendered camera as a PNG folder and as an FFV1 video at a variable frame rate,
+    with the folder's calibration for comparison."""
+    d = tmp_path_factory.mktemp("video")
+    scene = render_scenario(
+        d / "render", "fixed_joint", seed=3, frames=FRAMES, size=(320, 240), board_distance=0.45
+    )
+    folder = scene / "cam_a"
+    video, times = folder_to_video(folder, d / "in" / "cam_a.mkv", fps=10, jitter=0.3, seed=2)
+    intr_folder = d / "folder" / "intrinsics.yaml"
+    res = acscal("intrinsics", folder, "--board", "9x6", "-o", intr_folder)
+    assert res.returncode == 0, res.stderr
+    return {"dir": d, "folder": folder, "video": video, "times": times, "intr": intr_folder}
+
+
+def test_intrinsics_from_a_video_match_its_frames(recording: dict, tmp_path: Path) -> None:
+    video: Path = recording["video"]
+    before = sorted(video.parent.iterdir())
+    out = tmp_path / "intrinsics.yaml"
+    res = acscal("intrinsics", video, "--board", "9x6", "-o", out)
+    assert res.returncode == 0, res.stderr
+    doc = yaml.safe_load(out.read_text())
+    ref = yaml.safe_load(Path(recording["intr"]).read_text())
+    np.testing.assert_allclose(doc["camera_matrix"], ref["camera_matrix"], rtol=1e-9)
+    assert doc["images"]["total"] == FRAMES
+    assert all(n.startswith("frame_0000") for n in doc["images"]["used"])
+    assert doc["inputs"]["video"]["path"].endswith("cam_a.mkv")
+    assert doc["video"]["decoded"] == FRAMES and doc["video"]["kept"] == FRAMES
+    assert sorted(video.parent.iterdir()) == before  # nothing written beside the input
+    again = acscal("intrinsics", video, "--board", "9x6", "-o", out, "--json")
+    assert again.returncode == 0, again.stderr
+    assert f"{FRAMES} detections from the cache" in again.stderr + again.stdout
+
+
+def test_poses_take_the_presentation_times(recording: dict, tmp_path: Path) -> None:
+    npz, tum = tmp_path / "poses.npz", tmp_path / "poses.txt"
+    res = acscal(
+        "poses", recording["video"], "--intrinsics", recording["intr"], "-o", npz, "--tum", tum
+    )
+    assert res.returncode == 0, res.stderr
+    art = PosesArtifact.load(npz)
+    names = art.trajectory.names
+    assert names is not None and all(n.startswith("frame_") for n in names)
+    want = {f"frame_{i:06d}": t for i, t in enumerate(recording["times"])}
+    np.testing.assert_array_equal(
+        art.trajectory.timestamps_ns, [round(want[n] * 1e9) for n in names]
+    )
+    assert "presentation timestamps" in art.header["timestamps_from"]
+    traj = read_trajectory(tum)
+    np.testing.assert_allclose(traj.timestamps, [want[n] for n in names], atol=1e-9)
+
+
+def test_max_frames_and_every_are_reported(recording: dict, tmp_path: Path) -> None:
+    npz = tmp_path / "poses.npz"
+    res = acscal(
+        "poses", recording["video"], "--intrinsics", recording["intr"], "-o", npz,
+        "--every", "2", "--max-frames", "4",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "used 4 of 16 frames (1 frame in 2, then at most 4 frames spread evenly)" in res.stderr
+    art = PosesArtifact.load(npz)
+    kept = {"frame_000000", "frame_000004", "frame_000010", "frame_000014"}
+    assert art.trajectory.names is not None and set(art.trajectory.names) <= kept
+    assert art.header["video"]["max_frames"] == 4 and art.header["video"]["every"] == 2
+
+
+def test_truncated_video_warns_and_uses_what_decodes(recording: dict, tmp_path: Path) -> None:
+    data = Path(recording["video"]).read_bytes()
+    cut = tmp_path / "cut.mkv"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    out = tmp_path / "intrinsics.yaml"
+    res = acscal("intrinsics", cut, "--board", "9x6", "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert "the video is damaged" in res.stderr and "truncated" in res.stderr
+    assert 0 < yaml.safe_load(out.read_text())["images"]["total"] < FRAMES
+
+
+@pytest.mark.parametrize("case", ["not_video", "no_frame", "fps", "every_on_folder"])
+def test_bad_video_input_exits_2_with_one_line(recording: dict, tmp_path: Path, case: str) -> None:
+    video: Path = recording["video"]
+    src: Path = video
+    extra: list[str] = []
+    if case == "not_video":
+        src = tmp_path / "clip.mp4"
+        src.write_text("this is not a video\n" * 40)
+    elif case == "no_frame":
+        src = tmp_path / "head.mkv"
+        src.write_bytes(video.read_bytes()[:600])
+    elif case == "fps":
+        extra = ["--fps", "30"]
+    else:
+        src, extra = recording["folder"], ["--every", "2"]
+    out = tmp_path / "out" / "poses.npz"
+    res = acscal("poses", src, "--intrinsics", recording["intr"], "-o", out, *extra, "--json")
+    assert res.returncode == 2, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert not out.exists()
+    assert json.loads(res.stdout)["ok"] is False
