@@ -118,3 +118,43 @@ def test_bad_video_input_exits_2_with_one_line(recording: dict, tmp_path: Path, 
     assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
     assert not out.exists()
     assert json.loads(res.stdout)["ok"] is False
+
+
+RUN_CONFIG = """\
+schema: acscal/run-config
+schema_version: 1
+output: out
+board: {cols: 9, rows: 6, square: 0.025}
+cameras:
+  a: {video: cam_a.mkv, max_frames: 12}
+  b: {video: cam_b.avi, every: 1}
+joint: {scenario: fixed_joint}
+"""
+
+
+def test_run_config_takes_video_files(tmp_path: Path) -> None:
+    scene = render_scenario(tmp_path / "render", "fixed_joint", seed=0, frames=12, size=(640, 480))
+    a, times_a = folder_to_video(scene / "cam_a", tmp_path / "cfg" / "cam_a.mkv", fps=15)
+    folder_to_video(scene / "cam_b", tmp_path / "cfg" / "cam_b.avi", fps=15)
+    config = tmp_path / "cfg" / "run.yaml"
+    config.write_text(RUN_CONFIG, encoding="utf-8")
+    first = acscal("run", config)
+    assert first.returncode == 0, first.stderr
+    run = tmp_path / "cfg" / "out"
+    assert (run / "joint.yaml").is_file()
+    art = PosesArtifact.load(run / "cam_a" / "poses.npz")
+    names = art.trajectory.names
+    assert names is not None and names[0].startswith("frame_")
+    want = {f"frame_{i:06d}": t for i, t in enumerate(times_a)}
+    np.testing.assert_allclose(art.trajectory.timestamps, [want[n] for n in names], atol=1e-9)
+    assert yaml.safe_load((run / "cam_a" / "intrinsics.yaml").read_text())["video"]["kept"] == 12
+    second = acscal("run", config)
+    assert second.returncode == 0, second.stderr
+    status = {}
+    for line in second.stdout.splitlines():
+        name, sep, rest = line.partition(": ")
+        if sep and rest.split(" ")[0] in {"ran", "skipped", "reused"}:
+            status[name] = rest.split(" ")[0]
+    assert status and set(status.values()) == {"skipped"}, second.stdout
+    assert {"intrinsics a", "poses a", "joint"} <= set(status), status
+    assert a.is_file()
