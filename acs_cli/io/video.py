@@ -41,6 +41,7 @@ __all__ = [
     "VideoFrame",
     "VideoRead",
     "count_frames",
+    "estimate_frames",
     "frame_name",
     "is_video_path",
     "read_frame_images",
@@ -160,6 +161,9 @@ class VideoRead:
         Frames handed out.
     count : int, optional
         Frames counted before decoding (with ``max_frames``), else None.
+    estimate : int, optional
+        Without ``max_frames``: the frames to be kept by the header's frame count, for a
+        progress bar (None when unknown).
     notes : list of str
         Damage, frames without or with repeated times.
     """
@@ -167,6 +171,7 @@ class VideoRead:
     decoded: int = 0
     kept: int = 0
     count: int | None = None
+    estimate: int | None = None
     notes: list[str] = field(default_factory=list)
 
 
@@ -229,6 +234,22 @@ def _ends_early(container: Any, first_ns: int | None, last_ns: int, n: int) -> s
     return None
 
 
+def estimate_frames(path: Path) -> int | None:
+    """The frame count a video's header declares (or its duration times its average rate),
+    for a progress bar; None when it says neither."""
+    container = _open(path)
+    try:
+        stream = container.streams.video[0]
+        if stream.frames:
+            return int(stream.frames)
+        rate = stream.average_rate
+        if container.duration and rate:
+            return round(container.duration / 1e6 * float(rate))
+        return None
+    finally:
+        container.close()
+
+
 def count_frames(path: Path) -> tuple[int, str | None]:
     """The number of frames of a video's first video stream, by reading its packets
     without decoding them; with a note when the file ends in damage."""
@@ -289,6 +310,9 @@ def read_video_frames(
             if note is not None:
                 rep.notes.append(note)
             wanted = selection.indices(rep.count)
+    if report is not None and rep.count is None and only is None:
+        guess = estimate_frames(p)
+        rep.estimate = None if guess is None else -(-guess // selection.every)
     last_wanted = max(wanted) if wanted else None
     container = _open(p)
     errors = _ffmpeg_error()

@@ -646,6 +646,8 @@ def _detect_video(
     first = next(frames)  # counts the frames first when max_frames is given
     if report.count is not None and selection.max_frames is not None:
         total = len(selection.indices(report.count) or ())
+    elif report.estimate is not None:
+        total = report.estimate
     n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
 
     def all_frames() -> Iterator[Any]:
@@ -702,6 +704,8 @@ def _detect_video(
             pool.shutdown(wait=True, cancel_futures=True)
         if dirty:
             write_detections(cache, store)
+    if progress is not None:
+        progress(len(found), len(refs))  # the estimated total, corrected
     dets = [found[i] for i in range(len(refs))]
     kept = f"{len(refs)} of {report.decoded} frames"
     notes = [*report.notes]
