@@ -468,6 +468,7 @@ def poses(
             workdir=workdir,
             timestamps=timestamps,
             fps=fps,
+            selection=frame_selection(every, max_frames),
         )
         return
     from acs_cli.stages.poses import PosesConfig, run_poses
@@ -574,6 +575,7 @@ def _sfm_poses(
     workdir: Path | None,
     timestamps: Path | None,
     fps: float | None,
+    selection: FrameSelection,
 ) -> None:
     """``acscal poses --sfm``: the markerless front end."""
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
@@ -596,6 +598,7 @@ def _sfm_poses(
         workdir=workdir,
         timestamps=timestamps,
         fps=fps,
+        selection=selection,
     )
     with _phase_progress() as progress:
         run = run_sfm_poses(images_dir, intrinsics_file, output, cfg, progress)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import cv2
 import numpy as np
 
 from acs_cli.core.intrinsics import board_points
@@ -35,7 +36,7 @@ from acs_cli.core.sfm import SfmCamera, SfmOptions, SfmProgress, SfmResult
 from acs_cli.core.targets import MIN_POSE_CORNERS, Checkerboard, MarkerTarget, pose_ready
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
-from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.atomic import atomic_write_bytes, check_distinct_output, check_writable
 from acs_cli.io.detections import cache_path_for
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
@@ -49,7 +50,7 @@ from acs_cli.io.timestamps import (
     times_from_ns,
 )
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
-from acs_cli.io.video import FrameSelection, is_video_path
+from acs_cli.io.video import FrameSelection, VideoRead, is_video_path, read_video_frames
 from acs_cli.stages.intrinsics import (
     TARGET_FRAMES,
     detect_folder,
@@ -394,7 +395,7 @@ def run_poses(
 #: The file that marks a ``--workdir`` as made by ``acscal poses --sfm`` (safe to clear).
 WORKDIR_MARKER = ".acscal-sfm"
 #: What ``run_sfm_poses`` clears in a work folder it made before (COLMAP's files).
-_WORKDIR_ENTRIES = ("images", "sparse", "database.db", "vocab_tree.bin", "vocab_tree.log")
+_WORKDIR_ENTRIES = ("images", "frames", "sparse", "database.db", "vocab_tree.bin", "vocab_tree.log")
 #: Below this registered fraction the warning says the trajectory has gaps worth a look.
 POOR_REGISTRATION = 0.9
 
@@ -439,6 +440,7 @@ class SfmPosesConfig:
     workdir: Path | None = None
     timestamps: Path | None = None
     fps: float | None = None
+    selection: FrameSelection = field(default_factory=FrameSelection)
 
 
 @dataclass(frozen=True)
@@ -519,6 +521,40 @@ def _sfm_camera(intrinsics: Path) -> SfmCamera:
     except InputError as exc:
         raise InputError(exc.message, path=intrinsics) from exc
     return sfm_cam
+
+
+def _video_frames_to(
+    video: Path, folder: Path, selection: FrameSelection, progress: SfmProgress | None
+) -> tuple[tuple[int, int], dict[str, int], list[str], dict[str, Any]]:
+    """Decode a video's kept frames into ``folder`` as PNG files (``frame_000123.png``), one
+    at a time; their size, their times (ns) by file name, the reader's notes and the
+    frame counts (for the header)."""
+    report = VideoRead()
+    times: dict[str, int] = {}
+    size: tuple[int, int] | None = None
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, frame in enumerate(read_video_frames(video, selection, report)):
+        got = (int(frame.image.shape[1]), int(frame.image.shape[0]))
+        size = size or got
+        if got != size:  # pragma: no cover - one stream has one size
+            raise InputError(f"{frame.ref.name} is {got[0]}x{got[1]}", path=video)
+        ok, png = cv2.imencode(".png", frame.image)
+        if not ok:  # pragma: no cover - encoding a grey array does not fail
+            raise InputError(f"cannot encode {frame.ref.name} as PNG", path=video)
+        name = frame.ref.name + ".png"
+        atomic_write_bytes(folder / name, png.tobytes())
+        times[name] = frame.ref.time_ns
+        if progress is not None:
+            progress("decoding video", k + 1, max(k + 1, report.estimate or report.count or 0))
+    if size is None:  # pragma: no cover - read_video_frames raises first
+        raise InputError("no frame of the video decodes", path=video)
+    notes = list(report.notes)
+    counts = {"decoded": report.decoded, "kept": len(times), "every": selection.every,
+              "max_frames": selection.max_frames}  # fmt: skip
+    if not selection.trivial:
+        notes.insert(0, f"video: used {len(times)} of {report.decoded} frames "
+                        f"({selection.describe()})")  # fmt: skip
+    return size, times, notes, counts
 
 
 def _check_images(paths: list[Path], progress: SfmProgress | None) -> tuple[int, int]:
@@ -643,7 +679,14 @@ def run_sfm_poses(
     if config.refine_intrinsics and intrinsics is None:
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
     stamps = _time_source(config)
-    paths = list_images(images_dir)
+    video = _video_times_check(images_dir, config)
+    config.selection.check()
+    if not video and not config.selection.trivial:
+        raise InputError(
+            "--every and --max-frames select frames of a video file; this is a folder of images",
+            path=images_dir,
+        )
+    paths = [] if video else list_images(images_dir)
     camera = _sfm_camera(intrinsics) if intrinsics is not None else None
     opts = SfmOptions(
         matching=config.matching,
@@ -662,27 +705,43 @@ def run_sfm_poses(
         raise InputError("--tum and -o name the same file", path=output)
     for o in outputs:
         check_writable(o)
-    size = _check_images(paths, progress)
-    if camera is not None and size != camera.image_size:
-        raise InputError(
-            f"images are {size[0]}x{size[1]} but {intrinsics} was calibrated at "
-            f"{camera.image_size[0]}x{camera.image_size[1]}",
-            path=images_dir,
-        )
-    all_names = [p.name for p in paths]
+    frame_ns: dict[str, int] = {}
+    notes: list[str] = []
+    counts: dict[str, Any] = {}
     with _sfm_workdir(config.workdir, [images_dir, output.parent]) as work:
-        result = run_sfm(images_dir, all_names, work, camera, opts, progress)
+        folder = images_dir
+        if video:  # COLMAP reads files: the kept frames go to the work folder, as PNG
+            folder = work / "frames"
+            size, frame_ns, notes, counts = _video_frames_to(
+                images_dir, folder, config.selection, progress
+            )
+            all_names = list(frame_ns)
+        else:
+            size = _check_images(paths, progress)
+            all_names = [p.name for p in paths]
+        if camera is not None and size != camera.image_size:
+            raise InputError(
+                f"images are {size[0]}x{size[1]} but {intrinsics} was calibrated at "
+                f"{camera.image_size[0]}x{camera.image_size[1]}",
+                path=images_dir,
+            )
+        result = run_sfm(folder, all_names, work, camera, opts, progress)
 
     names = list(result.registered_names)
-    times = _image_times(names, all_names, stamps, config)
+    if video:
+        times = video_times([frame_ns[n] for n in names])
+    else:
+        times = _image_times(names, all_names, stamps, config)
     traj = _trajectory(times, result.T_world_cam, names, output)
-    warnings = _sfm_warnings(result, camera) + ([] if times.note is None else [times.note])
+    warnings = notes + _sfm_warnings(result, camera)
+    warnings += [] if times.note is None else [times.note]
     cam = result.camera
     given = "given (" + ("refined" if result.intrinsics_refined else "held fixed") + ")"
     n_images = len(all_names)
     header = make_header(
         "poses",
-        {"images": images_dir} | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
+        {"video" if video else "images": images_dir}
+        | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
         method=(
             f"incremental structure from motion ({pycolmap_version()}): SIFT features, "
             f"{result.matching} matching"
@@ -710,6 +769,8 @@ def run_sfm_poses(
         header["intrinsics_file"] = str(intrinsics)
     _time_header(header, times)
     header["front_end"] = "sfm"
+    if video:
+        header["video"] = counts
     feats = result.features_per_image
     header["sfm"] = {
         "method": "incremental",

@@ -521,6 +521,7 @@ def _sfm_stage(
         tum=npz.with_suffix(".tum"),
         timestamps=cam.timestamps,
         fps=cam.fps,
+        selection=_selection(cam),
         **config.sfm,
     )
 
@@ -533,6 +534,7 @@ def _sfm_stage(
     if cam.timestamps is not None:
         inputs["timestamps"] = cam.timestamps
     options = {"front_end": "sfm", **config.sfm} | ({"fps": cam.fps} if cam.fps else {})
+    options |= _selection_options(_selection(cam))
     return _Stage(f"sfm {name}", "poses", inputs, options, [npz], do_sfm), npz
 
 

@@ -158,3 +158,23 @@ def test_run_config_takes_video_files(tmp_path: Path) -> None:
     assert status and set(status.values()) == {"skipped"}, second.stdout
     assert {"intrinsics a", "poses a", "joint"} <= set(status), status
     assert a.is_file()
+
+
+def test_sfm_poses_from_a_video(tmp_path: Path) -> None:
+    from test_cli_sfm import FAST, _render
+
+    folder = tmp_path / "frames"
+    _render(folder, 12)
+    video, times = folder_to_video(folder, tmp_path / "in" / "walk.mkv", fps=5, jitter=0.2)
+    out, tum = tmp_path / "poses.npz", tmp_path / "poses.txt"
+    res = acscal("poses", video, "--sfm", "-o", out, "--tum", tum, "--every", "1", *FAST)
+    assert res.returncode == 0, res.stderr
+    assert "12 of 12 images registered" in res.stdout
+    art = PosesArtifact.load(out)
+    names = art.trajectory.names
+    assert names is not None and names[0] == "frame_000000.png"
+    # the frames' presentation times, not their order
+    want = {f"frame_{i:06d}.png": t for i, t in enumerate(times)}
+    np.testing.assert_allclose(art.trajectory.timestamps, [want[n] for n in names], atol=1e-9)
+    assert art.header["video"]["kept"] == 12
+    assert sorted(p.name for p in video.parent.iterdir()) == ["walk.mkv"]
