@@ -443,7 +443,7 @@ def poses(
         acscal poses images/cam_a --intrinsics cam_a/intrinsics.yaml --board 9x6 \\
             --square 0.025 -o cam_a/poses.npz --tum cam_a/poses.txt
 
-        acscal poses video_frames/cam_a --sfm --intrinsics cam_a/intrinsics.yaml \\
+        acscal poses walk.mp4 --sfm --intrinsics cam_a/intrinsics.yaml --max-frames 200 \\
             -o cam_a/poses.npz --tum cam_a/poses.txt
     """
     if sfm:
