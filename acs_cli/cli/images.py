@@ -130,6 +130,14 @@ def frame_selection(every: int | None, max_frames: int | None) -> FrameSelection
     return FrameSelection(1 if every is None else every, max_frames)
 
 
+TopicOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--topic",
+        help="ROS bag input (ROS 1 .bag, ROS 2 bag folder): the image topic "
+        "(sensor_msgs/Image or CompressedImage); times are header.stamp.",
+    ),
+]
 TargetOpt = Annotated[
     str | None,
     typer.Option(
@@ -216,6 +224,7 @@ def intrinsics(
     workers: WorkersOpt = None,
     every: EveryOpt = None,
     max_frames: MaxFramesOpt = None,
+    topic: TopicOpt = None,
     accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -253,6 +262,7 @@ def intrinsics(
         target=tgt,
         accept_weak=accept_weak,
         selection=frame_selection(every, max_frames),
+        topic=topic,
     )
     with _progress("detecting") as progress:
         run = run_intrinsics(images_dir, output, cfg, progress)
@@ -421,6 +431,7 @@ def poses(
     ] = None,
     every: EveryOpt = None,
     max_frames: MaxFramesOpt = None,
+    topic: TopicOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Each image's camera pose, as a trajectory: on a board, or markerless (--sfm).
@@ -447,6 +458,8 @@ def poses(
             -o cam_a/poses.npz --tum cam_a/poses.txt
     """
     if sfm:
+        if topic is not None:
+            raise InputError("--sfm does not read ROS bags yet; --topic applies to board poses")
         if target is not None:
             raise InputError(
                 "--target describes a calibration target, which --sfm does not use; leave it out"
@@ -501,6 +514,7 @@ def poses(
         timestamps=timestamps,
         fps=fps,
         selection=frame_selection(every, max_frames),
+        topic=topic,
     )
     with _progress("detecting") as progress:
         run = run_poses(images_dir, intrinsics_file, output, cfg, progress)

@@ -125,15 +125,19 @@ class VideoFrame:
     Attributes
     ----------
     video : Path
+        The video file (or ROS bag).
     index : int
-        The frame's index in the video, from 0.
+        The frame's index in the video (or on the bag's topic), from 0.
     time_ns : int
-        Its presentation time, integer nanoseconds.
+        Its presentation time (a bag's ``header.stamp``), integer nanoseconds.
+    topic : str, optional
+        A ROS bag's image topic (None for a video).
     """
 
     video: Path
     index: int
     time_ns: int
+    topic: str | None = None
 
     @property
     def name(self) -> str:
@@ -397,10 +401,15 @@ def read_frame_images(refs: Sequence[VideoFrame]) -> list[NDArray[np.uint8]]:
     """The pixels of some frames of one video, in the order of ``refs`` (one decoding pass)."""
     if not refs:
         return []
-    video = refs[0].video
-    by_index = {
-        f.ref.index: f.image for f in read_video_frames(video, only=[r.index for r in refs])
-    }
+    video, topic = refs[0].video, refs[0].topic
+    indices = [r.index for r in refs]
+    if topic is not None:
+        from acs_cli.io.bag import read_bag_frames
+
+        frames = read_bag_frames(video, topic, only=indices)
+    else:
+        frames = read_video_frames(video, only=indices)
+    by_index = {f.ref.index: f.image for f in frames}
     missing = [r.name for r in refs if r.index not in by_index]
     if missing:
         raise InputError(f"cannot decode {', '.join(missing)} again", path=video)

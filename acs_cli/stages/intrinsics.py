@@ -41,6 +41,7 @@ from acs_cli.core.targets import (
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.bag import bag_key, is_bag_path, read_bag_frames
 from acs_cli.io.detections import (
     Detection,
     cache_path_for,
@@ -103,10 +104,19 @@ def ref_path(ref: ImageRef) -> Path:
     return ref.video if isinstance(ref, VideoFrame) else ref
 
 
+def _input_role(fd: FolderDetections) -> str:
+    """The header's name of the input: ``images``, ``video`` or ``bag``."""
+    if fd.frames is None:
+        return "images"
+    return "bag" if "topic" in fd.frames else "video"
+
+
 def input_files(images: Path) -> list[Path]:
     """The input files an output must not overwrite: the folder and its images, or the
     video."""
-    return [images] if is_video_path(images) else [images, *list_images(images)]
+    if is_video_path(images) or is_bag_path(images):
+        return [images]
+    return [images, *list_images(images)]
 
 
 @dataclass(frozen=True)
@@ -141,6 +151,7 @@ class IntrinsicsConfig:
     target: MarkerTarget | None = None
     accept_weak: bool = False
     selection: FrameSelection = field(default_factory=FrameSelection)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -457,6 +468,7 @@ def detect_folder(
     progress: Progress | None = None,
     target: MarkerTarget | None = None,
     selection: FrameSelection = EVERY_FRAME,
+    topic: str | None = None,
 ) -> FolderDetections:
     """Detect the board in every image of a folder (or the kept frames of a video), reusing
     and updating a cache.
@@ -483,6 +495,8 @@ def detect_folder(
         corner seen).
     selection : FrameSelection
         A video's frames to use (``--every``, ``--max-frames``); refused for a folder.
+    topic : str, optional
+        With a ROS bag (``folder``; see :mod:`acs_cli.io.bag`): its image topic.
 
     Returns
     -------
@@ -495,6 +509,13 @@ def detect_folder(
         video, or a video of which no frame decodes.
     """
     selection.check()
+    if is_bag_path(folder) or topic is not None:
+        if not is_bag_path(folder):
+            raise InputError("--topic (topic) applies to ROS bags", path=folder)
+        return _detect_video(
+            folder, cols, rows, cache, extra_caches, workers, progress, target, selection,
+            bag=True, topic=topic,
+        )  # fmt: skip
     if is_video_path(folder):
         return _detect_video(
             folder, cols, rows, cache, extra_caches, workers, progress, target, selection
@@ -605,17 +626,22 @@ def _detect_video(
     progress: Progress | None,
     target: MarkerTarget | None,
     selection: FrameSelection,
+    *,
+    bag: bool = False,
+    topic: str | None = None,
 ) -> FolderDetections:
-    """:func:`detect_folder` for a video: frames decoded one by one in this process and
-    detected here or in a pool (at most :data:`FRAMES_IN_FLIGHT` per worker at a time).
+    """:func:`detect_folder` for a video (or a ROS bag's ``topic``): frames decoded one by
+    one in this process and detected here or in a pool (at most :data:`FRAMES_IN_FLIGHT`
+    per worker at a time).
 
-    Cache keys are the video's SHA-256 with the frame's index and presentation time."""
+    Cache keys are the video's SHA-256 (a bag's, with the topic) with the frame's index and
+    presentation time."""
     known: dict[str, Detection] = {}
     for extra in extra_caches:
         known.update(read_detections(extra))
     own = read_detections(cache)
     known.update(own)
-    sha = video_sha256(video)
+    sha = video_sha256(video) if not bag else f"{bag_key(video)}/{topic}"
     report = VideoRead()
     refs: list[VideoFrame] = []
     found: dict[int, Detection] = {}
@@ -642,7 +668,11 @@ def _detect_video(
     def frame_key(ref: VideoFrame) -> str:
         return f"{sha}#{ref.index}@{ref.time_ns}"
 
-    frames = read_video_frames(video, selection, report)
+    frames = (
+        read_bag_frames(video, topic, selection, report)
+        if bag
+        else read_video_frames(video, selection, report)
+    )
     first = next(frames)  # counts the frames first when max_frames is given
     if report.count is not None and selection.max_frames is not None:
         total = len(selection.indices(report.count) or ())
@@ -711,13 +741,15 @@ def _detect_video(
     notes = [*report.notes]
     if not selection.trivial:
         notes.insert(0, f"video: used {kept} ({selection.describe()})")
-    frames_info = {
+    frames_info: dict[str, Any] = {
         "decoded": report.decoded,
         "kept": len(refs),
         "every": selection.every,
         "max_frames": selection.max_frames,
-        "times": "presentation timestamps (pts * time_base), seconds",
+        "times": "header.stamp" if bag else "presentation timestamps (pts * time_base), seconds",
     }
+    if bag:
+        frames_info["topic"] = topic
     return FolderDetections(
         refs,
         dets,
@@ -791,6 +823,7 @@ def run_intrinsics(
         progress=progress,
         target=target,
         selection=config.selection,
+        topic=config.topic,
     )
     board_note = None
     if target is None:
@@ -841,7 +874,7 @@ def run_intrinsics(
     calibrator = "cv2.fisheye.calibrate" if config.model == "fisheye" else "calibrateCameraExtended"
     header = make_header(
         "intrinsics",
-        {"video" if fd.frames is not None else "images": images_dir},
+        {_input_role(fd): images_dir},
         method=f"OpenCV {calibrator} "
         f"({config.model} model) on {DETECTOR_VERSION} corners (coarse findChessboardCorners, "
         "cornerSubPix sized to the squares, X-junction fit); views with RMS above "

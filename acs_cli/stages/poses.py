@@ -37,6 +37,7 @@ from acs_cli.core.targets import MIN_POSE_CORNERS, Checkerboard, MarkerTarget, p
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.atomic import atomic_write_bytes, check_distinct_output, check_writable
+from acs_cli.io.bag import is_bag_path
 from acs_cli.io.detections import cache_path_for
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
@@ -53,6 +54,7 @@ from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
 from acs_cli.io.video import FrameSelection, VideoRead, is_video_path, read_video_frames
 from acs_cli.stages.intrinsics import (
     TARGET_FRAMES,
+    _input_role,
     detect_folder,
     few_boards,
     input_files,
@@ -107,6 +109,7 @@ class PosesConfig:
     fps: float | None = None
     target: MarkerTarget | None = None
     selection: FrameSelection = field(default_factory=FrameSelection)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -198,15 +201,16 @@ def _poses_target(
     return None if isinstance(target, Checkerboard) else target
 
 
-def video_times(ns: list[int]) -> ImageTimes:
-    """The times of a video's frames: their presentation timestamps (integer ns)."""
-    return times_from_ns(ns, VIDEO_TIMES)
+def video_times(ns: list[int], bag: bool = False) -> ImageTimes:
+    """The times of a video's frames: their presentation timestamps (integer ns); of a
+    bag's images (``bag``): their ``header.stamp``."""
+    return times_from_ns(ns, "the images' header.stamp (ROS bag)" if bag else VIDEO_TIMES)
 
 
 def _video_times_check(images: Path, config: _TimeOptions) -> bool:
     """True for a video input; :class:`InputError` when ``--timestamps``/``--fps`` are
     given for one (its frames carry their own times)."""
-    if not is_video_path(images):
+    if not (is_video_path(images) or is_bag_path(images)):
         return False
     given = [
         k for k, v in (("--timestamps", config.timestamps), ("--fps", config.fps)) if v is not None
@@ -261,7 +265,7 @@ def run_poses(
             raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
         if not (np.isfinite(square) and square > 0):
             raise InputError(f"--square must be a positive length in metres, got {square}")
-    video = _video_times_check(images_dir, config)
+    _video_times_check(images_dir, config)
     config.selection.check()
     outputs = [output] + ([config.tum] if config.tum is not None else [])
     inputs = [intrinsics, *input_files(images_dir)]
@@ -282,6 +286,7 @@ def run_poses(
         progress=progress,
         target=target,
         selection=config.selection,
+        topic=config.topic,
     )
     if fd.image_size != cam.image_size:
         raise InputError(
@@ -324,7 +329,7 @@ def run_poses(
         raise no_board_error(images_dir, cols, rows, len(fd.images))
     if fd.times_ns is not None:
         by_name = dict(zip(all_names, fd.times_ns, strict=True))
-        times = video_times([by_name[n] for n in names])
+        times = video_times([by_name[n] for n in names], bag=config.topic is not None)
     else:
         times = _image_times(names, all_names, stamps, config)
     t = times.seconds
@@ -350,7 +355,7 @@ def run_poses(
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     header = make_header(
         "poses",
-        {"video" if video else "images": images_dir, "intrinsics": intrinsics},
+        {_input_role(fd): images_dir, "intrinsics": intrinsics},
         method="cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on "
         f"{cols}x{rows} board corners; T_world_cam = inverse of T_cam_board",
         units={"length": "m", "reprojection_rms": "px"},

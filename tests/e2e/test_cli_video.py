@@ -178,3 +178,39 @@ def test_sfm_poses_from_a_video(tmp_path: Path) -> None:
     np.testing.assert_allclose(art.trajectory.timestamps, [want[n] for n in names], atol=1e-9)
     assert art.header["video"]["kept"] == 12
     assert sorted(p.name for p in video.parent.iterdir()) == ["walk.mkv"]
+
+
+def test_intrinsics_and_poses_from_a_ros_bag(recording: dict, tmp_path: Path) -> None:
+    import cv2
+
+    from sample_data_gen.bag import write_bag
+
+    pngs = sorted(Path(recording["folder"]).glob("*.png"))
+    stamps = [1_700_000_000_000_000_007 + k * 66_666_667 for k in range(len(pngs))]
+    frames = (cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in pngs)
+    bag = write_bag(tmp_path / "rec.bag", "/cam_a/image_raw", frames, stamps, encoding="bgr8")
+    intr = tmp_path / "intrinsics.yaml"
+    res = acscal("intrinsics", bag, "--topic", "/cam_a/image_raw", "--board", "9x6", "-o", intr)
+    assert res.returncode == 0, res.stderr
+    ref = yaml.safe_load(Path(recording["intr"]).read_text())
+    doc = yaml.safe_load(intr.read_text())
+    np.testing.assert_allclose(doc["camera_matrix"], ref["camera_matrix"], rtol=1e-9)
+    assert doc["video"]["topic"] == "/cam_a/image_raw" and "bag" in doc["inputs"]
+    npz, tum = tmp_path / "poses.npz", tmp_path / "poses.txt"
+    res = acscal(
+        "poses", bag, "--topic", "/cam_a/image_raw", "--intrinsics", intr, "-o", npz, "--tum", tum
+    )
+    assert res.returncode == 0, res.stderr
+    assert f"{FRAMES} detections from a cache" in res.stdout  # the intrinsics' detections
+    art = PosesArtifact.load(npz)
+    names = art.trajectory.names
+    assert names is not None
+    want = {f"frame_{i:06d}": t for i, t in enumerate(stamps)}
+    assert list(art.trajectory.timestamps_ns) == [want[n] for n in names]  # to the ns
+    first = next(ln for ln in tum.read_text().splitlines() if not ln.startswith("#"))
+    assert first.split()[0] == f"{want[names[0]] // 10**9}.{want[names[0]] % 10**9:09d}"
+    bad = acscal("poses", bag, "--intrinsics", intr, "-o", tmp_path / "x.npz")
+    assert bad.returncode == 2
+    says = "a ROS bag needs --topic (its image topics: /cam_a/image_raw)"
+    assert bad.stderr.strip().endswith(says) and len(bad.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.npz").exists()
