@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from acs_cli.errors import InputError
 from acs_cli.io.video import EVERY_FRAME, DecodedFrame, FrameSelection, VideoFrame, VideoRead
 
-__all__ = ["IMAGE_TYPES", "bag_key", "is_bag_path", "read_bag_frames"]
+__all__ = ["IMAGE_TYPES", "bag_key", "is_bag_path", "read_bag_frames", "read_bag_images"]
 
 #: The message types read as images.
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -185,3 +185,16 @@ def read_bag_frames(
             f"{repeated} image(s) skipped: their header.stamp does not increase past the "
             "previous kept image's"
         )
+
+
+def read_bag_images(refs: Sequence[VideoFrame]) -> list[NDArray[np.uint8]]:
+    """The pixels of some images of one bag's topic, in the order of ``refs`` (one pass)."""
+    if not refs:
+        return []
+    bag, topic = refs[0].video, refs[0].topic
+    frames = read_bag_frames(bag, topic, only=[r.index for r in refs])
+    by_index = {f.ref.index: f.image for f in frames}
+    missing = [r.name for r in refs if r.index not in by_index]
+    if missing:
+        raise InputError(f"cannot read {', '.join(missing)} again", path=bag)
+    return [by_index[r.index] for r in refs]

@@ -401,15 +401,10 @@ def read_frame_images(refs: Sequence[VideoFrame]) -> list[NDArray[np.uint8]]:
     """The pixels of some frames of one video, in the order of ``refs`` (one decoding pass)."""
     if not refs:
         return []
-    video, topic = refs[0].video, refs[0].topic
-    indices = [r.index for r in refs]
-    if topic is not None:
-        from acs_cli.io.bag import read_bag_frames
-
-        frames = read_bag_frames(video, topic, only=indices)
-    else:
-        frames = read_video_frames(video, only=indices)
-    by_index = {f.ref.index: f.image for f in frames}
+    video = refs[0].video
+    by_index = {
+        f.ref.index: f.image for f in read_video_frames(video, only=[r.index for r in refs])
+    }
     missing = [r.name for r in refs if r.index not in by_index]
     if missing:
         raise InputError(f"cannot decode {', '.join(missing)} again", path=video)

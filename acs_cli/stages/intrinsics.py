@@ -41,7 +41,7 @@ from acs_cli.core.targets import (
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
-from acs_cli.io.bag import bag_key, is_bag_path, read_bag_frames
+from acs_cli.io.bag import bag_key, is_bag_path, read_bag_frames, read_bag_images
 from acs_cli.io.detections import (
     Detection,
     cache_path_for,
@@ -95,7 +95,8 @@ ImageRef = Path | VideoFrame
 def read_images(refs: Sequence[ImageRef]) -> list[np.ndarray]:
     """The greyscale pixels of some images of one input (a video's frames in one pass)."""
     frames = [r for r in refs if isinstance(r, VideoFrame)]
-    decoded = dict(zip([f.index for f in frames], read_frame_images(frames), strict=True))
+    read = read_bag_images if frames and frames[0].topic is not None else read_frame_images
+    decoded = dict(zip([f.index for f in frames], read(frames), strict=True))
     return [decoded[r.index] if isinstance(r, VideoFrame) else read_gray(r)[0] for r in refs]
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from acs_cli.errors import InputError
-from acs_cli.io.bag import is_bag_path, read_bag_frames
-from acs_cli.io.video import FrameSelection, VideoFrame, VideoRead, read_frame_images
+from acs_cli.io.bag import is_bag_path, read_bag_frames, read_bag_images
+from acs_cli.io.video import FrameSelection, VideoFrame, VideoRead
 from sample_data_gen.bag import write_bag
 
 TOPIC = "/cam/image_raw"
@@ -51,7 +51,7 @@ def test_selection_and_frames_read_again(tmp_path: Path) -> None:
     report = VideoRead()
     kept = list(read_bag_frames(bag, TOPIC, FrameSelection(2, 2), report))
     assert [f.ref.index for f in kept] == [0, 4] and report.count == len(TIMES)
-    again = read_frame_images([VideoFrame(bag, 3, 0, TOPIC)])
+    again = read_bag_images([VideoFrame(bag, 3, 0, TOPIC)])
     np.testing.assert_array_equal(again[0], _frames()[3])
 
 
