@@ -8,7 +8,7 @@ each message's ``header.stamp`` is the given time in integer nanoseconds.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["write_bag"]
+__all__ = ["write_bag", "write_bag_topics"]
 
 
 def _message(types: Any, img: NDArray[np.uint8], t_ns: int, encoding: str) -> Any:
@@ -77,12 +77,26 @@ def write_bag(
     -------
     Path
     """
+    return write_bag_topics(
+        path, {topic: (frames, times_ns)}, encoding, mcap=mcap, extra_topics=extra_topics
+    )
+
+
+def write_bag_topics(
+    path: str | Path,
+    topics: Mapping[str, tuple[Iterable[NDArray[np.uint8]], Sequence[int]]],
+    encoding: str = "mono8",
+    mcap: bool = False,
+    extra_topics: Sequence[str] = (),
+) -> Path:
+    """:func:`write_bag` with several image topics: ``{topic: (frames, times_ns)}``."""
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
     types = store.types
     kind = "sensor_msgs/msg/CompressedImage" if encoding == "png" else "sensor_msgs/msg/Image"
     p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
     ros1 = p.suffix == ".bag"
     if ros1:
         from rosbags.rosbag1 import Writer as Writer1
@@ -95,12 +109,16 @@ def write_bag(
         plugin = StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3
         writer = Writer2(p, version=8, storage_plugin=plugin)
     serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
+    first = 0
     with writer:
-        conn = writer.add_connection(topic, kind, typestore=store)
-        for img, t in zip(frames, times_ns, strict=False):
-            writer.write(conn, int(t), serialize(_message(types, img, int(t), encoding), kind))
+        for topic, (frames, times_ns) in topics.items():
+            conn = writer.add_connection(topic, kind, typestore=store)
+            first = int(times_ns[0])
+            for img, t in zip(frames, times_ns, strict=False):
+                msg = _message(types, img, int(t), encoding)
+                writer.write(conn, int(t), serialize(msg, kind))
         for other in extra_topics:
             c = writer.add_connection(other, "std_msgs/msg/String", typestore=store)
             text = types["std_msgs/msg/String"](data="not an image")
-            writer.write(c, int(times_ns[0]), serialize(text, "std_msgs/msg/String"))
+            writer.write(c, first, serialize(text, "std_msgs/msg/String"))
     return p

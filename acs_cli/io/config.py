@@ -121,6 +121,8 @@ class CameraSpec:
     #: holds the video file
     every: int = 1
     max_frames: int | None = None
+    #: with ``bag``: the image topic (``images`` then holds the bag)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -191,6 +193,8 @@ class RigCameraSpec:
     #: holds the video file
     every: int = 1
     max_frames: int | None = None
+    #: with ``bag``: the image topic (``images`` then holds the bag)
+    topic: str | None = None
     #: with ``poses``: the file holds ``T_cam_world`` (a robot's ``T_flange_base``): inverted
     #: on reading
     invert: bool = False
@@ -391,10 +395,16 @@ class RunCamera(Section):
     video: ConfigPath | None = Field(
         default=None, description="instead of images: a video file of the joint motion"
     )
-    every: Frames | None = Field(default=None, description="with video: use every n-th frame")
-    max_frames: Frames | None = Field(
-        default=None, description="with video: at most this many frames, spread evenly"
+    every: Frames | None = Field(
+        default=None, description="with video or bag: use every n-th frame"
     )
+    max_frames: Frames | None = Field(
+        default=None, description="with video or bag: at most this many frames, spread evenly"
+    )
+    bag: ConfigPath | None = Field(
+        default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
+    )
+    topic: Name | None = Field(default=None, description="with bag: the image topic")
     model: LensModel = "pinhole"
     timestamps: ConfigPath | None = Field(default=None, description="image times (a CSV file)")
     fps: Positive | None = Field(default=None, description="image times from a frame rate")
@@ -471,10 +481,16 @@ class RigCamera(Section):
     format: TrajectoryFormat = "auto"
     images: ConfigPath | None = Field(default=None, description="instead of poses: an image folder")
     video: ConfigPath | None = Field(default=None, description="instead of poses: a video file")
-    every: Frames | None = Field(default=None, description="with video: use every n-th frame")
-    max_frames: Frames | None = Field(
-        default=None, description="with video: at most this many frames, spread evenly"
+    every: Frames | None = Field(
+        default=None, description="with video or bag: use every n-th frame"
     )
+    max_frames: Frames | None = Field(
+        default=None, description="with video or bag: at most this many frames, spread evenly"
+    )
+    bag: ConfigPath | None = Field(
+        default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
+    )
+    topic: Name | None = Field(default=None, description="with bag: the image topic")
     model: LensModel = "pinhole"
     scale: Scale | None = Field(default=None, description="default known (unknown with sfm)")
     front_end: FrontEnd = "board"
@@ -690,21 +706,34 @@ def _camera_times(cam: RunCamera | RigCamera, key: str, path: Path) -> None:
         raise _fail(path, key, "give either 'timestamps' or 'fps', not both")
 
 
+def _frames_path(cam: RunCamera | RigCamera) -> str | None:
+    """The camera's images, video or bag (one at most is given)."""
+    return cam.video or cam.bag or cam.images
+
+
 def _camera_video(cam: RunCamera | RigCamera, key: str, path: Path) -> None:
-    """``video`` excludes ``images``, and a video's frames carry their times; ``every`` and
-    ``max_frames`` go with ``video``."""
-    if cam.given("video") and cam.given("images"):
-        raise _fail(path, key, "give either 'images' (a folder) or 'video' (a file), not both")
-    if cam.given("video"):
+    """``images``, ``video`` and ``bag`` exclude each other; a video's or bag's frames carry
+    their times; ``every`` and ``max_frames`` go with ``video`` or ``bag``, ``topic`` with
+    ``bag`` (which needs it)."""
+    given = [k for k in ("images", "video", "bag") if cam.given(k)]
+    if len(given) > 1:
+        raise _fail(path, key, f"give one of {' and '.join(repr(k) for k in given)}, not both")
+    if cam.given("video") or cam.given("bag"):
         for k in ("timestamps", "fps"):
             if cam.given(k):
                 raise _fail(
                     path,
                     f"{key}.{k}",
-                    "goes with 'images': a video's frames carry their own times",
+                    "goes with 'images': a video's or bag's frames carry their own times",
                 )
     elif any(cam.given(k) for k in _VIDEO_KEYS):
-        raise _fail(path, key, f"{', '.join(repr(k) for k in _VIDEO_KEYS)} go with 'video'")
+        raise _fail(
+            path, key, f"{', '.join(repr(k) for k in _VIDEO_KEYS)} go with 'video' or 'bag'"
+        )
+    if cam.given("bag") and not cam.given("topic"):
+        raise _fail(path, f"{key}.topic", "missing (a bag needs its image topic)")
+    if cam.given("topic") and not cam.given("bag"):
+        raise _fail(path, f"{key}.topic", "goes with 'bag' (a ROS bag)")
 
 
 def _unknown_keys(keys: Iterable[str], known: Iterable[str], key: str, path: Path) -> None:
@@ -783,12 +812,13 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
         _camera_video(cam, f"cameras.{name}", path)
         cameras[name] = CameraSpec(
             name,
-            _opt_path(cam.video if cam.given("video") else cam.images, path),
+            _opt_path(_frames_path(cam), path),
             cam.model,
             _opt_path(cam.timestamps, path),
             cam.fps,
             every=cam.every or 1,
             max_frames=cam.max_frames,
+            topic=cam.topic,
         )
 
     intrinsics_from: dict[str, Path] | None = None
@@ -994,19 +1024,23 @@ def _camera_specs(
     for name, entry in doc.items():
         key = f"{where}.{name}"
         cam = entry or RigCamera()
-        if [cam.given("poses"), cam.given("images"), cam.given("video")].count(True) != 1:
+        if [cam.given(k) for k in ("poses", "images", "video", "bag")].count(True) != 1:
             raise _fail(
                 path,
                 key,
-                "give one of 'poses' (a trajectory file), 'images' (a folder) or 'video' "
-                "(a video file)",
+                "give one of 'poses' (a trajectory file), 'images' (a folder), 'video' "
+                "(a video file) or 'bag' (a ROS bag)",
             )
-        if not (cam.given("images") or cam.given("video")) and any(
+        if not (cam.given("images") or cam.given("video") or cam.given("bag")) and any(
             cam.given(k) for k in _IMAGE_KEYS
         ):
             raise _fail(
-                path, key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images' or 'video'"
+                path,
+                key,
+                f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images', 'video' or 'bag'",
             )
+        if cam.given("bag") and cam.front_end == "sfm":
+            raise _fail(path, f"{key}.front_end", "sfm does not read ROS bags yet (use board)")
         _camera_times(cam, key, path)
         _camera_video(cam, key, path)
         if cam.invert and not cam.given("poses"):
@@ -1026,7 +1060,7 @@ def _camera_specs(
             name=name,
             poses=_opt_path(cam.poses, path),
             format=cam.format,
-            images=_opt_path(cam.video if cam.given("video") else cam.images, path),
+            images=_opt_path(_frames_path(cam), path),
             model=cam.model,
             unknown_scale=scale == "unknown",
             front_end=cam.front_end,
@@ -1035,6 +1069,7 @@ def _camera_specs(
             fps=cam.fps,
             every=cam.every or 1,
             max_frames=cam.max_frames,
+            topic=cam.topic,
             invert=cam.invert,
         )
     return cameras

@@ -32,6 +32,7 @@ import acs_cli
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
+from acs_cli.io.bag import is_bag_path
 from acs_cli.io.config import (
     CONFIG_SCHEMA,
     CameraSpec,
@@ -273,6 +274,7 @@ def _poses_stage(
     times: tuple[Path | None, float | None] = (None, None),
     target: MarkerTarget | None = None,
     selection: FrameSelection = EVERY_FRAME,
+    topic: str | None = None,
 ) -> _Stage:
     """The poses stage of one camera's image folder or video (``npz`` and the TUM file
     beside it), on the board, or on ``target`` when given (``selection``: a video's
@@ -291,6 +293,7 @@ def _poses_stage(
         fps=times[1],
         target=target,
         selection=selection,
+        topic=topic,
     )
 
     def do_poses(_read: Mapping[str, PosesArtifact]) -> list[str]:
@@ -302,7 +305,7 @@ def _poses_stage(
     options: dict[str, Any] = _target_options(board, target)
     if times[1] is not None:
         options["fps"] = times[1]
-    options |= _selection_options(selection)
+    options |= _selection_options(selection) | ({"topic": topic} if topic else {})
     return _Stage(stage, "poses", inputs, options, [npz, tum], do_poses)
 
 
@@ -350,7 +353,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             folders["general"] = rel.images[name]
         intr_out = cam_dir / "intrinsics.yaml"
         intrinsics[name] = intr_out
-        selection = _selection(cam) if list(folders) == ["joint"] else EVERY_FRAME
+        joint_only = list(folders) == ["joint"]
+        selection = _selection(cam) if joint_only else EVERY_FRAME
         icfg = IntrinsicsConfig(
             cols=config.cols,
             rows=config.rows,
@@ -360,6 +364,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             target=config.target,
             accept_weak=config.accept_weak,
             selection=selection,
+            topic=cam.topic if joint_only else None,
         )
 
         def do_intrinsics(
@@ -371,11 +376,11 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         ) -> list[str]:
             if len(folders) == 1:
                 images = next(iter(folders.values()))
-            elif any(is_video_path(f) for f in folders.values()):
+            elif any(is_video_path(f) or is_bag_path(f) for f in folders.values()):
                 raise InputError(
-                    f"camera {cam_dir.name}'s intrinsics would pool a video with other "
+                    f"camera {cam_dir.name}'s intrinsics would pool a video or bag with other "
                     "images; set 'intrinsics: {from: joint}' (or give intrinsics_from)",
-                    path=next(f for f in folders.values() if is_video_path(f)),
+                    path=next(f for f in folders.values() if is_video_path(f) or is_bag_path(f)),
                 )
             else:
                 images = _link_images(folders, cam_dir / "intrinsics_images")
@@ -392,6 +397,7 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "images_from": sorted(folders),
                     "accept_weak": config.accept_weak,
                     **_selection_options(selection),
+                    **({"topic": cam.topic} if joint_only and cam.topic else {}),
                 },
                 [intr_out],
                 do_intrinsics,
@@ -399,7 +405,12 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         )
 
     def poses_stage(
-        name: str, images: Path, stem: str, label: str, selection: FrameSelection
+        name: str,
+        images: Path,
+        stem: str,
+        label: str,
+        selection: FrameSelection,
+        topic: str | None = None,
     ) -> Path:
         npz = out / f"cam_{name}" / f"{stem}.npz"
         stages.append(
@@ -413,13 +424,16 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 (config.cameras[name].timestamps, config.cameras[name].fps),
                 config.target,
                 selection,
+                topic,
             )
         )
         return npz
 
     for name, cam in config.cameras.items():
         if config.joint is not None and cam.images is not None:
-            poses[name] = poses_stage(name, cam.images, "poses", "poses", _selection(cam))
+            poses[name] = poses_stage(
+                name, cam.images, "poses", "poses", _selection(cam), cam.topic
+            )
         if rel is not None:
             general[name] = poses_stage(
                 name, rel.images[name], "poses_general", "poses general", EVERY_FRAME
@@ -636,6 +650,7 @@ def _plan_rig_camera(
         target=config.target,
         accept_weak=config.accept_weak,
         selection=_selection(cam),
+        topic=cam.topic,
     )
     images = cam.images
 
@@ -657,6 +672,7 @@ def _plan_rig_camera(
                 "model": cam.model,
                 "accept_weak": config.accept_weak,
                 **_selection_options(_selection(cam)),
+                **({"topic": cam.topic} if cam.topic else {}),
             },
             [intr_out],
             do_intrinsics,
@@ -674,6 +690,7 @@ def _plan_rig_camera(
             (cam.timestamps, cam.fps),
             config.target,
             _selection(cam),
+            cam.topic,
         )
     )
     poses[name] = npz

@@ -214,3 +214,45 @@ def test_intrinsics_and_poses_from_a_ros_bag(recording: dict, tmp_path: Path) ->
     says = "a ROS bag needs --topic (its image topics: /cam_a/image_raw)"
     assert bad.stderr.strip().endswith(says) and len(bad.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.npz").exists()
+
+
+BAG_CONFIG = """\
+schema: acscal/run-config
+schema_version: 1
+output: out
+board: {cols: 9, rows: 6, square: 0.025}
+cameras:
+  a: {bag: rig.bag, topic: /cam_a/image_raw}
+  b: {bag: rig.bag, topic: /cam_b/image_raw, max_frames: 12}
+joint: {scenario: fixed_joint}
+"""
+
+
+def test_run_config_points_two_cameras_at_one_bag(tmp_path: Path) -> None:
+    import cv2
+
+    from sample_data_gen.bag import write_bag_topics
+
+    scene = render_scenario(tmp_path / "render", "fixed_joint", seed=0, frames=12, size=(640, 480))
+    stamps = [1_600_000_000_000_000_000 + k * 50_000_001 for k in range(12)]
+    topics = {
+        f"/{cam}/image_raw": (
+            [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted((scene / cam).glob("*.png"))],
+            stamps,
+        )
+        for cam in ("cam_a", "cam_b")
+    }
+    write_bag_topics(tmp_path / "cfg" / "rig.bag", topics)
+    config = tmp_path / "cfg" / "run.yaml"
+    config.write_text(BAG_CONFIG, encoding="utf-8")
+    res = acscal("run", config)
+    assert res.returncode == 0, res.stderr
+    run = tmp_path / "cfg" / "out"
+    assert (run / "joint.yaml").is_file()
+    for cam in ("cam_a", "cam_b"):
+        art = PosesArtifact.load(run / cam / "poses.npz")
+        names = art.trajectory.names
+        assert names is not None
+        want = [stamps[int(n.removeprefix("frame_"))] for n in names]
+        assert list(art.trajectory.timestamps_ns) == want
+        assert "header.stamp" in art.header["timestamps_from"]
