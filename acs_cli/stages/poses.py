@@ -684,6 +684,8 @@ def run_sfm_poses(
     if config.refine_intrinsics and intrinsics is None:
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
     stamps = _time_source(config)
+    if is_bag_path(images_dir):
+        raise InputError("--sfm does not read ROS bags yet (board poses do)", path=images_dir)
     video = _video_times_check(images_dir, config)
     config.selection.check()
     if not video and not config.selection.trivial:

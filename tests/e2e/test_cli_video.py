@@ -256,3 +256,14 @@ def test_run_config_points_two_cameras_at_one_bag(tmp_path: Path) -> None:
         want = [stamps[int(n.removeprefix("frame_"))] for n in names]
         assert list(art.trajectory.timestamps_ns) == want
         assert "header.stamp" in art.header["timestamps_from"]
+
+
+def test_sfm_refuses_a_bag_in_one_line(tmp_path: Path) -> None:
+    from sample_data_gen.bag import write_bag
+
+    frame = np.zeros((24, 32), np.uint8)
+    bag = write_bag(tmp_path / "r.bag", "/cam/image_raw", [frame, frame], [1, 2])
+    res = acscal("poses", bag, "--sfm", "-o", tmp_path / "p.npz")
+    assert res.returncode == 2
+    assert res.stderr.strip().endswith("--sfm does not read ROS bags yet (board poses do)")
+    assert not (tmp_path / "p.npz").exists()
