@@ -6,6 +6,9 @@ Without ``--scenario`` all three scenarios are written (``OUT/overlap``,
 configuration is ``--size 1024x768 --frames 20 --board-distance 0.75 --joint-distance 0.25``.
 ``--target aprilgrid`` (or ``charuco``, or any ``acscal --target`` value: a short form or a
 target YAML) films that target instead of the checkerboard, and writes ``target.yaml``.
+``--video mkv`` (or ``avi``, ``mp4``) also writes each camera's images as a video,
+``<scenario>/cam_a.mkv``, at ``--video-fps`` frames per second (see
+:mod:`sample_data_gen.video`).
 """
 
 from __future__ import annotations
@@ -96,6 +99,16 @@ def _parser() -> argparse.ArgumentParser:
         "charuco (7x5 squares of 0.035 m) or an acscal --target value (aprilgrid:4x3:0.045:0.3, "
         "a target YAML); writes target.yaml beside truth.yaml",
     )
+    p.add_argument(
+        "--video",
+        choices=("mkv", "avi", "mp4"),
+        default=None,
+        help="also write each camera's images as <scenario>/cam_<x>.<suffix>: FFV1 (mkv, "
+        "lossless), MJPEG (avi) or H.264 (mp4)",
+    )
+    p.add_argument(
+        "--video-fps", type=float, default=10.0, metavar="FPS", help="the videos' frame rate"
+    )
     return p
 
 
@@ -128,6 +141,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (ValueError, RuntimeError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        if args.video is not None:
+            from sample_data_gen.video import folder_to_video
+
+            for cam in ("cam_a", "cam_b"):
+                folder_to_video(path / cam, path / f"{cam}.{args.video}", fps=args.video_fps)
         print(f"{sc}: {path} ({time.perf_counter() - t0:.1f} s)")
     return 0
 

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from rich.progress import Progress
 
     from acs_cli.core.targets import MarkerTarget
+    from acs_cli.io.video import FrameSelection
     from acs_cli.stages.poses import PosesRun, SfmPosesRun
 
 __all__ = ["intrinsics", "parse_board", "poses", "register"]
@@ -103,6 +104,40 @@ SquareOpt = Annotated[
     float | None,
     typer.Option("--square", help="Side of a board square, metres. (default: 0.025)", min=0.0),
 ]
+EveryOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--every",
+        min=1,
+        help="Video input: use every n-th frame (frames 0, n, 2n, ...). (default: 1)",
+    ),
+]
+MaxFramesOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--max-frames",
+        min=1,
+        help="Video input: use at most this many frames, spread evenly over the recording "
+        "(after --every).",
+    ),
+]
+
+
+def frame_selection(every: int | None, max_frames: int | None) -> FrameSelection:
+    """``--every`` and ``--max-frames`` as a :class:`FrameSelection`."""
+    from acs_cli.io.video import FrameSelection
+
+    return FrameSelection(1 if every is None else every, max_frames)
+
+
+TopicOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--topic",
+        help="ROS bag input (ROS 1 .bag, ROS 2 bag folder): the image topic "
+        "(sensor_msgs/Image or CompressedImage); times are header.stamp.",
+    ),
+]
 TargetOpt = Annotated[
     str | None,
     typer.Option(
@@ -152,7 +187,12 @@ WorkersOpt = Annotated[
 
 
 def intrinsics(
-    images_dir: Annotated[Path, typer.Argument(help="Folder of checkerboard images.")],
+    images_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="Folder of checkerboard images, or a video file (.mp4, .mkv, .mov, .avi, ...)."
+        ),
+    ],
     output: Annotated[Path, typer.Option("-o", "--output", help="intrinsics.yaml to write.")],
     board: BoardOpt = None,
     square: SquareOpt = None,
@@ -182,6 +222,9 @@ def intrinsics(
         ),
     ] = "camera",
     workers: WorkersOpt = None,
+    every: EveryOpt = None,
+    max_frames: MaxFramesOpt = None,
+    topic: TopicOpt = None,
     accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -200,6 +243,8 @@ def intrinsics(
         acscal intrinsics images/cam_a --target april_6x6.yaml -o cam_a/intrinsics.yaml
 
         acscal intrinsics images/left -o left/intrinsics.yaml --export ros,opencv --camera-name left
+
+        acscal intrinsics board.mp4 --board 9x6 --max-frames 60 -o cam_a/intrinsics.yaml
     """
     from acs_cli.stages.export import parse_list_option
     from acs_cli.stages.intrinsics import EXPORTS, IntrinsicsConfig, run_intrinsics
@@ -216,6 +261,8 @@ def intrinsics(
         workers=workers,
         target=tgt,
         accept_weak=accept_weak,
+        selection=frame_selection(every, max_frames),
+        topic=topic,
     )
     with _progress("detecting") as progress:
         run = run_intrinsics(images_dir, output, cfg, progress)
@@ -266,7 +313,11 @@ def _phase_progress() -> Iterator[Callable[[str, int, int], None]]:
 
 def poses(
     images_dir: Annotated[
-        Path, typer.Argument(help="Folder of checkerboard images (or of any images with --sfm).")
+        Path,
+        typer.Argument(
+            help="Folder of checkerboard images (or of any images with --sfm), or a video "
+            "file (.mp4, .mkv, .mov, .avi, ...)."
+        ),
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="poses.npz to write.")],
     intrinsics_file: Annotated[
@@ -378,6 +429,9 @@ def poses(
             "seconds. Without it (or --timestamps) such times stay frame numbers.",
         ),
     ] = None,
+    every: EveryOpt = None,
+    max_frames: MaxFramesOpt = None,
+    topic: TopicOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Each image's camera pose, as a trajectory: on a board, or markerless (--sfm).
@@ -387,7 +441,9 @@ def poses(
 
     Times come from the file names: a decimal number is seconds, an integer of 18 or more
     digits nanoseconds (ROS, EuRoC), of 9-17 digits seconds, ms or us of Unix time, and a
-    shorter integer a frame number (give --fps, or --timestamps FILE).
+    shorter integer a frame number (give --fps, or --timestamps FILE). A video file's frames
+    are timed by their presentation timestamps and named frame_000123 by index; --every and
+    --max-frames select among them.
 
     With --sfm, incremental structure from motion (COLMAP) poses the registered images:
     world = the first registered camera, translations in SfM units (unknown scale: for
@@ -398,10 +454,12 @@ def poses(
         acscal poses images/cam_a --intrinsics cam_a/intrinsics.yaml --board 9x6 \\
             --square 0.025 -o cam_a/poses.npz --tum cam_a/poses.txt
 
-        acscal poses video_frames/cam_a --sfm --intrinsics cam_a/intrinsics.yaml \\
+        acscal poses walk.mp4 --sfm --intrinsics cam_a/intrinsics.yaml --max-frames 200 \\
             -o cam_a/poses.npz --tum cam_a/poses.txt
     """
     if sfm:
+        if topic is not None:
+            raise InputError("--sfm does not read ROS bags yet; --topic applies to board poses")
         if target is not None:
             raise InputError(
                 "--target describes a calibration target, which --sfm does not use; leave it out"
@@ -423,6 +481,7 @@ def poses(
             workdir=workdir,
             timestamps=timestamps,
             fps=fps,
+            selection=frame_selection(every, max_frames),
         )
         return
     from acs_cli.stages.poses import PosesConfig, run_poses
@@ -454,6 +513,8 @@ def poses(
         workers=workers,
         timestamps=timestamps,
         fps=fps,
+        selection=frame_selection(every, max_frames),
+        topic=topic,
     )
     with _progress("detecting") as progress:
         run = run_poses(images_dir, intrinsics_file, output, cfg, progress)
@@ -528,6 +589,7 @@ def _sfm_poses(
     workdir: Path | None,
     timestamps: Path | None,
     fps: float | None,
+    selection: FrameSelection,
 ) -> None:
     """``acscal poses --sfm``: the markerless front end."""
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
@@ -550,6 +612,7 @@ def _sfm_poses(
         workdir=workdir,
         timestamps=timestamps,
         fps=fps,
+        selection=selection,
     )
     with _phase_progress() as progress:
         run = run_sfm_poses(images_dir, intrinsics_file, output, cfg, progress)

@@ -94,6 +94,8 @@ DEFAULT_RECORDING = "default"
 WORLDS = ("separate", "shared")
 #: Camera keys that only apply to a camera given as an image folder.
 _IMAGE_KEYS = ("front_end", "intrinsics", "timestamps", "fps")
+#: Keys of a camera entry that go with ``video`` (frame selection, see acs_cli.io.video).
+_VIDEO_KEYS = ("every", "max_frames")
 #: Settings of a body that every recording of it must give alike.
 _BODY_KEYS = ("unknown_scale", "model", "front_end", "intrinsics")
 #: A run config's board fields when it names a target instead (unused then; the defaults
@@ -115,6 +117,12 @@ class CameraSpec:
     #: folder of this camera
     timestamps: Path | None = None
     fps: float | None = None
+    #: with ``video``: its frames used (``--every``, ``--max-frames``); ``images`` then
+    #: holds the video file
+    every: int = 1
+    max_frames: int | None = None
+    #: with ``bag``: the image topic (``images`` then holds the bag)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -181,6 +189,12 @@ class RigCameraSpec:
     #: with ``images``: where image times come from (``acscal poses --timestamps``/``--fps``)
     timestamps: Path | None = None
     fps: float | None = None
+    #: with ``video``: its frames used (``--every``, ``--max-frames``); ``images`` then
+    #: holds the video file
+    every: int = 1
+    max_frames: int | None = None
+    #: with ``bag``: the image topic (``images`` then holds the bag)
+    topic: str | None = None
     #: with ``poses``: the file holds ``T_cam_world`` (a robot's ``T_flange_base``): inverted
     #: on reading
     invert: bool = False
@@ -322,6 +336,8 @@ Name = Annotated[str, _say("must be a name (a string), got {got}")]
 #: A number > 0 (an integer is taken).
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Workers = Annotated[int, Field(ge=1, description="detection processes (null: all cores)")]
+#: A number of frames, at least 1.
+Frames = Annotated[int, Field(ge=1)]
 BoardCorners = Annotated[int, Field(ge=2, le=MAX_BOARD_CORNERS)]
 SfmSize = Annotated[int, Field(ge=16)]
 Vector3 = Annotated[
@@ -376,6 +392,19 @@ class RunCamera(Section):
     """Camera ``a`` or ``b`` (may be empty)."""
 
     images: ConfigPath | None = Field(default=None, description="the folder of joint-motion images")
+    video: ConfigPath | None = Field(
+        default=None, description="instead of images: a video file of the joint motion"
+    )
+    every: Frames | None = Field(
+        default=None, description="with video or bag: use every n-th frame"
+    )
+    max_frames: Frames | None = Field(
+        default=None, description="with video or bag: at most this many frames, spread evenly"
+    )
+    bag: ConfigPath | None = Field(
+        default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
+    )
+    topic: Name | None = Field(default=None, description="with bag: the image topic")
     model: LensModel = "pinhole"
     timestamps: ConfigPath | None = Field(default=None, description="image times (a CSV file)")
     fps: Positive | None = Field(default=None, description="image times from a frame rate")
@@ -451,6 +480,17 @@ class RigCamera(Section):
     poses: ConfigPath | None = Field(default=None, description="a trajectory of T_world_cam")
     format: TrajectoryFormat = "auto"
     images: ConfigPath | None = Field(default=None, description="instead of poses: an image folder")
+    video: ConfigPath | None = Field(default=None, description="instead of poses: a video file")
+    every: Frames | None = Field(
+        default=None, description="with video or bag: use every n-th frame"
+    )
+    max_frames: Frames | None = Field(
+        default=None, description="with video or bag: at most this many frames, spread evenly"
+    )
+    bag: ConfigPath | None = Field(
+        default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
+    )
+    topic: Name | None = Field(default=None, description="with bag: the image topic")
     model: LensModel = "pinhole"
     scale: Scale | None = Field(default=None, description="default known (unknown with sfm)")
     front_end: FrontEnd = "board"
@@ -666,6 +706,36 @@ def _camera_times(cam: RunCamera | RigCamera, key: str, path: Path) -> None:
         raise _fail(path, key, "give either 'timestamps' or 'fps', not both")
 
 
+def _frames_path(cam: RunCamera | RigCamera) -> str | None:
+    """The camera's images, video or bag (one at most is given)."""
+    return cam.video or cam.bag or cam.images
+
+
+def _camera_video(cam: RunCamera | RigCamera, key: str, path: Path) -> None:
+    """``images``, ``video`` and ``bag`` exclude each other; a video's or bag's frames carry
+    their times; ``every`` and ``max_frames`` go with ``video`` or ``bag``, ``topic`` with
+    ``bag`` (which needs it)."""
+    given = [k for k in ("images", "video", "bag") if cam.given(k)]
+    if len(given) > 1:
+        raise _fail(path, key, f"give one of {' and '.join(repr(k) for k in given)}, not both")
+    if cam.given("video") or cam.given("bag"):
+        for k in ("timestamps", "fps"):
+            if cam.given(k):
+                raise _fail(
+                    path,
+                    f"{key}.{k}",
+                    "goes with 'images': a video's or bag's frames carry their own times",
+                )
+    elif any(cam.given(k) for k in _VIDEO_KEYS):
+        raise _fail(
+            path, key, f"{', '.join(repr(k) for k in _VIDEO_KEYS)} go with 'video' or 'bag'"
+        )
+    if cam.given("bag") and not cam.given("topic"):
+        raise _fail(path, f"{key}.topic", "missing (a bag needs its image topic)")
+    if cam.given("topic") and not cam.given("bag"):
+        raise _fail(path, f"{key}.topic", "goes with 'bag' (a ROS bag)")
+
+
 def _unknown_keys(keys: Iterable[str], known: Iterable[str], key: str, path: Path) -> None:
     allowed = list(known)
     for k in keys:
@@ -739,12 +809,16 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             continue
         cam = getattr(m.cameras, name) or RunCamera()
         _camera_times(cam, f"cameras.{name}", path)
+        _camera_video(cam, f"cameras.{name}", path)
         cameras[name] = CameraSpec(
             name,
-            _opt_path(cam.images, path),
+            _opt_path(_frames_path(cam), path),
             cam.model,
             _opt_path(cam.timestamps, path),
             cam.fps,
+            every=cam.every or 1,
+            max_frames=cam.max_frames,
+            topic=cam.topic,
         )
 
     intrinsics_from: dict[str, Path] | None = None
@@ -950,11 +1024,25 @@ def _camera_specs(
     for name, entry in doc.items():
         key = f"{where}.{name}"
         cam = entry or RigCamera()
-        if cam.given("poses") == cam.given("images"):
-            raise _fail(path, key, "give either 'poses' (a trajectory file) or 'images' (a folder)")
-        if not cam.given("images") and any(cam.given(k) for k in _IMAGE_KEYS):
-            raise _fail(path, key, f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images'")
+        if [cam.given(k) for k in ("poses", "images", "video", "bag")].count(True) != 1:
+            raise _fail(
+                path,
+                key,
+                "give one of 'poses' (a trajectory file), 'images' (a folder), 'video' "
+                "(a video file) or 'bag' (a ROS bag)",
+            )
+        if not (cam.given("images") or cam.given("video") or cam.given("bag")) and any(
+            cam.given(k) for k in _IMAGE_KEYS
+        ):
+            raise _fail(
+                path,
+                key,
+                f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images', 'video' or 'bag'",
+            )
+        if cam.given("bag") and cam.front_end == "sfm":
+            raise _fail(path, f"{key}.front_end", "sfm does not read ROS bags yet (use board)")
         _camera_times(cam, key, path)
+        _camera_video(cam, key, path)
         if cam.invert and not cam.given("poses"):
             raise _fail(path, f"{key}.invert", "goes with 'poses' (a trajectory file)")
         if cam.front_end == "board" and cam.given("intrinsics"):
@@ -972,13 +1060,16 @@ def _camera_specs(
             name=name,
             poses=_opt_path(cam.poses, path),
             format=cam.format,
-            images=_opt_path(cam.images, path),
+            images=_opt_path(_frames_path(cam), path),
             model=cam.model,
             unknown_scale=scale == "unknown",
             front_end=cam.front_end,
             intrinsics=_opt_path(cam.intrinsics, path),
             timestamps=_opt_path(cam.timestamps, path),
             fps=cam.fps,
+            every=cam.every or 1,
+            max_frames=cam.max_frames,
+            topic=cam.topic,
             invert=cam.invert,
         )
     return cameras

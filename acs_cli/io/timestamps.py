@@ -32,12 +32,17 @@ from acs_cli.io.atomic import MAX_TEXT_BYTES, read_input_bytes
 from acs_cli.io.images import IMAGE_SUFFIXES
 
 __all__ = [
+    "VIDEO_TIMES",
     "ImageTimes",
     "NameStamp",
     "image_times",
     "read_timestamps_file",
     "stamp_from_name",
+    "times_from_ns",
 ]
+
+#: How artifacts name a video's frame times.
+VIDEO_TIMES = "the video's presentation timestamps (pts * time_base)"
 
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
 #: Integer file-name stamps by their number of digits: (fewest digits, unit, ns per unit).
@@ -166,6 +171,18 @@ def _times_from_ns(ns: list[int], unit: str, source: str) -> ImageTimes:
     whole, frac = np.divmod(arr, _NS)
     seconds = whole.astype(float) + frac.astype(float) / _NS
     return ImageTimes(seconds, arr, unit, source, True)
+
+
+def times_from_ns(ns: list[int], source: str) -> ImageTimes:
+    """Times in seconds from strictly increasing integer nanoseconds (e.g. a video's
+    presentation timestamps), named ``source``.
+
+    Raises
+    ------
+    InputError
+        Times beyond int64 nanoseconds.
+    """
+    return _times_from_ns(ns, "s", source)
 
 
 def _check_increasing(names: list[str], ns: list[int], source: str) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +41,7 @@ from acs_cli.core.targets import (
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
 from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.bag import bag_key, is_bag_path, read_bag_frames, read_bag_images
 from acs_cli.io.detections import (
     Detection,
     cache_path_for,
@@ -58,6 +59,16 @@ from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, DroppedView, ImagesUsed, IntrinsicsArtifact
 from acs_cli.io.target import target_to_mapping
 from acs_cli.io.verdict import VerdictSection, weak_marks
+from acs_cli.io.video import (
+    EVERY_FRAME,
+    FrameSelection,
+    VideoFrame,
+    VideoRead,
+    is_video_path,
+    read_frame_images,
+    read_video_frames,
+    video_sha256,
+)
 
 __all__ = [
     "EXPORTS",
@@ -77,6 +88,36 @@ CACHE_EVERY = 8
 MIN_IMAGES_PER_WORKER = 12
 
 Progress = Callable[[int, int], None]
+#: An image of the input: a file of a folder, or a frame of a video.
+ImageRef = Path | VideoFrame
+
+
+def read_images(refs: Sequence[ImageRef]) -> list[np.ndarray]:
+    """The greyscale pixels of some images of one input (a video's frames in one pass)."""
+    frames = [r for r in refs if isinstance(r, VideoFrame)]
+    read = read_bag_images if frames and frames[0].topic is not None else read_frame_images
+    decoded = dict(zip([f.index for f in frames], read(frames), strict=True))
+    return [decoded[r.index] if isinstance(r, VideoFrame) else read_gray(r)[0] for r in refs]
+
+
+def ref_path(ref: ImageRef) -> Path:
+    """The file an image comes from (a video frame's video)."""
+    return ref.video if isinstance(ref, VideoFrame) else ref
+
+
+def _input_role(fd: FolderDetections) -> str:
+    """The header's name of the input: ``images``, ``video`` or ``bag``."""
+    if fd.frames is None:
+        return "images"
+    return "bag" if "topic" in fd.frames else "video"
+
+
+def input_files(images: Path) -> list[Path]:
+    """The input files an output must not overwrite: the folder and its images, or the
+    video."""
+    if is_video_path(images) or is_bag_path(images):
+        return [images]
+    return [images, *list_images(images)]
 
 
 @dataclass(frozen=True)
@@ -110,6 +151,8 @@ class IntrinsicsConfig:
     workers: int | None = None
     target: MarkerTarget | None = None
     accept_weak: bool = False
+    selection: FrameSelection = field(default_factory=FrameSelection)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -118,8 +161,8 @@ class FolderDetections:
 
     Attributes
     ----------
-    images : list of Path
-        All images, in natural order.
+    images : list of Path or VideoFrame
+        All images, in natural order (a video's kept frames, in its order).
     detections : list of Detection
         One per image, same order.
     image_size : tuple of int
@@ -128,13 +171,23 @@ class FolderDetections:
         How many detections came from a cache.
     cache : Path
         The cache file written.
+    times_ns : list of int, optional
+        A video's frame times (presentation timestamps, integer nanoseconds); None for a
+        folder.
+    notes : list of str
+        A video's selection counts and damage, as warnings.
+    frames : dict, optional
+        A video's counts for artifacts: ``decoded``, ``kept``, ``selection``.
     """
 
-    images: list[Path]
+    images: Sequence[ImageRef]
     detections: list[Detection]
     image_size: tuple[int, int]
     cached: int
     cache: Path
+    times_ns: list[int] | None = None
+    notes: list[str] = field(default_factory=list)
+    frames: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -158,14 +211,22 @@ def _detect_file(
         img, sha = read_gray(path)
     except InputError as exc:
         return "", None, exc.one_line()
+    return _detect_image(img, Path(path).name, sha, cols, rows, target)
+
+
+def _detect_image(
+    img: np.ndarray, name: str, sha: str, cols: int, rows: int, target: MarkerTarget | None
+) -> tuple[str, Detection | None, str | None]:
+    """Worker: detect the board (or ``target``) in one greyscale image whose content key is
+    ``sha``."""
     h, w = img.shape[:2]
     if target is not None:
         found = detect_target(img, target)
         dense = found.dense(target.n_corners) if len(found) else None
-        det = Detection(Path(path).name, dense is not None, (int(w), int(h)), dense)
+        det = Detection(name, dense is not None, (int(w), int(h)), dense)
         return _target_key(sha, target), det, None
     corners = detect_checkerboard(img, cols, rows)
-    det = Detection(Path(path).name, corners is not None, (int(w), int(h)), corners)
+    det = Detection(name, corners is not None, (int(w), int(h)), corners)
     return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
 
 
@@ -225,7 +286,7 @@ FEW_BOARDS = 0.5
 
 
 def board_advice(
-    images: Sequence[Path], cols: int, rows: int
+    images: Sequence[ImageRef], cols: int, rows: int
 ) -> tuple[str, tuple[int, int] | None]:
     """Advice naming ``--board`` for images where a ``cols x rows`` board was not found,
     and the nearby size they show, if one is found in them
@@ -248,7 +309,7 @@ def board_advice(
 
 
 def _size_in(
-    images: Sequence[Path], sizes: Sequence[tuple[int, int]]
+    images: Sequence[ImageRef], sizes: Sequence[tuple[int, int]]
 ) -> tuple[tuple[int, int], int] | None:
     """:func:`acs_cli.core.board_hint.board_size_hint` on up to :data:`HINT_IMAGES` of
     ``images``, evenly spread."""
@@ -257,12 +318,12 @@ def _size_in(
     if not images:
         return None
     pick = np.unique(np.round(np.linspace(0, len(images) - 1, HINT_IMAGES)).astype(int))
-    return board_size_hint([read_gray(images[int(i)])[0] for i in pick], sizes)
+    return board_size_hint(read_images([images[int(i)] for i in pick]), sizes)
 
 
 def few_boards(
     folder: Path,
-    images: Sequence[Path],
+    images: Sequence[ImageRef],
     found: Sequence[bool],
     cols: int,
     rows: int,
@@ -368,7 +429,7 @@ def target_views(
 
 
 def no_target_error(
-    folder: Path, target: MarkerTarget, images: Sequence[Path], seen: int = 0
+    folder: Path, target: MarkerTarget, images: Sequence[ImageRef], seen: int = 0
 ) -> AcsError:
     """The error for a folder where no image shows enough of an AprilGrid or ChArUco.
 
@@ -379,15 +440,14 @@ def no_target_error(
     """
     n = len(images)
     probes = [images[int(i)] for i in np.unique(np.linspace(0, n - 1, min(n, FAMILY_PROBES)))]
-    for p in probes:
-        img, _ = read_gray(p)
+    for p, img in zip(probes, read_images(probes), strict=True):
         family = find_other_family(img, target)
         if family is not None:
             return InputError(
                 f"the images show markers of the {family} family, not the target's "
                 f"{target.dictionary} (--target {target.short()}); check the target "
                 "description (its dictionary or tag family)",
-                path=p,
+                path=ref_path(p) if isinstance(p, Path) else f"{ref_path(p)}: {p.name}",
             )
     few = f"; {seen} image(s) show fewer than {MIN_POSE_CORNERS} usable corners" if seen else ""
     return DegenerateMotionError(
@@ -408,13 +468,17 @@ def detect_folder(
     workers: int | None = None,
     progress: Progress | None = None,
     target: MarkerTarget | None = None,
+    selection: FrameSelection = EVERY_FRAME,
+    topic: str | None = None,
 ) -> FolderDetections:
-    """Detect the board in every image of a folder, reusing and updating a cache.
+    """Detect the board in every image of a folder (or the kept frames of a video), reusing
+    and updating a cache.
 
     Parameters
     ----------
     folder : Path
-        The images (see :func:`acs_cli.io.images.list_images`).
+        The images (see :func:`acs_cli.io.images.list_images`), or a video file (see
+        :mod:`acs_cli.io.video`).
     cols, rows : int
         Inner corners of the board.
     cache : Path
@@ -430,6 +494,10 @@ def detect_folder(
         Detect this target instead of the ``cols x rows`` board: each detection's corners
         are ``(m, 2)``, row ``j`` = corner id ``j``, NaN where unseen (``found``: any
         corner seen).
+    selection : FrameSelection
+        A video's frames to use (``--every``, ``--max-frames``); refused for a folder.
+    topic : str, optional
+        With a ROS bag (``folder``; see :mod:`acs_cli.io.bag`): its image topic.
 
     Returns
     -------
@@ -438,8 +506,27 @@ def detect_folder(
     Raises
     ------
     InputError
-        No images, a corrupt image, or images of different sizes.
+        No images, a corrupt image, or images of different sizes; a file that is not a
+        video, or a video of which no frame decodes.
     """
+    selection.check()
+    if is_bag_path(folder) or topic is not None:
+        if not is_bag_path(folder):
+            raise InputError("--topic (topic) applies to ROS bags", path=folder)
+        return _detect_video(
+            folder, cols, rows, cache, extra_caches, workers, progress, target, selection,
+            bag=True, topic=topic,
+        )  # fmt: skip
+    if is_video_path(folder):
+        return _detect_video(
+            folder, cols, rows, cache, extra_caches, workers, progress, target, selection
+        )
+    if not selection.trivial:
+        raise InputError(
+            "--every and --max-frames (every, max_frames) select frames of a video file; "
+            "this is a folder of images",
+            path=folder,
+        )
     images = list_images(folder)
     known: dict[str, Detection] = {}
     for extra in extra_caches:
@@ -510,6 +597,10 @@ def detect_folder(
             write_detections(cache, store)
 
     dets = [found[i] for i in range(len(images))]
+    return FolderDetections(images, dets, _common_size(images, dets), cached, cache)
+
+
+def _common_size(images: Sequence[ImageRef], dets: Sequence[Detection]) -> tuple[int, int]:
     size = dets[0].image_size
     for p, d in zip(images, dets, strict=True):
         if d.image_size != size:
@@ -517,9 +608,159 @@ def detect_folder(
                 f"image size {d.image_size[0]}x{d.image_size[1]} differs from "
                 f"{size[0]}x{size[1]} of {images[0].name}: all images must come from one "
                 "camera at one resolution",
-                path=p,
+                path=ref_path(p),
             )
-    return FolderDetections(images, dets, size, cached, cache)
+    return size
+
+
+#: Frames a video's detection keeps in flight per worker (memory stays bounded).
+FRAMES_IN_FLIGHT = 2
+
+
+def _detect_video(
+    video: Path,
+    cols: int,
+    rows: int,
+    cache: Path,
+    extra_caches: Sequence[Path],
+    workers: int | None,
+    progress: Progress | None,
+    target: MarkerTarget | None,
+    selection: FrameSelection,
+    *,
+    bag: bool = False,
+    topic: str | None = None,
+) -> FolderDetections:
+    """:func:`detect_folder` for a video (or a ROS bag's ``topic``): frames decoded one by
+    one in this process and detected here or in a pool (at most :data:`FRAMES_IN_FLIGHT`
+    per worker at a time).
+
+    Cache keys are the video's SHA-256 (a bag's, with the topic) with the frame's index and
+    presentation time."""
+    known: dict[str, Detection] = {}
+    for extra in extra_caches:
+        known.update(read_detections(extra))
+    own = read_detections(cache)
+    known.update(own)
+    sha = video_sha256(video) if not bag else f"{bag_key(video)}/{topic}"
+    report = VideoRead()
+    refs: list[VideoFrame] = []
+    found: dict[int, Detection] = {}
+    store: dict[str, Detection] = dict(own)
+    cached = 0
+    dirty = False
+    last_save = time.monotonic()
+    total = 0
+
+    def record(i: int, key: str, det: Detection, from_cache: bool) -> None:
+        nonlocal dirty, last_save, cached
+        found[i] = det
+        cached += from_cache
+        if store.get(key) is not det:
+            store[key] = det
+            dirty = True
+        if progress is not None:
+            progress(len(found), max(total, len(refs)))
+        if dirty and (len(found) % CACHE_EVERY == 0 or time.monotonic() - last_save > 2.0):
+            write_detections(cache, store)
+            dirty = False
+            last_save = time.monotonic()
+
+    def frame_key(ref: VideoFrame) -> str:
+        return f"{sha}#{ref.index}@{ref.time_ns}"
+
+    frames = (
+        read_bag_frames(video, topic, selection, report)
+        if bag
+        else read_video_frames(video, selection, report)
+    )
+    first = next(frames)  # counts the frames first when max_frames is given
+    if report.count is not None and selection.max_frames is not None:
+        total = len(selection.indices(report.count) or ())
+    elif report.estimate is not None:
+        total = report.estimate
+    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+
+    def all_frames() -> Iterator[Any]:
+        yield first
+        yield from frames
+
+    def check(result: tuple[str, Detection | None, str | None]) -> tuple[str, Detection]:
+        key, det, error = result
+        if error is not None:  # pragma: no cover - an array always detects
+            raise InputError(error)
+        if det is None:  # pragma: no cover - _detect_image's contract
+            raise RuntimeError("detection worker returned nothing")
+        return key, det
+
+    pool: ProcessPoolExecutor | None = None
+    uncached = 0
+    pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {}
+    try:
+        for frame in all_frames():
+            ref = frame.ref
+            i = len(refs)
+            refs.append(ref)
+            seed = frame_key(ref)
+            key = (
+                _target_key(seed, target)
+                if target is not None
+                else detection_key(seed, cols, rows, DETECTOR_VERSION)
+            )
+            if key in known:
+                record(i, key, known[key], True)
+                continue
+            uncached += 1
+            if n_workers <= 1 or uncached <= MIN_IMAGES_PER_WORKER:  # few: no pool
+                result = _detect_image(frame.image, ref.name, seed, cols, rows, target)
+                record(i, *check(result), False)
+                continue
+            if pool is None:
+                pool = ProcessPoolExecutor(
+                    max_workers=n_workers,
+                    initializer=_exit_with_parent,
+                    initargs=(os.getpid(),),
+                )
+            pending[pool.submit(_detect_image, frame.image, ref.name, seed, cols, rows, target)] = i
+            while len(pending) >= FRAMES_IN_FLIGHT * n_workers:
+                ready, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in ready:
+                    record(pending.pop(fut), *check(fut.result()), False)
+        for fut in list(pending):
+            record(pending.pop(fut), *check(fut.result()), False)
+    finally:
+        for fut in pending:
+            fut.cancel()
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+        if dirty:
+            write_detections(cache, store)
+    if progress is not None:
+        progress(len(found), len(refs))  # the estimated total, corrected
+    dets = [found[i] for i in range(len(refs))]
+    kept = f"{len(refs)} of {report.decoded} frames"
+    notes = [*report.notes]
+    if not selection.trivial:
+        notes.insert(0, f"video: used {kept} ({selection.describe()})")
+    frames_info: dict[str, Any] = {
+        "decoded": report.decoded,
+        "kept": len(refs),
+        "every": selection.every,
+        "max_frames": selection.max_frames,
+        "times": "header.stamp" if bag else "presentation timestamps (pts * time_base), seconds",
+    }
+    if bag:
+        frames_info["topic"] = topic
+    return FolderDetections(
+        refs,
+        dets,
+        _common_size(refs, dets),
+        cached,
+        cache,
+        times_ns=[r.time_ns for r in refs],
+        notes=notes,
+        frames=frames_info,
+    )
 
 
 def _check_config(config: IntrinsicsConfig) -> None:
@@ -561,7 +802,8 @@ def run_intrinsics(
         corners (nothing but the cache is written).
     """
     _check_config(config)
-    inputs = [images_dir, *list_images(images_dir)]
+    config.selection.check()
+    inputs = input_files(images_dir)
     check_distinct_output(output, inputs)
     exports: dict[str, Path] = {}
     if "ros" in config.export:
@@ -581,6 +823,8 @@ def run_intrinsics(
         workers=config.workers,
         progress=progress,
         target=target,
+        selection=config.selection,
+        topic=config.topic,
     )
     board_note = None
     if target is None:
@@ -604,7 +848,7 @@ def run_intrinsics(
     dropped = [
         DroppedView(names[j], float(calib.first_pass_per_view_rms[j])) for j in calib.dropped
     ]
-    warnings: list[str] = [] if board_note is None else [board_note]
+    warnings: list[str] = [*fd.notes] + ([] if board_note is None else [board_note])
     if skipped:
         warnings.append(f"no board in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     if dropped:
@@ -631,7 +875,7 @@ def run_intrinsics(
     calibrator = "cv2.fisheye.calibrate" if config.model == "fisheye" else "calibrateCameraExtended"
     header = make_header(
         "intrinsics",
-        {"images": images_dir},
+        {_input_role(fd): images_dir},
         method=f"OpenCV {calibrator} "
         f"({config.model} model) on {DETECTOR_VERSION} corners (coarse findChessboardCorners, "
         "cornerSubPix sized to the squares, X-junction fit); views with RMS above "
@@ -642,6 +886,8 @@ def run_intrinsics(
             "board": "origin at the first inner corner, x along a row, z into the board",
         },
     )
+    if fd.frames is not None:
+        header["video"] = fd.frames
     if target is not None:
         header["method"] = (
             f"OpenCV {calibrator} ({config.model} model) on the identified corners of a "

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import cv2
 import numpy as np
 
 from acs_cli.core.intrinsics import board_points
@@ -35,18 +36,28 @@ from acs_cli.core.sfm import SfmCamera, SfmOptions, SfmProgress, SfmResult
 from acs_cli.core.targets import MIN_POSE_CORNERS, Checkerboard, MarkerTarget, pose_ready
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
-from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.atomic import atomic_write_bytes, check_distinct_output, check_writable
+from acs_cli.io.bag import is_bag_path
 from acs_cli.io.detections import cache_path_for
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
 from acs_cli.io.poses import PosesArtifact, SfmSummary
 from acs_cli.io.target import target_from_mapping, target_to_mapping
-from acs_cli.io.timestamps import ImageTimes, image_times, read_timestamps_file
+from acs_cli.io.timestamps import (
+    VIDEO_TIMES,
+    ImageTimes,
+    image_times,
+    read_timestamps_file,
+    times_from_ns,
+)
 from acs_cli.io.trajectory import FRAME_NUMBERS_NOTE, Trajectory, write_tum
+from acs_cli.io.video import FrameSelection, VideoRead, is_video_path, read_video_frames
 from acs_cli.stages.intrinsics import (
     TARGET_FRAMES,
+    _input_role,
     detect_folder,
     few_boards,
+    input_files,
     no_board_error,
     no_target_error,
 )
@@ -85,6 +96,8 @@ class PosesConfig:
         Pose on this target (identified corners, partial views) instead of a checkerboard;
         default: the intrinsics artifact's target when it records one (and no board option
         is given).
+    selection : FrameSelection
+        A video's frames to use (``--every``, ``--max-frames``).
     """
 
     cols: int | None = None
@@ -95,6 +108,8 @@ class PosesConfig:
     timestamps: Path | None = None
     fps: float | None = None
     target: MarkerTarget | None = None
+    selection: FrameSelection = field(default_factory=FrameSelection)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -186,6 +201,30 @@ def _poses_target(
     return None if isinstance(target, Checkerboard) else target
 
 
+def video_times(ns: list[int], bag: bool = False) -> ImageTimes:
+    """The times of a video's frames: their presentation timestamps (integer ns); of a
+    bag's images (``bag``): their ``header.stamp``."""
+    return times_from_ns(ns, "the images' header.stamp (ROS bag)" if bag else VIDEO_TIMES)
+
+
+def _video_times_check(images: Path, config: _TimeOptions) -> bool:
+    """True for a video input; :class:`InputError` when ``--timestamps``/``--fps`` are
+    given for one (its frames carry their own times)."""
+    if not (is_video_path(images) or is_bag_path(images)):
+        return False
+    given = [
+        k for k, v in (("--timestamps", config.timestamps), ("--fps", config.fps)) if v is not None
+    ]
+    if given:
+        raise InputError(
+            f"{' and '.join(given)} {'apply' if len(given) > 1 else 'applies'} to image "
+            "folders: a video's frames carry their own times (presentation timestamps); "
+            "leave it out",
+            path=images,
+        )
+    return True
+
+
 def _board_option(value: Any, stored: Any, name: str, path: Path) -> Any:
     if value is not None:
         return value
@@ -226,8 +265,10 @@ def run_poses(
             raise InputError(f"--board needs at least 2x2 inner corners, got {cols}x{rows}")
         if not (np.isfinite(square) and square > 0):
             raise InputError(f"--square must be a positive length in metres, got {square}")
+    _video_times_check(images_dir, config)
+    config.selection.check()
     outputs = [output] + ([config.tum] if config.tum is not None else [])
-    inputs = [images_dir, intrinsics, *list_images(images_dir)]
+    inputs = [intrinsics, *input_files(images_dir)]
     for o in outputs:
         check_distinct_output(o, inputs)
     if config.tum is not None and os.path.realpath(config.tum) == os.path.realpath(output):
@@ -244,6 +285,8 @@ def run_poses(
         workers=config.workers,
         progress=progress,
         target=target,
+        selection=config.selection,
+        topic=config.topic,
     )
     if fd.image_size != cam.image_size:
         raise InputError(
@@ -284,9 +327,13 @@ def run_poses(
         board_note = few_boards(images_dir, fd.images, found, cols, rows, 1, part_is_error=True)
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
-    times = _image_times(names, all_names, stamps, config)
+    if fd.times_ns is not None:
+        by_name = dict(zip(all_names, fd.times_ns, strict=True))
+        times = video_times([by_name[n] for n in names], bag=config.topic is not None)
+    else:
+        times = _image_times(names, all_names, stamps, config)
     t = times.seconds
-    warnings = [w for w in (board_note, times.note) if w is not None]
+    warnings = [*fd.notes] + [w for w in (board_note, times.note) if w is not None]
     # one board frame for the whole sequence: undo 180-degree relabellings of the board
     T_cb_arr = np.stack(T_cb)
     if target is None and cols != rows:
@@ -308,7 +355,7 @@ def run_poses(
         warnings.append(f"no board pose in {len(skipped)} image(s): {', '.join(skipped[:10])}")
     header = make_header(
         "poses",
-        {"images": images_dir, "intrinsics": intrinsics},
+        {_input_role(fd): images_dir, "intrinsics": intrinsics},
         method="cv2.solvePnP (SOLVEPNP_IPPE) refined by cv2.solvePnPRefineLM on "
         f"{cols}x{rows} board corners; T_world_cam = inverse of T_cam_board",
         units={"length": "m", "reprojection_rms": "px"},
@@ -330,6 +377,8 @@ def run_poses(
         header["target"] = target_to_mapping(target)
     header["intrinsics_file"] = str(intrinsics)
     _time_header(header, times)
+    if fd.frames is not None:
+        header["video"] = fd.frames
     rms_arr = np.array(rms, dtype=float)
     PosesArtifact(
         trajectory=traj,
@@ -351,7 +400,7 @@ def run_poses(
 #: The file that marks a ``--workdir`` as made by ``acscal poses --sfm`` (safe to clear).
 WORKDIR_MARKER = ".acscal-sfm"
 #: What ``run_sfm_poses`` clears in a work folder it made before (COLMAP's files).
-_WORKDIR_ENTRIES = ("images", "sparse", "database.db", "vocab_tree.bin", "vocab_tree.log")
+_WORKDIR_ENTRIES = ("images", "frames", "sparse", "database.db", "vocab_tree.bin", "vocab_tree.log")
 #: Below this registered fraction the warning says the trajectory has gaps worth a look.
 POOR_REGISTRATION = 0.9
 
@@ -396,6 +445,7 @@ class SfmPosesConfig:
     workdir: Path | None = None
     timestamps: Path | None = None
     fps: float | None = None
+    selection: FrameSelection = field(default_factory=FrameSelection)
 
 
 @dataclass(frozen=True)
@@ -476,6 +526,40 @@ def _sfm_camera(intrinsics: Path) -> SfmCamera:
     except InputError as exc:
         raise InputError(exc.message, path=intrinsics) from exc
     return sfm_cam
+
+
+def _video_frames_to(
+    video: Path, folder: Path, selection: FrameSelection, progress: SfmProgress | None
+) -> tuple[tuple[int, int], dict[str, int], list[str], dict[str, Any]]:
+    """Decode a video's kept frames into ``folder`` as PNG files (``frame_000123.png``), one
+    at a time; their size, their times (ns) by file name, the reader's notes and the
+    frame counts (for the header)."""
+    report = VideoRead()
+    times: dict[str, int] = {}
+    size: tuple[int, int] | None = None
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, frame in enumerate(read_video_frames(video, selection, report)):
+        got = (int(frame.image.shape[1]), int(frame.image.shape[0]))
+        size = size or got
+        if got != size:  # pragma: no cover - one stream has one size
+            raise InputError(f"{frame.ref.name} is {got[0]}x{got[1]}", path=video)
+        ok, png = cv2.imencode(".png", frame.image)
+        if not ok:  # pragma: no cover - encoding a grey array does not fail
+            raise InputError(f"cannot encode {frame.ref.name} as PNG", path=video)
+        name = frame.ref.name + ".png"
+        atomic_write_bytes(folder / name, png.tobytes())
+        times[name] = frame.ref.time_ns
+        if progress is not None:
+            progress("decoding video", k + 1, max(k + 1, report.estimate or report.count or 0))
+    if size is None:  # pragma: no cover - read_video_frames raises first
+        raise InputError("no frame of the video decodes", path=video)
+    notes = list(report.notes)
+    counts = {"decoded": report.decoded, "kept": len(times), "every": selection.every,
+              "max_frames": selection.max_frames}  # fmt: skip
+    if not selection.trivial:
+        notes.insert(0, f"video: used {len(times)} of {report.decoded} frames "
+                        f"({selection.describe()})")  # fmt: skip
+    return size, times, notes, counts
 
 
 def _check_images(paths: list[Path], progress: SfmProgress | None) -> tuple[int, int]:
@@ -600,7 +684,16 @@ def run_sfm_poses(
     if config.refine_intrinsics and intrinsics is None:
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
     stamps = _time_source(config)
-    paths = list_images(images_dir)
+    if is_bag_path(images_dir):
+        raise InputError("--sfm does not read ROS bags yet (board poses do)", path=images_dir)
+    video = _video_times_check(images_dir, config)
+    config.selection.check()
+    if not video and not config.selection.trivial:
+        raise InputError(
+            "--every and --max-frames select frames of a video file; this is a folder of images",
+            path=images_dir,
+        )
+    paths = [] if video else list_images(images_dir)
     camera = _sfm_camera(intrinsics) if intrinsics is not None else None
     opts = SfmOptions(
         matching=config.matching,
@@ -619,27 +712,43 @@ def run_sfm_poses(
         raise InputError("--tum and -o name the same file", path=output)
     for o in outputs:
         check_writable(o)
-    size = _check_images(paths, progress)
-    if camera is not None and size != camera.image_size:
-        raise InputError(
-            f"images are {size[0]}x{size[1]} but {intrinsics} was calibrated at "
-            f"{camera.image_size[0]}x{camera.image_size[1]}",
-            path=images_dir,
-        )
-    all_names = [p.name for p in paths]
+    frame_ns: dict[str, int] = {}
+    notes: list[str] = []
+    counts: dict[str, Any] = {}
     with _sfm_workdir(config.workdir, [images_dir, output.parent]) as work:
-        result = run_sfm(images_dir, all_names, work, camera, opts, progress)
+        folder = images_dir
+        if video:  # COLMAP reads files: the kept frames go to the work folder, as PNG
+            folder = work / "frames"
+            size, frame_ns, notes, counts = _video_frames_to(
+                images_dir, folder, config.selection, progress
+            )
+            all_names = list(frame_ns)
+        else:
+            size = _check_images(paths, progress)
+            all_names = [p.name for p in paths]
+        if camera is not None and size != camera.image_size:
+            raise InputError(
+                f"images are {size[0]}x{size[1]} but {intrinsics} was calibrated at "
+                f"{camera.image_size[0]}x{camera.image_size[1]}",
+                path=images_dir,
+            )
+        result = run_sfm(folder, all_names, work, camera, opts, progress)
 
     names = list(result.registered_names)
-    times = _image_times(names, all_names, stamps, config)
+    if video:
+        times = video_times([frame_ns[n] for n in names])
+    else:
+        times = _image_times(names, all_names, stamps, config)
     traj = _trajectory(times, result.T_world_cam, names, output)
-    warnings = _sfm_warnings(result, camera) + ([] if times.note is None else [times.note])
+    warnings = notes + _sfm_warnings(result, camera)
+    warnings += [] if times.note is None else [times.note]
     cam = result.camera
     given = "given (" + ("refined" if result.intrinsics_refined else "held fixed") + ")"
     n_images = len(all_names)
     header = make_header(
         "poses",
-        {"images": images_dir} | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
+        {"video" if video else "images": images_dir}
+        | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
         method=(
             f"incremental structure from motion ({pycolmap_version()}): SIFT features, "
             f"{result.matching} matching"
@@ -667,6 +776,8 @@ def run_sfm_poses(
         header["intrinsics_file"] = str(intrinsics)
     _time_header(header, times)
     header["front_end"] = "sfm"
+    if video:
+        header["video"] = counts
     feats = result.features_per_image
     header["sfm"] = {
         "method": "incremental",

@@ -32,6 +32,7 @@ import acs_cli
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import load_yaml_file, sha256_of
 from acs_cli.io.atomic import atomic_write_text
+from acs_cli.io.bag import is_bag_path
 from acs_cli.io.config import (
     CONFIG_SCHEMA,
     CameraSpec,
@@ -45,6 +46,7 @@ from acs_cli.io.config import (
 )
 from acs_cli.io.images import list_images
 from acs_cli.io.poses import PosesArtifact
+from acs_cli.io.video import EVERY_FRAME, FrameSelection, is_video_path
 
 if TYPE_CHECKING:
     from acs_cli.core.targets import MarkerTarget
@@ -271,9 +273,12 @@ def _poses_stage(
     workers: int | None,
     times: tuple[Path | None, float | None] = (None, None),
     target: MarkerTarget | None = None,
+    selection: FrameSelection = EVERY_FRAME,
+    topic: str | None = None,
 ) -> _Stage:
-    """The poses stage of one camera's image folder (``npz`` and the TUM file beside it),
-    on the board, or on ``target`` when given."""
+    """The poses stage of one camera's image folder or video (``npz`` and the TUM file
+    beside it), on the board, or on ``target`` when given (``selection``: a video's
+    frames)."""
     from acs_cli.stages.poses import PosesConfig, run_poses
 
     cols, rows, square = board
@@ -287,6 +292,8 @@ def _poses_stage(
         timestamps=times[0],
         fps=times[1],
         target=target,
+        selection=selection,
+        topic=topic,
     )
 
     def do_poses(_read: Mapping[str, PosesArtifact]) -> list[str]:
@@ -298,7 +305,19 @@ def _poses_stage(
     options: dict[str, Any] = _target_options(board, target)
     if times[1] is not None:
         options["fps"] = times[1]
+    options |= _selection_options(selection) | ({"topic": topic} if topic else {})
     return _Stage(stage, "poses", inputs, options, [npz, tum], do_poses)
+
+
+def _selection_options(selection: FrameSelection) -> dict[str, Any]:
+    """A stage's options naming a video's frame selection (none for every frame)."""
+    if selection.trivial:
+        return {}
+    return {"every": selection.every, "max_frames": selection.max_frames}
+
+
+def _selection(cam: CameraSpec | RigCameraSpec) -> FrameSelection:
+    return FrameSelection(cam.every, cam.max_frames)
 
 
 def _target_options(board: tuple[int, int, float], target: MarkerTarget | None) -> dict[str, Any]:
@@ -334,6 +353,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             folders["general"] = rel.images[name]
         intr_out = cam_dir / "intrinsics.yaml"
         intrinsics[name] = intr_out
+        joint_only = list(folders) == ["joint"]
+        selection = _selection(cam) if joint_only else EVERY_FRAME
         icfg = IntrinsicsConfig(
             cols=config.cols,
             rows=config.rows,
@@ -342,6 +363,8 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
             workers=config.workers,
             target=config.target,
             accept_weak=config.accept_weak,
+            selection=selection,
+            topic=cam.topic if joint_only else None,
         )
 
         def do_intrinsics(
@@ -353,6 +376,12 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
         ) -> list[str]:
             if len(folders) == 1:
                 images = next(iter(folders.values()))
+            elif any(is_video_path(f) or is_bag_path(f) for f in folders.values()):
+                raise InputError(
+                    f"camera {cam_dir.name}'s intrinsics would pool a video or bag with other "
+                    "images; set 'intrinsics: {from: joint}' (or give intrinsics_from)",
+                    path=next(f for f in folders.values() if is_video_path(f) or is_bag_path(f)),
+                )
             else:
                 images = _link_images(folders, cam_dir / "intrinsics_images")
             return run_intrinsics(images, intr_out, icfg).warnings
@@ -367,13 +396,22 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                     "model": cam.model,
                     "images_from": sorted(folders),
                     "accept_weak": config.accept_weak,
+                    **_selection_options(selection),
+                    **({"topic": cam.topic} if joint_only and cam.topic else {}),
                 },
                 [intr_out],
                 do_intrinsics,
             )
         )
 
-    def poses_stage(name: str, images: Path, stem: str, label: str) -> Path:
+    def poses_stage(
+        name: str,
+        images: Path,
+        stem: str,
+        label: str,
+        selection: FrameSelection,
+        topic: str | None = None,
+    ) -> Path:
         npz = out / f"cam_{name}" / f"{stem}.npz"
         stages.append(
             _poses_stage(
@@ -385,15 +423,21 @@ def _plan(config: RunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 config.workers,
                 (config.cameras[name].timestamps, config.cameras[name].fps),
                 config.target,
+                selection,
+                topic,
             )
         )
         return npz
 
     for name, cam in config.cameras.items():
         if config.joint is not None and cam.images is not None:
-            poses[name] = poses_stage(name, cam.images, "poses", "poses")
+            poses[name] = poses_stage(
+                name, cam.images, "poses", "poses", _selection(cam), cam.topic
+            )
         if rel is not None:
-            general[name] = poses_stage(name, rel.images[name], "poses_general", "poses general")
+            general[name] = poses_stage(
+                name, rel.images[name], "poses_general", "poses general", EVERY_FRAME
+            )
 
     joint_file: Path | None = None
     if config.joint is not None:
@@ -491,6 +535,7 @@ def _sfm_stage(
         tum=npz.with_suffix(".tum"),
         timestamps=cam.timestamps,
         fps=cam.fps,
+        selection=_selection(cam),
         **config.sfm,
     )
 
@@ -503,6 +548,7 @@ def _sfm_stage(
     if cam.timestamps is not None:
         inputs["timestamps"] = cam.timestamps
     options = {"front_end": "sfm", **config.sfm} | ({"fps": cam.fps} if cam.fps else {})
+    options |= _selection_options(_selection(cam))
     return _Stage(f"sfm {name}", "poses", inputs, options, [npz], do_sfm), npz
 
 
@@ -603,6 +649,8 @@ def _plan_rig_camera(
         workers=config.workers,
         target=config.target,
         accept_weak=config.accept_weak,
+        selection=_selection(cam),
+        topic=cam.topic,
     )
     images = cam.images
 
@@ -619,7 +667,13 @@ def _plan_rig_camera(
             f"intrinsics {name}",
             "intrinsics",
             {"images": images},
-            {**board, "model": cam.model, "accept_weak": config.accept_weak},
+            {
+                **board,
+                "model": cam.model,
+                "accept_weak": config.accept_weak,
+                **_selection_options(_selection(cam)),
+                **({"topic": cam.topic} if cam.topic else {}),
+            },
             [intr_out],
             do_intrinsics,
         )
@@ -635,6 +689,8 @@ def _plan_rig_camera(
             config.workers,
             (cam.timestamps, cam.fps),
             config.target,
+            _selection(cam),
+            cam.topic,
         )
     )
     poses[name] = npz

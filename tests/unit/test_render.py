@@ -176,6 +176,19 @@ def test_cli_writes_a_scenario(tmp_path: Path, capsys: pytest.CaptureFixture[str
         main([str(tmp_path), "--size", "bad"])
 
 
+def test_cli_writes_the_cameras_as_videos(tmp_path: Path) -> None:
+    from acs_cli.io.video import read_video_frames
+
+    args = [str(tmp_path), "--scenario", "overlap", "--size", "200x150", "--frames", "3"]
+    assert main([*args, "--video", "mkv", "--video-fps", "20"]) == 0
+    folder = tmp_path / "overlap"
+    for cam in ("cam_a", "cam_b"):
+        frames = list(read_video_frames(folder / f"{cam}.mkv"))
+        assert [f.ref.time_ns for f in frames] == [0, 50_000_000, 100_000_000]
+        png = cv2.imread(str(sorted((folder / cam).glob("*.png"))[1]), cv2.IMREAD_GRAYSCALE)
+        np.testing.assert_array_equal(frames[1].image, png)  # FFV1: lossless
+
+
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="unknown scenario"):
         render_scenario("/nonexistent", "nope")
