@@ -168,7 +168,7 @@ def test_the_reference_in_the_second_recording_and_its_trajectories(
     assert traj == ["femur.tum", "knee.tum", "tibia.tum"]
     res = acscal("trajectory", "--rig", tmp_path / "out" / "rig.yaml", "-o", tmp_path / "t")
     assert res.returncode == 0, res.stderr
-    assert sorted(f.name for f in (tmp_path / "t").iterdir()) == traj
+    assert sorted(f.name for f in (tmp_path / "t").iterdir()) == sorted([*traj, "angles.csv"])
 
 
 def test_each_recording_estimates_its_own_clocks(tmp_path: Path) -> None:
