@@ -335,6 +335,26 @@ def input_size(path: str | Path, what: str, max_bytes: int) -> int:
     return st.st_size
 
 
+def file_sha256(path: str | Path, what: str) -> str:
+    """SHA-256 of a file's bytes, read in chunks of 1 MiB (a video of gigabytes too).
+
+    Raises
+    ------
+    InputError
+        Unreadable, naming it as ``what`` (``"image"``, ``"video"``).
+    """
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    except OSError as exc:
+        raise InputError(f"cannot read {what} ({exc.strerror or exc})", path=path) from exc
+    return h.hexdigest()
+
+
 def read_input_bytes(path: str | Path, what: str, max_bytes: int) -> bytes:
     """The content of a regular input file of at most ``max_bytes`` (see :func:`input_size`).
 

@@ -20,7 +20,6 @@ Nothing is written beside the input; memory holds one decoded frame at a time.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -31,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acs_cli.errors import InputError
+from acs_cli.io.atomic import file_sha256
 from acs_cli.io.images import IMAGE_SUFFIXES
 
 __all__ = [
@@ -180,15 +180,8 @@ class VideoRead:
 
 
 def video_sha256(path: Path) -> str:
-    """SHA-256 of a video file's bytes, read in chunks."""
-    h = hashlib.sha256()
-    try:
-        with open(path, "rb") as fh:
-            while chunk := fh.read(1 << 20):
-                h.update(chunk)
-    except OSError as exc:
-        raise InputError(f"cannot read video ({exc.strerror or exc})", path=path) from exc
-    return h.hexdigest()
+    """SHA-256 of a video file's bytes (:func:`acs_cli.io.atomic.file_sha256`)."""
+    return file_sha256(path, "video")
 
 
 def _ffmpeg_error() -> tuple[type[BaseException], ...]:

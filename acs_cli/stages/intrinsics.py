@@ -40,7 +40,7 @@ from acs_cli.core.targets import (
 )
 from acs_cli.errors import AcsError, DegenerateMotionError, InputError
 from acs_cli.io.artifacts import make_header, to_plain
-from acs_cli.io.atomic import check_distinct_output, check_writable
+from acs_cli.io.atomic import check_distinct_output, check_writable, file_sha256
 from acs_cli.io.bag import bag_key, is_bag_path, read_bag_frames, read_bag_images
 from acs_cli.io.detections import (
     Detection,
@@ -253,18 +253,10 @@ def _exit_with_parent(parent: int) -> None:
 
 
 def _file_key(path: Path, cols: int, rows: int, target: MarkerTarget | None = None) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    try:
-        with open(path, "rb") as fh:
-            while chunk := fh.read(1 << 20):
-                h.update(chunk)
-    except OSError as exc:
-        raise InputError(f"cannot read image ({exc.strerror or exc})", path=path) from exc
+    sha = file_sha256(path, "image")
     if target is not None:
-        return _target_key(h.hexdigest(), target)
-    return detection_key(h.hexdigest(), cols, rows, DETECTOR_VERSION)
+        return _target_key(sha, target)
+    return detection_key(sha, cols, rows, DETECTOR_VERSION)
 
 
 def no_board_error(
