@@ -223,7 +223,7 @@ def report(
 
 def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) -> None:
     """``acscal trajectory --rig``: every camera and joint of a rig in the reference frame."""
-    from acs_cli.core.angles import EULER_SEQUENCES
+    from acs_cli.core.angles import check_euler_sequence
     from acs_cli.io.angles import write_angles_csv
     from acs_cli.io.rig import RigArtifact
     from acs_cli.io.trajectory import read_trajectory, write_tum
@@ -231,11 +231,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) 
     from acs_cli.stages.rig import trajectories_from_rig
     from acs_cli.stages.trajectory import rig_angles
 
-    if euler not in EULER_SEQUENCES:  # before anything is written
-        raise InputError(
-            f"--euler {euler!r} is not an Euler sequence: one of {', '.join(EULER_SEQUENCES)} "
-            "(upper case intrinsic, lower case extrinsic)"
-        )
+    check_euler_sequence(euler, "--euler ")  # before anything is written
     art = RigArtifact.load(rig_file)
     files: dict[str, Path] = {}
     for c, cam in art.cameras.items():

@@ -41,6 +41,7 @@ __all__ = [
     "HingeAngles",
     "articulation_from_orientations",
     "ball_angles",
+    "check_euler_sequence",
     "hinge_angles",
 ]
 
@@ -66,6 +67,16 @@ EULER_SEQUENCES = tuple(
     )
     for s in (order, order.lower())
 )
+
+
+def check_euler_sequence(sequence: str, option: str = "") -> None:
+    """Refuse a sequence not in :data:`EULER_SEQUENCES` (``InputError``; ``option`` names
+    where it came from, e.g. ``"--euler "``)."""
+    if sequence not in EULER_SEQUENCES:
+        raise InputError(
+            f"{option}{sequence!r} is not an Euler sequence: one of "
+            f"{', '.join(EULER_SEQUENCES)} (upper case intrinsic, lower case extrinsic)"
+        )
 
 
 def articulation_from_orientations(
@@ -178,11 +189,7 @@ def ball_angles(
     InputError
         An unknown sequence.
     """
-    if sequence not in EULER_SEQUENCES:
-        raise InputError(
-            f"unknown Euler sequence {sequence!r}: one of {', '.join(EULER_SEQUENCES)} "
-            "(upper case intrinsic, lower case extrinsic)"
-        )
+    check_euler_sequence(sequence)
     n = D.shape[0]
     s = np.radians(2.0 * float(sigma_rot_deg))
     rv = se3.rotvec_from_matrix(D)

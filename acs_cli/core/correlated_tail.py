@@ -3,9 +3,8 @@
 The seeded simulation of the Wishart tail costs 0.1-0.3 s per (dimension, blocks) pair in
 every command that solves; these are its results for dimensions 1-16 and 6-12 blocks at
 the default false-alarm rate, bit for bit (the simulation is seeded and deterministic:
-``tests/unit/test_correlated.py`` recomputes some). Regenerate with::
-
-    PYTHONPATH=. python -c "from acs_cli.core.correlated import tail_table_source as s; print(s())"
+``tests/unit/test_correlated.py`` recomputes some). The entries below are what
+:func:`acs_cli.core.correlated.tail_table_source` returns.
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acs_cli.errors import InputError
+from acs_cli.io.atomic import file_sha256
 from acs_cli.io.video import EVERY_FRAME, DecodedFrame, FrameSelection, VideoFrame, VideoRead
 
 __all__ = ["IMAGE_TYPES", "bag_key", "is_bag_path", "read_bag_frames", "read_bag_images"]
@@ -50,14 +51,9 @@ def bag_key(path: Path) -> str:
     """A content key of a bag for the detections cache: SHA-256 of its file(s)."""
     files = sorted(f for f in path.rglob("*") if f.is_file()) if path.is_dir() else [path]
     h = hashlib.sha256()
-    try:
-        for f in files:
-            h.update(f.name.encode())
-            with open(f, "rb") as fh:
-                while chunk := fh.read(1 << 20):
-                    h.update(chunk)
-    except OSError as exc:
-        raise InputError(f"cannot read the bag ({exc.strerror or exc})", path=path) from exc
+    for f in files:  # each file's name and content
+        h.update(f.name.encode())
+        h.update(file_sha256(f, "the bag").encode())
     return h.hexdigest()
 
 

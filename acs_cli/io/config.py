@@ -388,13 +388,10 @@ class Board(Section):
     square: Positive = Field(le=10.0, description="the square's side, metres (at most 10)")
 
 
-class RunCamera(Section):
-    """Camera ``a`` or ``b`` (may be empty)."""
+class FrameSource(Section):
+    """The keys a camera entry of either config version takes with a video or a bag (its
+    ``video`` or ``images`` key is the entry's own: what it replaces differs)."""
 
-    images: ConfigPath | None = Field(default=None, description="the folder of joint-motion images")
-    video: ConfigPath | None = Field(
-        default=None, description="instead of images: a video file of the joint motion"
-    )
     every: Frames | None = Field(
         default=None, description="with video or bag: use every n-th frame"
     )
@@ -405,6 +402,15 @@ class RunCamera(Section):
         default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
     )
     topic: Name | None = Field(default=None, description="with bag: the image topic")
+
+
+class RunCamera(FrameSource):
+    """Camera ``a`` or ``b`` (may be empty)."""
+
+    images: ConfigPath | None = Field(default=None, description="the folder of joint-motion images")
+    video: ConfigPath | None = Field(
+        default=None, description="instead of images: a video file of the joint motion"
+    )
     model: LensModel = "pinhole"
     timestamps: ConfigPath | None = Field(default=None, description="image times (a CSV file)")
     fps: Positive | None = Field(default=None, description="image times from a frame rate")
@@ -474,23 +480,13 @@ class RunConfigFile(Section):
 # --------------------------------------------------------------------------- version 2
 
 
-class RigCamera(Section):
+class RigCamera(FrameSource):
     """One camera (body) of a rig: a trajectory file or a folder of images."""
 
     poses: ConfigPath | None = Field(default=None, description="a trajectory of T_world_cam")
     format: TrajectoryFormat = "auto"
     images: ConfigPath | None = Field(default=None, description="instead of poses: an image folder")
     video: ConfigPath | None = Field(default=None, description="instead of poses: a video file")
-    every: Frames | None = Field(
-        default=None, description="with video or bag: use every n-th frame"
-    )
-    max_frames: Frames | None = Field(
-        default=None, description="with video or bag: at most this many frames, spread evenly"
-    )
-    bag: ConfigPath | None = Field(
-        default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
-    )
-    topic: Name | None = Field(default=None, description="with bag: the image topic")
     model: LensModel = "pinhole"
     scale: Scale | None = Field(default=None, description="default known (unknown with sfm)")
     front_end: FrontEnd = "board"

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,6 +45,9 @@ from acs_cli.io.joint import BundleSection
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.validate import MAX_MAGNITUDE
 from acs_cli.io.verdict import VerdictSection, weak_marks
+
+if TYPE_CHECKING:  # rig.yaml's reader is imported where a rig is exported
+    from acs_cli.io.rig import RigArtifact
 
 __all__ = [
     "EXPORT_FORMATS",
@@ -464,7 +467,7 @@ def run_rig_export(
 
 
 def handeye_of_rig(
-    rig: Any,
+    rig: RigArtifact,
     metres: float,
     names: Mapping[str, str],
     base_frame: str,

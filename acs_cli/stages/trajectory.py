@@ -18,11 +18,11 @@ import numpy as np
 
 from acs_cli.core.acs_trajectory import AcsTrajectory, recover_trajectory
 from acs_cli.core.angles import (
-    EULER_SEQUENCES,
     BallAngles,
     HingeAngles,
     articulation_from_orientations,
     ball_angles,
+    check_euler_sequence,
     hinge_angles,
 )
 from acs_cli.core.se3 import FloatArray
@@ -263,9 +263,7 @@ def pair_angles(
     return ball_angles(D, sigma, traj.reference, euler)
 
 
-def angles_section(
-    angles: HingeAngles | BallAngles, rec: RecoveredTrajectory, relpose: RelposeArtifact
-) -> dict[str, Any]:
+def angles_section(angles: HingeAngles | BallAngles, rec: RecoveredTrajectory) -> dict[str, Any]:
     """``trajectory.yaml``'s ``angles``: what ``angles.csv`` holds and its zero."""
     pair, k = rec.pair, rec.trajectory.reference
     body: dict[str, Any] = {
@@ -340,11 +338,7 @@ def run_trajectory(
         Bad files or options; ``out_dir`` is a file; an output would overwrite an input.
     """
     cfg = config or TrajectoryConfig()
-    if cfg.euler not in EULER_SEQUENCES:  # before anything is written
-        raise InputError(
-            f"--euler {cfg.euler!r} is not an Euler sequence: one of "
-            f"{', '.join(EULER_SEQUENCES)} (upper case intrinsic, lower case extrinsic)"
-        )
+    check_euler_sequence(cfg.euler, "--euler ")  # before anything is written
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("is a file; -o takes a folder for the trajectory files", path=out_dir)
@@ -405,7 +399,7 @@ def run_trajectory(
             "position_in_b": rec.position_in_b.tolist(),
         },
         "outputs": {key: name for key, name in OUTPUT_NAMES.items() if key != "artifact"},
-        "angles": angles_section(angles, rec, art),
+        "angles": angles_section(angles, rec),
         "consistency": {
             "rms": float(np.sqrt(np.mean(d[used] ** 2))),
             "median": float(np.median(d[used])),

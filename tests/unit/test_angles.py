@@ -92,5 +92,5 @@ def test_bad_angle_requests_are_input_errors(rng: np.random.Generator) -> None:
     D = random_rotations(rng, 5, 30.0)
     with pytest.raises(InputError, match="not a direction"):
         hinge_angles(D, np.zeros(3), 0.1, 0)
-    with pytest.raises(InputError, match="unknown Euler sequence 'ABC'"):
+    with pytest.raises(InputError, match="'ABC' is not an Euler sequence"):
         ball_angles(D, 0.1, 0, "ABC")
