@@ -269,3 +269,52 @@ def test_tail_shape(rng: np.random.Generator) -> None:
     assert estimation.outlier_threshold(100, 200.0, shape=1.0) > estimation.outlier_threshold(
         100, 200.0, shape=2.5
     )
+
+
+def test_down_weights_taper_from_the_gaussian_level_to_the_threshold() -> None:
+    stat = np.array([0.0, 4.0, 5.0, 6.0, 7.5, 9.0, 10.0, 50.0])
+    w = estimation.down_weights(stat, 5.0, 10.0)
+    assert np.all(w[:3] == 1.0) and np.all(w[-2:] <= 1e-6)
+    assert np.all(np.diff(w) <= 0.0) and 0.0 < w[4] < 1.0
+    assert w[4] == pytest.approx((1 - 0.5**2) ** 2)
+    np.testing.assert_array_equal(estimation.down_weights(stat, 5.0, 5.0), np.ones(8))
+
+
+def _linear_without_first(
+    J: np.ndarray, b: np.ndarray, L: np.ndarray
+) -> estimation.LeastSquaresProblem:
+    """The problem of :func:`_linear_problem` without its first frame."""
+    J, b, L = J[1:], b[1:], L[1:]
+
+    def residuals(x: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        return np.einsum("nij,j->ni", J, x) - b, J
+
+    return estimation.LeastSquaresProblem(residuals, lambda x: L)
+
+
+def test_a_doubtful_frame_below_the_threshold_is_down_weighted_not_dropped(
+    rng: np.random.Generator,
+) -> None:
+    """12 frames, one moved by 5-12 sigma: where the (heavy-tailed) rejection threshold
+    keeps it and the Gaussian level doubts it, its weight is below 1, no frame is dropped,
+    and the estimate is nearer the fit without it than the unweighted fit of all frames."""
+    seen = 0
+    for shift in np.linspace(0.25, 0.6, 8):  # 5-12 times the 0.05 m translation noise
+        problem, J, b, L, _ = _linear_problem(rng, 12)
+        b[0] += shift * sim.random_unit_vectors(rng, 1)[0]
+        sol = estimation.solve(problem, np.zeros(6))
+        assert sol.weights.shape == (12,) and np.all(sol.weights[1:] == 1.0)
+        if not sol.inliers.all() or sol.weights[0] == 1.0:
+            continue  # dropped, or (a shift along the noise) not doubted
+        seen += 1
+        plain = estimation.solve(problem, np.zeros(6), reject_outliers=False)
+        without = estimation.solve(
+            _linear_without_first(J, b, L), np.zeros(6), reject_outliers=False
+        )
+        assert np.linalg.norm(sol.x - without.x) < np.linalg.norm(plain.x - without.x)
+        # its distance is against the noise levels alone, not shrunk by its weight
+        W = estimation.batched_inv3(estimation.covariances(sol.theta, L))
+        np.testing.assert_allclose(
+            sol.mahalanobis_sq, estimation.mahalanobis_sq(sol.residuals, W), rtol=1e-9
+        )
+    assert seen >= 2
