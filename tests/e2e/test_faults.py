@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import cli_runner
 import cv2
 import numpy as np
 import pytest
@@ -107,9 +108,8 @@ def _env() -> dict[str, str]:
 
 
 def acscal(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    res = subprocess.run(
-        [str(ACSCAL), *map(str, args)], capture_output=True, text=True, env=_env(), timeout=300
-    )
+    """A command that runs to its end (:func:`cli_runner.acscal`); kills exec the script."""
+    res = cli_runner.acscal(*args)
     assert res.returncode == 0, (args, res.stdout, res.stderr)
     return res
 
