@@ -21,3 +21,28 @@ cv2.setNumThreads(1)
 def rng() -> np.random.Generator:
     """A seeded random generator: every test is reproducible."""
     return np.random.default_rng(20240607)
+
+
+#: The longest modules (seconds of CPU each, measured with --durations), run first: xdist's
+#: loadscope hands whole modules to the workers in collection order, and a long module
+#: handed out last keeps one worker busy while the other is done.
+LONG_MODULES = (
+    "tests/unit/test_time_offset.py",
+    "tests/unit/test_core_relpose.py",
+    "tests/e2e/test_faults.py",
+    "tests/e2e/test_cli_trajectories.py",
+    "tests/e2e/test_cli_video.py",
+    "tests/e2e/test_demo.py",
+    "tests/unit/test_rig_bundle.py",
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run :data:`LONG_MODULES` first, in that order (the rest keep theirs)."""
+    rank = {name: i for i, name in enumerate(LONG_MODULES)}
+
+    def key(item: pytest.Item) -> int:
+        path = item.nodeid.split("::", 1)[0]
+        return rank.get(path, len(rank))
+
+    items.sort(key=key)  # stable: each module's tests keep their order
