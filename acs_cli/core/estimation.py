@@ -674,6 +674,14 @@ def down_weights(stat: FloatArray, lower: float, upper: float) -> FloatArray:
     return np.maximum((1.0 - u**2) ** 2, _WEIGHT_FLOOR)
 
 
+def _noise_information(
+    problem: LeastSquaresProblem, x: FloatArray, theta: FloatArray
+) -> FloatArray:
+    """``Sigma_i^{-1}`` ``(n, 3, 3)`` at ``x`` from the noise levels ``theta`` alone (no
+    frame's down-weighting)."""
+    return batched_inv3(covariances(theta, problem.noise_shapes(x)))
+
+
 def _down_weighted(
     problem: LeastSquaresProblem,
     fit: _Fit,
@@ -698,8 +706,7 @@ def _down_weighted(
     extra = 0
     base = fit
     for _round in range(DOWN_WEIGHT_ROUNDS):
-        L = problem.noise_shapes(fit.x)
-        plain = _Fit(fit.x, fit.theta, batched_inv3(covariances(fit.theta, L)), True, 0)
+        plain = _Fit(fit.x, fit.theta, _noise_information(problem, fit.x, fit.theta), True, 0)
         st = _studentize(problem, plain, mask, False)
         if not st.dof_kept > 0:
             return base, np.ones(mask.size), extra
@@ -874,7 +881,7 @@ def solve(
         theta=np.asarray(th, dtype=float),
         residuals=r,
         # against the noise levels alone (a down-weighted frame's residual is not smaller)
-        mahalanobis_sq=mahalanobis_sq(r, batched_inv3(covariances(th, problem.noise_shapes(x)))),
+        mahalanobis_sq=mahalanobis_sq(r, _noise_information(problem, x, th)),
         inliers=mask,
         weights=frame_weights,
         iterations=iterations,

@@ -25,7 +25,14 @@ from numpy.typing import NDArray
 
 from acs_cli.errors import InputError
 from acs_cli.io.atomic import file_sha256
-from acs_cli.io.video import EVERY_FRAME, DecodedFrame, FrameSelection, VideoFrame, VideoRead
+from acs_cli.io.video import (
+    EVERY_FRAME,
+    DecodedFrame,
+    FrameSelection,
+    VideoFrame,
+    VideoRead,
+    images_in_order,
+)
 
 __all__ = ["IMAGE_TYPES", "bag_key", "is_bag_path", "read_bag_frames", "read_bag_images"]
 
@@ -187,10 +194,5 @@ def read_bag_images(refs: Sequence[VideoFrame]) -> list[NDArray[np.uint8]]:
     """The pixels of some images of one bag's topic, in the order of ``refs`` (one pass)."""
     if not refs:
         return []
-    bag, topic = refs[0].video, refs[0].topic
-    frames = read_bag_frames(bag, topic, only=[r.index for r in refs])
-    by_index = {f.ref.index: f.image for f in frames}
-    missing = [r.name for r in refs if r.index not in by_index]
-    if missing:
-        raise InputError(f"cannot read {', '.join(missing)} again", path=bag)
-    return [by_index[r.index] for r in refs]
+    frames = read_bag_frames(refs[0].video, refs[0].topic, only=[r.index for r in refs])
+    return images_in_order(refs, frames, "read")

@@ -20,7 +20,7 @@ Nothing is written beside the input; memory holds one decoded frame at a time.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -43,6 +43,7 @@ __all__ = [
     "count_frames",
     "estimate_frames",
     "frame_name",
+    "images_in_order",
     "is_video_path",
     "read_frame_images",
     "read_video_frames",
@@ -394,11 +395,18 @@ def read_frame_images(refs: Sequence[VideoFrame]) -> list[NDArray[np.uint8]]:
     """The pixels of some frames of one video, in the order of ``refs`` (one decoding pass)."""
     if not refs:
         return []
-    video = refs[0].video
-    by_index = {
-        f.ref.index: f.image for f in read_video_frames(video, only=[r.index for r in refs])
-    }
+    frames = read_video_frames(refs[0].video, only=[r.index for r in refs])
+    return images_in_order(refs, frames, "decode")
+
+
+def images_in_order(
+    refs: Sequence[VideoFrame], frames: Iterable[DecodedFrame], verb: str
+) -> list[NDArray[np.uint8]]:
+    """The pixels of ``frames`` (one pass over ``refs``' input) in the order of ``refs``
+    (non-empty); a frame the pass did not give again is an ``InputError`` ("cannot
+    ``verb`` frame_000012 again")."""
+    by_index = {f.ref.index: f.image for f in frames}
     missing = [r.name for r in refs if r.index not in by_index]
     if missing:
-        raise InputError(f"cannot decode {', '.join(missing)} again", path=video)
+        raise InputError(f"cannot {verb} {', '.join(missing)} again", path=refs[0].video)
     return [by_index[r.index] for r in refs]

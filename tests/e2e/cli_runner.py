@@ -35,10 +35,10 @@ ENV = {"COLUMNS": "200", "NO_COLOR": "1"}
 #: a fresh interpreter's warnings filters (CPython 3.11, no -W or PYTHONWARNINGS)
 _DEFAULT_FILTERS = (
     ("default", DeprecationWarning, "__main__"),
-    ("ignore", DeprecationWarning, None),
-    ("ignore", PendingDeprecationWarning, None),
-    ("ignore", ImportWarning, None),
-    ("ignore", ResourceWarning, None),
+    ("ignore", DeprecationWarning, ""),
+    ("ignore", PendingDeprecationWarning, ""),
+    ("ignore", ImportWarning, ""),
+    ("ignore", ResourceWarning, ""),
 )
 
 
@@ -115,10 +115,7 @@ def _child(
             os.chdir(cwd)
         warnings.resetwarnings()
         for action, category, module in reversed(_DEFAULT_FILTERS):
-            if module is None:
-                warnings.simplefilter(action, category)  # type: ignore[arg-type]
-            else:
-                warnings.filterwarnings(action, category=category, module=module)  # type: ignore[arg-type]
+            warnings.filterwarnings(action, category=category, module=module)
         sys.argv = [str(ACSCAL), *argv]
         try:
             main(argv)
