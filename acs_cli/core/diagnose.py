@@ -39,7 +39,7 @@ import numpy as np
 
 from acs_cli.core import se3
 from acs_cli.core.joint import estimate_pivot
-from acs_cli.core.overlap import estimate_joint_overlap
+from acs_cli.core.overlap import JOINT, estimate_joint_overlap, estimate_overlap_rig
 from acs_cli.core.paper import algorithm_2_pivot
 from acs_cli.core.quality import RESIDUAL, length_scale
 from acs_cli.core.relpose import JointPrior, RelposeEstimate, estimate_relpose
@@ -624,9 +624,14 @@ def diagnose_overlap(
         return lambda A, B: estimate_joint_overlap(A, B, method).residual_rms["ab"]
 
     def residuals(A: FloatArray, B: FloatArray) -> FloatArray:
-        est = estimate_joint_overlap(A, B)
-        o_b = est.position_in_b if est.position_in_b is not None else np.zeros(3)
-        return se3.transform_points(A, est.position_in_a) - se3.transform_points(B, o_b)
+        # the clocks' search fits at every offset tried: every frame kept (the costs
+        # compare), quick fits (as the pair's, :func:`diagnose_relpose`)
+        e = estimate_overlap_rig(
+            A, B, reject_outliers=False, noise_tolerance=TEST_SETTLED_NOISE
+        ).edges[JOINT]
+        return se3.transform_points(A, e.position_in["a"]) - se3.transform_points(
+            B, e.position_in["b"]
+        )
 
     candidates = _pose_candidates((Ta, Tb), quaternion_source) + _unit_candidates(Ta, Tb, ())
     base = _rms_or_inf(fit("paper"), Ta, Tb)

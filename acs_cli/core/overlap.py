@@ -88,6 +88,7 @@ def estimate_overlap_rig(
     *,
     reject_outliers: bool = True,
     joint_type: str = "ball",
+    noise_tolerance: float = 0.0,
 ) -> RigEstimate:
     """The two-body rig of Algorithm I, solved by the rig engine.
 
@@ -96,6 +97,9 @@ def estimate_overlap_rig(
     T_w_a, T_w_b : ndarray, shape (n, 4, 4)
         Paired ``T_world_a`` and ``T_world_b`` in the same world frame.
     reject_outliers : bool
+    noise_tolerance : float
+        When the noise levels' refits stop (:func:`acs_cli.core.rig_solve.estimate_rig`;
+        0: at their fixed point).
     joint_type : {"ball", "hinge"}
         A hinge's point is the one on its axis nearest camera A's centre, its axis in
         ``axis_in``; an articulation about one axis is then what is expected, not refused.
@@ -127,6 +131,7 @@ def estimate_overlap_rig(
             overlap_tracks(motion.T_w_a, motion.T_w_b),
             reference_frame=int(np.argmin(np.sum(residuals**2, axis=1))),
             reject_outliers=reject_outliers,
+            noise_tolerance=noise_tolerance,
             accept_weak=True,
             recordings=Recordings.single(n, shared_world=True),
         )
