@@ -428,6 +428,16 @@ def export(
     board_frame: Annotated[
         str, typer.Option("--board-frame", help="handeye: the board's tf frame.")
     ] = "board",
+    limit_margin: Annotated[
+        float,
+        typer.Option(
+            "--limit-margin",
+            metavar="DEG",
+            min=0.0,
+            help="urdf: degrees added on either side of each hinge's angle range over the "
+            "calibration (rig.yaml's angle_range_deg) for its joint limits.",
+        ),
+    ] = 10.0,  # acs_cli.io.rig_export.DEFAULT_LIMIT_MARGIN_DEG (not imported at start-up)
     json_out: JsonOpt = False,
 ) -> None:
     """Export a relative pose, or a whole rig, for other tools.
@@ -458,6 +468,7 @@ def export(
         robot_name=robot_name,
         base_frame=base_frame,
         board_frame=board_frame,
+        limit_margin_deg=limit_margin,
     )
     for line in info.get("static_transform_publisher", {}).get("ros1", []):
         out.print(line)

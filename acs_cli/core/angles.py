@@ -42,6 +42,7 @@ __all__ = [
     "articulation_from_orientations",
     "ball_angles",
     "check_euler_sequence",
+    "hinge_angle_range_deg",
     "hinge_angles",
 ]
 
@@ -127,14 +128,8 @@ def hinge_angles(
     InputError
         An axis that is not a finite non-zero vector.
     """
-    u = np.asarray(axis_p, dtype=float)
-    norm = float(np.linalg.norm(u))
-    if not (np.isfinite(norm) and norm > 0):
-        raise InputError(f"the hinge axis {u.tolist()} is not a direction")
-    u = u / norm
-    q = se3.quat_xyzw_from_matrix(D)  # w >= 0
-    twist = 2.0 * np.arctan2(q[:, :3] @ u, q[:, 3])
-    twist = np.unwrap(twist)
+    u = _direction(axis_p)
+    twist = _twist(D, u)
     twist -= twist[reference]
     # the swing: D with the twist taken out, D Exp(-twist u)
     swing = D @ se3.matrix_from_rotvec(-twist[:, None] * u)
@@ -142,6 +137,62 @@ def hinge_angles(
     std = np.full(D.shape[0], 2.0 * float(sigma_rot_deg))
     std[reference] = 0.0
     return HingeAngles(np.degrees(twist), std, np.degrees(wobble))
+
+
+def _direction(axis: FloatArray) -> FloatArray:
+    """``axis`` ``(3,)`` as a unit vector; InputError when it is not a direction."""
+    u = np.asarray(axis, dtype=float)
+    norm = float(np.linalg.norm(u))
+    if not (np.isfinite(norm) and norm > 0):
+        raise InputError(f"the hinge axis {u.tolist()} is not a direction")
+    return u / norm
+
+
+def _twist(D: FloatArray, u: FloatArray) -> FloatArray:
+    """The twist (rad) of each ``D`` ``(n, 3, 3)`` about the unit ``u``, unwrapped over the
+    frames (swing-twist of its quaternion ``(v, w)``: ``2 atan2(v . u, w)``)."""
+    q = se3.quat_xyzw_from_matrix(D)  # w >= 0
+    return np.asarray(np.unwrap(2.0 * np.arctan2(q[:, :3] @ u, q[:, 3])))
+
+
+def hinge_angle_range_deg(
+    R_w_p: FloatArray, R_w_q: FloatArray, R_p_q0: FloatArray, axis_p: FloatArray
+) -> tuple[float, float]:
+    """The smallest and largest hinge angle over frames (deg), zero at the pose ``R_p_q0``.
+
+    The angle of frame ``i`` is the twist about ``axis_p`` of ``R_p_q[i] R_p_q0^T`` (as
+    :func:`hinge_angles`, with the rig's own relative rotation at the reference instant,
+    ``R_p_q0``, as the zero rather than a measured one): ``q`` turning relative to ``p`` by
+    the right-hand rule. A URDF revolute joint whose zero is that pose has its angle in this
+    range over the recording (the limits of :func:`acs_cli.io.rig_export.urdf_from_rig`).
+
+    Parameters
+    ----------
+    R_w_p, R_w_q : ndarray, shape (n, 3, 3)
+        The two bodies' orientations at the frames, in one world (n >= 1).
+    R_p_q0 : ndarray, shape (3, 3)
+        ``q``'s orientation in ``p``'s frame at the zero.
+    axis_p : ndarray, shape (3,)
+        The hinge axis in ``p``'s frame.
+
+    Returns
+    -------
+    (float, float)
+        ``(lowest, highest)`` in degrees.
+
+    Raises
+    ------
+    InputError
+        No frame, or an axis that is not a direction.
+    """
+    if R_w_p.shape[0] == 0:
+        raise InputError("a hinge's angle range needs at least one frame")
+    R_p_q = np.einsum("nji,njk->nik", R_w_p, R_w_q)
+    twist = np.degrees(_twist(np.einsum("nij,kj->nik", R_p_q, R_p_q0), _direction(axis_p)))
+    # the unwrapping starts from the first frame's branch: put the range's middle within
+    # half a turn of the zero
+    twist -= 360.0 * np.round(0.5 * (float(twist.min()) + float(twist.max())) / 360.0)
+    return float(twist.min()), float(twist.max())
 
 
 @dataclass(frozen=True)

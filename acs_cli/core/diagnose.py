@@ -108,8 +108,9 @@ UNIT_FACTORS = (1e-3, 1e3)
 #: A joint file is named as another rig's only when the joint the recording implies lies
 #: more than this many standard deviations from it (in A or in B).
 ANOTHER_RIG_SIGMAS = 5.0
-#: Corrections are screened by a cheap estimator (the paper's); the refined estimator
-#: refits at most this many, ...
+#: Corrections are screened by a cheap estimator (the paper's; where it does not apply, the
+#: refined one's quick fit: every frame kept, noise levels settled to 2%); the refined
+#: estimator refits at most this many, ...
 SCREEN_KEEP = 2
 #: ... of those the screen puts below this share of its RMS on the inputs as given.
 SCREEN_FRACTION = 0.5
@@ -360,20 +361,17 @@ def _rms_or_inf(refit: Callable[..., float], *args: object) -> float:
 def _screened(
     candidates: Sequence[_Candidate],
     refit: Callable[..., float],
-    screen: Callable[..., float] | None,
+    screen: Callable[..., float],
     base: float,
 ) -> list[_Trial]:
-    """The candidates' trials: each refitted, or with a ``screen`` (a cheap estimator, e.g.
-    the paper's, whose RMS on the inputs as given is ``base``) only the
-    :data:`SCREEN_KEEP` best of those the screen puts below :data:`SCREEN_FRACTION` of
-    ``base`` (the others get an infinite RMS: the refined estimators take seconds to fail
-    on poses that do not fit)."""
-    if screen is None:
-        keep = set(range(len(candidates)))
-    else:
-        scores = [_rms_or_inf(screen, *c.args) for c in candidates]
-        best = np.argsort(scores, kind="stable")[:SCREEN_KEEP]
-        keep = {int(i) for i in best if scores[i] < SCREEN_FRACTION * base}
+    """The candidates' trials: a ``screen`` (a cheap estimator, e.g. the paper's, whose RMS
+    on the inputs as given is ``base``) picks the :data:`SCREEN_KEEP` best of those it puts
+    below :data:`SCREEN_FRACTION` of ``base``, and only those are refitted (the others get
+    an infinite RMS: the refined estimators take seconds to fail on poses that do not
+    fit)."""
+    scores = [_rms_or_inf(screen, *c.args) for c in candidates]
+    best = np.argsort(scores, kind="stable")[:SCREEN_KEEP]
+    keep = {int(i) for i in best if scores[i] < SCREEN_FRACTION * base}
     return [
         _Trial(c.cause, c.input, _rms_or_inf(refit, *c.args) if i in keep else float("inf"),
                c.details)
@@ -790,6 +788,19 @@ def diagnose_relpose(
             estimate_relpose(A, B, p, unknown_scale=unknown_scale, method=method).residual_rms
         )
 
+    def quick(A: FloatArray, B: FloatArray, p: JointPrior | None) -> float:
+        # the screen where the paper's method does not apply: no outlier rejection, the
+        # noise levels settled to 2% (half the refined fit's time; a wrong reading's refit
+        # took twice the right one's)
+        return estimate_relpose(
+            A,
+            B,
+            p,
+            unknown_scale=unknown_scale,
+            reject_outliers=False,
+            noise_tolerance=TEST_SETTLED_NOISE,
+        ).residual_rms
+
     def residuals(A: FloatArray, B: FloatArray) -> FloatArray:
         # the clocks' search fits at every offset tried: the paper's method when it can
         return estimate_relpose(
@@ -809,8 +820,8 @@ def diagnose_relpose(
         candidates += _unit_candidates(Ta, Tb, (prior,))
     # the paper's method (a quick screen) needs the joint in A
     paper = prior is not None and prior.position_in_a is not None and not metric
-    base = _rms_or_inf(fit("paper"), Ta, Tb, prior) if paper else 0.0
-    trials = _screened(candidates, fit("refined"), fit("paper") if paper else None, base)
+    screen = fit("paper") if paper else quick
+    trials = _screened(candidates, fit("refined"), screen, _rms_or_inf(screen, Ta, Tb, prior))
     # the joint and the clocks are costlier to check: only when the poses' corrections fail
     if _select(trials, current_rms) is None:
         if prior is not None and (

@@ -32,6 +32,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, largest component in p > 0
         axis_std_deg_in: {p: float, q: float}
         wobble_rms_deg: float           # a hinge: its bodies' RMS rotation off the axis
+        angle_range_deg: [lo, hi]       # a hinge: its angle over the frames used, zero at
+                                        # the reference instant, q turning about axis_in
         T_q_p: 4x4                      # rigid only: maps p's frame into q's (hand-eye X)
         T_q_p_std: {rotation_deg: [3], translation: [3]}   # when bundle-adjusted
         residual_rms: float             # of the joint constraint over the frames used
@@ -83,6 +85,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.base import YamlArtifact, header_of
 from acs_cli.io.joint import BundleSection, MotionQuality, UncertaintySection
 from acs_cli.io.validate import (
+    Source,
     as_int,
     as_mapping,
     as_matrix,
@@ -255,6 +258,9 @@ class RigJointResult:
     motion: dict[str, MotionQuality] = field(default_factory=dict)
     #: a hinge: the RMS rotation of its bodies off the axis over the frames used (deg)
     wobble_rms_deg: float | None = None
+    #: a hinge: the lowest and highest angle over the frames used (deg), zero at the
+    #: reference instant, ``q`` turning relative to ``p`` about ``axis_in`` (right-hand rule)
+    angle_range_deg: tuple[float, float] | None = None
 
     @property
     def model(self) -> JointModel:
@@ -436,6 +442,8 @@ class RigArtifact(YamlArtifact):
                 d["axis_std_deg_in"] = dict(j.axis_std_deg_in)
                 if j.wobble_rms_deg is not None:
                     d["wobble_rms_deg"] = j.wobble_rms_deg
+                if j.angle_range_deg is not None:
+                    d["angle_range_deg"] = list(j.angle_range_deg)
             if j.model.constant_transform and j.T_q_p is not None:
                 d["T_q_p"] = j.T_q_p
                 if j.T_q_p_std is not None:
@@ -631,6 +639,9 @@ class RigArtifact(YamlArtifact):
                 wobble_rms_deg=None
                 if j.get("wobble_rms_deg") is None
                 else as_number(j["wobble_rms_deg"], f"{k}.wobble_rms_deg", p, non_negative=True),
+                angle_range_deg=None
+                if not jm.has_axis or j.get("angle_range_deg") is None
+                else _angle_range(j["angle_range_deg"], f"{k}.angle_range_deg", p),
             )
         warnings = doc.get("warnings") or []
         if not isinstance(warnings, list):
@@ -715,3 +726,11 @@ def _parse_recordings(doc: Any, p: Path) -> dict[str, RigRecordingResult]:
             None if clock is None else str(clock), offsets,
         )  # fmt: skip
     return out
+
+
+def _angle_range(value: Any, key: str, path: Source) -> tuple[float, float]:
+    """``[lo, hi]`` degrees with ``lo <= hi`` (a hinge's ``angle_range_deg``)."""
+    lo, hi = (float(v) for v in as_vector(value, key, path, 2))
+    if lo > hi:
+        raise InputError(f"'{key}' must be [lowest, highest], got [{lo:g}, {hi:g}]", path=path)
+    return lo, hi

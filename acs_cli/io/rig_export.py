@@ -22,7 +22,11 @@ URDF (:func:`urdf_from_rig`)
     ``<joint>_y``, ``<joint>_z`` about the child body's x, y and z axes, in that order
     (``R = Rx(a) Ry(b) Rz(c)``; every rotation is reachable, with a singularity at
     ``b = +-90`` degrees). At zero joint angles every camera is at its pose at the
-    reference instant (``T_cam_ref``). Limits are ``[-pi, pi]``; ``effort`` and
+    reference instant (``T_cam_ref``). A hinge's limits are the range of its angle over
+    the calibration's frames (``angle_range_deg`` of ``rig.yaml``, in the URDF joint's own
+    sense: the child turning about its ``<axis>``) widened by a margin on either side
+    (:data:`DEFAULT_LIMIT_MARGIN_DEG`, ``acscal export --limit-margin``); ``[-pi, pi]`` for
+    a hinge without a recorded range and for a ball's three joints. ``effort`` and
     ``velocity``, which URDF requires, are placeholders (not calibrated).
 
     Origins use URDF's convention: ``xyz`` then fixed-axis ``rpy`` (radians) with
@@ -85,6 +89,8 @@ RIG_EXPORT_FORMATS = ("kalibr", "urdf")
 
 #: Revolute limits of the URDF joints, radians (wide: the joints are not limited).
 _LIMIT = math.pi
+#: Degrees added on either side of a hinge's observed range for its URDF limits.
+DEFAULT_LIMIT_MARGIN_DEG = 10.0
 #: Placeholders for the ``effort`` (N m) and ``velocity`` (rad/s) URDF requires.
 _EFFORT = 1.0
 _VELOCITY = 1.0
@@ -306,6 +312,7 @@ class _Urdf:
         child: str,
         T_parent_child: FloatArray,
         axis: FloatArray | None = None,
+        limit: tuple[float, float] | None = None,
     ) -> None:
         if name in self.joints:
             raise InputError(f"URDF export: the joint name {name!r} would be used twice")
@@ -317,11 +324,12 @@ class _Urdf:
         if axis is not None:
             ET.SubElement(el, "axis", xyz=" ".join(_num(v) for v in axis))
         if kind == "revolute":
+            lower, upper = limit if limit is not None else (-_LIMIT, _LIMIT)
             ET.SubElement(
                 el,
                 "limit",
-                lower=_num(-_LIMIT),
-                upper=_num(_LIMIT),
+                lower=_num(lower),
+                upper=_num(upper),
                 effort=_num(_EFFORT),
                 velocity=_num(_VELOCITY),
             )
@@ -346,7 +354,34 @@ def _hinge_axis_in_body(
     return np.asarray(mean / np.linalg.norm(mean))
 
 
-def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
+def _hinge_limit(
+    rig: RigArtifact,
+    joint: str,
+    parent: str,
+    axis_body: FloatArray,
+    T_ref_body: FloatArray,
+    margin_deg: float,
+) -> tuple[float, float] | None:
+    """A hinge's URDF limits (rad): ``rig.yaml``'s ``angle_range_deg`` (``q`` turning
+    relative to ``p`` about ``axis_in[p]``) in the URDF joint's sense (the child, hung from
+    ``parent``, turning about ``axis_body``, in the child body's frame) widened by
+    ``margin_deg``; None without a recorded range."""
+    j = rig.joints[joint]
+    if j.angle_range_deg is None:
+        return None
+    p = j.between[0]
+    a_p = _T_ref_cam(rig, p)[:3, :3] @ np.asarray(j.axis_in[p], dtype=float)
+    # reversed when the parent is q (p then turns relative to q) or the axes oppose
+    sign = (1.0 if parent == p else -1.0) * float(np.sign(a_p @ (T_ref_body[:3, :3] @ axis_body)))
+    lo, hi = sorted(sign * v for v in j.angle_range_deg)
+    return math.radians(lo - margin_deg), math.radians(hi + margin_deg)
+
+
+def urdf_from_rig(
+    rig: RigArtifact,
+    robot_name: str = "acs_rig",
+    limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
+) -> str:
     """The rig as a URDF (XML text) for ``robot_state_publisher``.
 
     See the module doc for the links, joints and frames. At zero joint angles every camera
@@ -360,6 +395,8 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
         The calibrated rig; lengths in ``rig.length_unit`` (URDF expects metres).
     robot_name : str
         The ``<robot name>``.
+    limit_margin_deg : float
+        Degrees added on either side of each hinge's observed angle range for its limits.
 
     Returns
     -------
@@ -370,10 +407,16 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
     ------
     InputError
         The joints do not form a tree over the cameras, a hinge axis of zero length, a
-        joint or link name that would be used twice, an empty ``robot_name``.
+        joint or link name that would be used twice, an empty ``robot_name``, a negative
+        or non-finite ``limit_margin_deg``.
     """
     if not robot_name or not robot_name.strip():
         raise InputError("URDF export: the robot name must not be empty")
+    if not (math.isfinite(limit_margin_deg) and limit_margin_deg >= 0):
+        raise InputError(
+            f"URDF export: the limits' margin must be a non-negative number of degrees, got "
+            f"{limit_margin_deg:g}"
+        )
     topo = _topology(rig)
     bodies, body_of, articulations = _bodies(rig, topo)
     u = _Urdf(robot_name)
@@ -399,8 +442,10 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
         u.comment("Lengths in metres, angles in radians.")
     if articulations:
         u.comment(
-            f"Revolute limits are [-pi, pi]; effort ({_num(_EFFORT)}) and velocity "
-            f"({_num(_VELOCITY)}) are placeholders URDF requires, not calibrated values."
+            "A hinge's limits are the range of its angle over the calibration's frames, "
+            f"widened by {_num(limit_margin_deg)} deg on either side; other revolute limits "
+            f"are [-pi, pi]. Effort ({_num(_EFFORT)}) and velocity ({_num(_VELOCITY)}) are "
+            "placeholders URDF requires, not calibrated values."
         )
 
     # links: bodies (parents first), cameras, the massless links of ball joints
@@ -419,7 +464,11 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
             if j.model.has_axis
             else None
         )
-        urdf[name] = j.model.urdf(topo.joint(name), P.name, C.name, T_P_C, axis)
+        links, joints, comment = j.model.urdf(topo.joint(name), P.name, C.name, T_P_C, axis)
+        if axis is not None:
+            limit = _hinge_limit(rig, name, parent, axis, C.T_ref_body, limit_margin_deg)
+            joints = [replace(uj, limit=limit) for uj in joints]
+        urdf[name] = (links, joints, comment)
     for name, (links, _, _) in urdf.items():
         if links:
             u.comment(f"massless intermediate links of the {rig.joints[name].type} joint {name}")
@@ -455,7 +504,7 @@ def urdf_from_rig(rig: RigArtifact, robot_name: str = "acs_rig") -> str:
     for _links, joints, comment in urdf.values():
         u.comment(comment)
         for uj in joints:
-            u.joint(uj.name, uj.type, uj.parent, uj.child, uj.origin, uj.axis)
+            u.joint(uj.name, uj.type, uj.parent, uj.child, uj.origin, uj.axis, uj.limit)
 
     ET.indent(u.robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(u.robot, encoding="unicode") + "\n"
@@ -825,6 +874,7 @@ def write_rig_export(
     intrinsics: Mapping[str, IntrinsicsLike] | None = None,
     robot_name: str = "acs_rig",
     notes: Sequence[str] = (),
+    limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
 ) -> str:
     """Write the rig as ``fmt`` (``"urdf"`` or ``"kalibr"``) atomically.
 
@@ -841,6 +891,8 @@ def write_rig_export(
         ``urdf``: the robot's name.
     notes : sequence of str
         Comment lines for the top of the file (after its own).
+    limit_margin_deg : float
+        ``urdf``: degrees added on either side of each hinge's observed angle range.
 
     Returns
     -------
@@ -853,7 +905,7 @@ def write_rig_export(
         An unknown format, what the chosen export raises, an unwritable destination.
     """
     if fmt == "urdf":
-        text = urdf_from_rig(rig, robot_name=robot_name)
+        text = urdf_from_rig(rig, robot_name=robot_name, limit_margin_deg=limit_margin_deg)
         if notes:
             head, sep, rest = text.partition("\n")
             text = head + sep + "".join(f"<!-- {_xml_comment(n)} -->\n" for n in notes) + rest

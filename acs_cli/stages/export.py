@@ -378,6 +378,7 @@ def run_rig_export(
     doc: Any = None,
     base_frame: str = "base_link",
     board_frame: str = "board",
+    limit_margin_deg: float | None = None,
 ) -> dict[str, Any]:
     """Export ``rig.yaml`` as a Kalibr camchain, ROS camera_infos, a URDF or a hand-eye
     calibration (``handeye``: :func:`handeye_of_rig`).
@@ -386,7 +387,9 @@ def run_rig_export(
     name to ``intrinsics.yaml``; ``cam_<name>/intrinsics.yaml`` beside ``rig.yaml``).
     Lengths are put in metres (:func:`rig_metres`). ``camera_names`` name the ROS
     camera_info files (default: the rig's camera names). ``cam_overlaps`` are empty: a rig
-    does not record which cameras share views.
+    does not record which cameras share views. A URDF's hinge limits are each hinge's
+    observed angle range widened by ``limit_margin_deg`` on either side
+    (:func:`acs_cli.io.rig_export.urdf_from_rig`).
 
     Returns
     -------
@@ -401,7 +404,7 @@ def run_rig_export(
         a camera without intrinsics (kalibr, ros), lengths that cannot be put in metres.
     """
     from acs_cli.io.rig import RigArtifact
-    from acs_cli.io.rig_export import rig_in_metres, write_rig_export
+    from acs_cli.io.rig_export import DEFAULT_LIMIT_MARGIN_DEG, rig_in_metres, write_rig_export
 
     if fmt not in RIG_FORMATS:
         raise InputError(f"a rig exports as {', '.join(RIG_FORMATS)}, not {fmt!r}", path=rig_file)
@@ -461,6 +464,7 @@ def run_rig_export(
         intrinsics=_known(cams) if fmt == "kalibr" else None,
         robot_name=robot_name,
         notes=notes,
+        limit_margin_deg=DEFAULT_LIMIT_MARGIN_DEG if limit_margin_deg is None else limit_margin_deg,
     )
     info["written"] = [str(output)]
     return info
@@ -557,6 +561,7 @@ def run_export(
     robot_name: str = "acs_rig",
     base_frame: str = "base_link",
     board_frame: str = "board",
+    limit_margin_deg: float | None = None,
 ) -> dict[str, Any]:
     """Export ``relpose.yaml`` (or a rig's ``rig.yaml``, see :func:`run_rig_export`).
 
@@ -584,6 +589,9 @@ def run_export(
         Metres per unit of the artifact's lengths (unknown scale: of camera B's trajectory).
     robot_name : str
         ``urdf``: the robot's name.
+    limit_margin_deg : float, optional
+        ``urdf``: degrees added on either side of each hinge's observed angle range
+        (default :data:`acs_cli.io.rig_export.DEFAULT_LIMIT_MARGIN_DEG`).
 
     Returns
     -------
@@ -613,6 +621,7 @@ def run_export(
             doc=doc,
             base_frame=base_frame,
             board_frame=board_frame,
+            limit_margin_deg=limit_margin_deg,
         )
     if fmt in ("urdf", "handeye"):
         raise InputError(f"{fmt} exports a rig (rig.yaml from acscal run)", path=relpose)

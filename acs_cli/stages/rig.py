@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from acs_cli.core import se3
+from acs_cli.core.angles import hinge_angle_range_deg
 from acs_cli.core.joints import joint_model
 from acs_cli.core.pairing import common_timeline
 from acs_cli.core.quality import (
@@ -262,6 +263,28 @@ def hinge_wobble_deg(e: EdgeEstimate) -> float | None:
     return float(np.degrees(np.sqrt(np.mean(np.sum(rot**2, axis=1)))))
 
 
+def hinge_angle_range(est: RigEstimate, name: str) -> tuple[float, float] | None:
+    """A hinge's angle range over its frames used (deg, :func:`hinge_angle_range_deg`):
+    zero at the rig's relative pose at the reference instant (``T_cam_ref``, the URDF's
+    zero), about the axis in its first camera; None for another joint type, or where a
+    camera has no pose at the reference instant."""
+    e = est.edges[name]
+    p, q = e.joint.between
+    cp, cq = est.cameras[p], est.cameras[q]
+    if e.joint.type != "hinge" or cp.T_cam_ref is None or cq.T_cam_ref is None:
+        return None
+    frames = np.asarray(e.inliers, dtype=int)
+    if frames.size == 0 or p not in e.axis_in:
+        return None
+    R_p_q0 = cp.T_cam_ref[:3, :3] @ cq.T_cam_ref[:3, :3].T
+    return hinge_angle_range_deg(
+        cp.poses_in_reference_world[frames, :3, :3],
+        cq.poses_in_reference_world[frames, :3, :3],
+        R_p_q0,
+        e.axis_in[p],
+    )
+
+
 def rig_artifact(
     est: RigEstimate, length_unit: str, warnings: list[str], recordings: str | None = None
 ) -> RigArtifact:
@@ -334,6 +357,7 @@ def rig_artifact(
             T_q_p_std=T_q_p_std,
             motion=MotionQuality.of(edge_motion(est, name), dict(e.position_cov_in)),
             wobble_rms_deg=hinge_wobble_deg(e),
+            angle_range_deg=hinge_angle_range(est, name),
         )
     return RigArtifact(
         reference_camera=est.topology.reference,

@@ -170,13 +170,29 @@ def test_export_a_rig_as_urdf_and_refuse_kalibr_without_intrinsics(
     rig_file = recording / "out" / "rig.yaml"
     if not rig_file.is_file():
         assert acscal("run", recording / "config.yaml").returncode == 0
-    res = acscal("export", rig_file, "--format", "urdf", "-o", tmp_path / "rig.urdf")
+    res = acscal(
+        "export", rig_file, "--format", "urdf", "--limit-margin", "5", "-o", tmp_path / "rig.urdf"
+    )
     assert res.returncode == 0, res.stderr
     assert "wrote" in res.stdout
     robot = ET.parse(tmp_path / "rig.urdf").getroot()
     joints = {j.get("name"): j.get("type") for j in robot.iter("joint")}
     assert joints["j23"] == "revolute" and joints["r34"] == "fixed"
     assert {"j02_x", "j02_y", "j02_z"} <= set(joints)  # a ball: three revolutes
+    # the hinge's limits: its angle range over the calibration, 5 deg wider either side (in
+    # the URDF joint's sense, the range itself or its negation)
+    lo, hi = yaml.safe_load(rig_file.read_text())["joints"]["j23"]["angle_range_deg"]
+    assert hi - lo > 10.0
+    limit = next(j for j in robot.iter("joint") if j.get("name") == "j23").find("limit")
+    assert limit is not None
+    got = sorted(np.degrees([float(limit.get("lower", "nan")), float(limit.get("upper", "nan"))]))
+    assert got == pytest.approx([lo - 5, hi + 5], abs=1e-4) or got == pytest.approx(
+        [-hi - 5, -lo + 5], abs=1e-4
+    )
+    bad = acscal(
+        "export", rig_file, "--format", "urdf", "--limit-margin", "-1", "-o", tmp_path / "x"
+    )
+    assert bad.returncode == 2 and not (tmp_path / "x").exists()
     res = acscal("export", rig_file, "--format", "kalibr", "-o", tmp_path / "cc.yaml")
     assert res.returncode == 2 and "intrinsics" in res.stderr
     assert not (tmp_path / "cc.yaml").exists()

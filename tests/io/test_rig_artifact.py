@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -17,8 +18,10 @@ from acs_cli.stages.rig import rig_artifact
 from sample_data_gen.rig_sim import rig_recording
 
 
-@pytest.fixture
-def artifact(rng: np.random.Generator) -> RigArtifact:
+@pytest.fixture(scope="module")
+def _solved() -> RigArtifact:
+    """One rig solve for the module (seconds of CPU; each test gets its own copy)."""
+    rng = np.random.default_rng(20240607)
     rec = rig_recording(rng, 30, sigma_rot_deg=0.2, sigma_trans=0.005, unknown_scale=("cam4",))
     tracks = {
         c: CameraTrack(T, np.ones(30, bool), rec.unknown_scale[c]) for c, T in rec.T_wc_c.items()
@@ -26,6 +29,11 @@ def artifact(rng: np.random.Generator) -> RigArtifact:
     est = estimate_rig(rec.topology, tracks)
     art = rig_artifact(est, "m", ["a warning"])
     return dataclasses.replace(art, header=make_header("rig", {}, "test", {"length": "m"}, {}))
+
+
+@pytest.fixture
+def artifact(_solved: RigArtifact) -> RigArtifact:
+    return copy.deepcopy(_solved)
 
 
 def test_round_trip(artifact: RigArtifact, tmp_path: Path) -> None:
@@ -45,6 +53,8 @@ def test_round_trip(artifact: RigArtifact, tmp_path: Path) -> None:
             np.testing.assert_allclose(got_j.axis_in[c], v)
         assert got_j.wobble_rms_deg == j.wobble_rms_deg
         assert (j.wobble_rms_deg is not None) == (j.type == "hinge")
+        assert got_j.angle_range_deg == j.angle_range_deg
+        assert (j.angle_range_deg is not None) == (j.type == "hinge")
     assert back.warnings == ["a warning"] and back.source == str(path)
     assert "cam4" in back.summary() and "scale" in back.summary()
     np.testing.assert_allclose(back.T_a_b("cam1", "cam1"), np.eye(4), atol=1e-12)
@@ -90,6 +100,10 @@ def test_round_trip_with_bundle_sections(artifact: RigArtifact, tmp_path: Path) 
         (lambda d: d["joints"]["j23"]["axis_in"].pop("cam3"), "joints.j23.axis_in"),
         (lambda d: d["joints"]["j02"].update(between=["cam0", "cam9"]), "joints.j02.between"),
         (lambda d: d.update(reference={"camera": "camX"}), "reference.camera"),
+        (
+            lambda d: d["joints"]["j23"].update(angle_range_deg=[5, -5]),
+            "joints.j23.angle_range_deg",
+        ),
     ],
 )
 def test_bad_rig_yaml_names_the_key(artifact: RigArtifact, tmp_path: Path, edit, key: str) -> None:

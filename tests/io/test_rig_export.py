@@ -16,6 +16,7 @@ from export_consumers import check_kalibr_camchain
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
+from acs_cli.core.angles import hinge_angle_range_deg
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.intrinsics import IntrinsicsArtifact
@@ -244,6 +245,40 @@ def test_urdf_joints_articulate_like_the_rig(rec: RigRecording, rng: np.random.G
         np.testing.assert_allclose(se3.transform_points(got, e02.o_q), e02.o_p, atol=TOL, rtol=0)
     # the ball's centre is the origin of the child body's frame
     np.testing.assert_allclose(body2[:3, 3], e02.o_p, atol=TOL)
+
+
+@pytest.mark.parametrize("reference", ["cam0", "cam4"])
+def test_urdf_hinge_limits_hold_the_observed_angles(rec: RigRecording, reference: str) -> None:
+    """Limits from rig.yaml's angle range plus the margin, in the URDF joint's own sense:
+    from cam0 the hinge hangs cam3 from cam2 (as ``between``), from cam4 cam2 from cam3
+    (reversed). Every frame's relative pose is reached at an angle within the limits less
+    the margin, and the extreme frames at the limits less the margin."""
+    rig = rig_from_recording(rec, reference)
+    e = rec.edges["j23"]
+    assert e.axis_p is not None
+    R = {c: rec.T_W_c[c][:, :3, :3] for c in ("cam2", "cam3")}
+    R0 = rig.cameras["cam2"].T_cam_ref[:3, :3] @ rig.cameras["cam3"].T_cam_ref[:3, :3].T
+    span = hinge_angle_range_deg(R["cam2"], R["cam3"], R0, e.axis_p)
+    joint = dataclasses.replace(rig.joints["j23"], angle_range_deg=span)
+    rig = dataclasses.replace(rig, joints={**rig.joints, "j23": joint})
+    root, joints = _urdf_kinematics(urdf_from_rig(rig, limit_margin_deg=7.5))
+    j = next(v for v in joints.values() if v["name"] == "j23")
+    lower, upper = float(j["limit"].get("lower")), float(j["limit"].get("upper"))
+    assert upper - lower == pytest.approx(math.radians(span[1] - span[0] + 15.0), abs=1e-6)
+    # each frame's articulation at its angle: the twist about the URDF axis
+    T_rel = se3.invert_transforms(rec.T_W_c["cam2"]) @ rec.T_W_c["cam3"]
+    grid = np.radians(np.arange(-200.0, 200.0, 0.5))
+    T_at = np.stack(
+        [
+            se3.invert_transforms(T["cam2"]) @ T["cam3"]
+            for T in (_forward(joints, root, {"j23": a}) for a in grid)
+        ]
+    )
+    gap = np.linalg.norm(T_at[None] - T_rel[:, None], axis=(2, 3))  # (frames, angles)
+    assert float(np.max(np.min(gap, axis=1))) < 0.02  # every frame's pose is on the hinge
+    reached = grid[np.argmin(gap, axis=1)]
+    assert min(reached) == pytest.approx(lower + math.radians(7.5), abs=math.radians(0.5))
+    assert max(reached) == pytest.approx(upper - math.radians(7.5), abs=math.radians(0.5))
 
 
 def test_urdf_hinge_axis_and_point(rec: RigRecording) -> None:

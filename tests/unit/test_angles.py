@@ -7,7 +7,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from acs_cli.core import se3
-from acs_cli.core.angles import articulation_from_orientations, ball_angles, hinge_angles
+from acs_cli.core.angles import (
+    articulation_from_orientations,
+    ball_angles,
+    hinge_angle_range_deg,
+    hinge_angles,
+)
 from acs_cli.errors import InputError
 from sample_data_gen.acs_sim import add_pose_noise, random_rotations
 
@@ -38,6 +43,26 @@ def test_a_hinge_angle_is_its_turn_about_the_axis_by_the_right_hand_rule(
     # the other way round the axis, the other sign
     flipped = hinge_angles(articulation_from_orientations(R_w_p, R_w_q, k), -u_p, 0.1, k)
     assert np.allclose(flipped.angle_deg, -h.angle_deg)
+
+
+def test_a_hinge_angle_range_is_zero_at_the_pose_given(rng: np.random.Generator) -> None:
+    """The range a URDF's limits are made of: zero at the rig's pose at the reference
+    instant (here q's start, R_p_q0), past 180 deg unwrapped, the axis's sign its sense."""
+    R_w_p, R_w_q, u_p, truth = _hinge_motion(rng, 60)
+    R_p_q = np.einsum("nji,njk->nik", R_w_p, R_w_q)
+    R_p_q0 = se3.matrix_from_rotvec(np.radians(truth[0]) * u_p).T @ R_p_q[0]  # theta = 0
+    lo, hi = hinge_angle_range_deg(R_w_p, R_w_q, R_p_q0, u_p)
+    assert (lo, hi) == pytest.approx((truth.min(), truth.max()), abs=1e-9)
+    assert hinge_angle_range_deg(R_w_p, R_w_q, R_p_q0, -3.0 * u_p) == pytest.approx((-hi, -lo))
+    # another zero: the rig's pose 30 deg further on
+    turned = se3.matrix_from_rotvec(np.radians(30.0) * u_p) @ R_p_q0
+    assert hinge_angle_range_deg(R_w_p, R_w_q, turned, u_p) == pytest.approx((lo - 30, hi - 30))
+    # a range about half a turn: its middle within half a turn of the zero, whichever branch
+    # the first frame's twist fell on
+    back = hinge_angle_range_deg(R_w_p[::-1], R_w_q[::-1], R_p_q0, u_p)
+    assert back == pytest.approx((lo, hi), abs=1e-9)
+    with pytest.raises(InputError, match="at least one frame"):
+        hinge_angle_range_deg(R_w_p[:0], R_w_q[:0], R_p_q0, u_p)
 
 
 def test_a_wobbling_hinge_reports_its_wobble(rng: np.random.Generator) -> None:

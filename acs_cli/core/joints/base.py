@@ -159,6 +159,8 @@ class UrdfJoint:
     child: str
     origin: FloatArray
     axis: FloatArray | None = None
+    #: a revolute joint's ``(lower, upper)`` (rad); None: ``[-pi, pi]``
+    limit: tuple[float, float] | None = None
 
 
 class JointModel(ABC):
