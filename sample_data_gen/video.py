@@ -106,3 +106,32 @@ def folder_to_video(
     times = [round(float(t), 3) for t in np.concatenate([[0.0], np.cumsum(steps)])]
     images = (cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) for f in files)
     return write_video(path, images, times), times
+
+
+def panning_scene(
+    n: int = 24, blurred: Sequence[int] = (5, 12), stopped: Sequence[int] = (8, 9, 10)
+) -> tuple[list[NDArray[np.uint8]], set[int], set[int]]:
+    """Frames of a camera panning over a blocky texture, for frame selection's rules.
+
+    The camera moves 6 pixels a frame (320x480 views of an 800x480 texture), but not at the
+    frames ``stopped`` (each the same view as the frame before), and the frames ``blurred``
+    carry a horizontal pan's motion blur (a 15-pixel box).
+
+    Returns
+    -------
+    frames : list of ndarray, shape (480, 320), uint8
+    blurred, stopped : set of int
+        The frames blurred, and those repeating the view before them.
+    """
+    rng = np.random.default_rng(7)
+    texture = cv2.resize(
+        rng.integers(0, 256, (24, 40), dtype=np.uint8), (800, 480), interpolation=cv2.INTER_NEAREST
+    )
+    frames, x = [], 0
+    for i in range(n):
+        x += 0 if i in stopped else 6
+        view = np.ascontiguousarray(texture[:, x : x + 320])
+        if i in blurred:
+            view = np.asarray(cv2.blur(view, (15, 1)))
+        frames.append(view)
+    return frames, set(blurred), set(stopped)

@@ -123,11 +123,39 @@ MaxFramesOpt = Annotated[
 ]
 
 
-def frame_selection(every: int | None, max_frames: int | None) -> FrameSelection:
-    """``--every`` and ``--max-frames`` as a :class:`FrameSelection`."""
+SkipBlurredOpt = Annotated[
+    bool,
+    typer.Option(
+        "--skip-blurred",
+        help="Video input: skip frames whose sharpness is below half the median of the last "
+        "15 selected frames (motion blur; docs/formats.md, video files).",
+    ),
+]
+MinChangeOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--min-change",
+        min=0.0,
+        max=1.0,
+        metavar="SHARE",
+        help="Video input: skip frames that differ from the last kept one by less than this "
+        "share of the grey range (mean absolute difference; e.g. 0.02: a camera standing "
+        "still).",
+    ),
+]
+
+
+def frame_selection(
+    every: int | None,
+    max_frames: int | None,
+    skip_blurred: bool = False,
+    min_change: float | None = None,
+) -> FrameSelection:
+    """``--every``, ``--max-frames``, ``--skip-blurred`` and ``--min-change`` as a
+    :class:`FrameSelection`."""
     from acs_cli.io.video import FrameSelection
 
-    return FrameSelection(1 if every is None else every, max_frames)
+    return FrameSelection(1 if every is None else every, max_frames, skip_blurred, min_change)
 
 
 TopicOpt = Annotated[
@@ -224,6 +252,8 @@ def intrinsics(
     workers: WorkersOpt = None,
     every: EveryOpt = None,
     max_frames: MaxFramesOpt = None,
+    skip_blurred: SkipBlurredOpt = False,
+    min_change: MinChangeOpt = None,
     topic: TopicOpt = None,
     accept_weak: AcceptWeakOpt = False,
     json_out: JsonOpt = False,
@@ -261,7 +291,7 @@ def intrinsics(
         workers=workers,
         target=tgt,
         accept_weak=accept_weak,
-        selection=frame_selection(every, max_frames),
+        selection=frame_selection(every, max_frames, skip_blurred, min_change),
         topic=topic,
     )
     with _progress("detecting") as progress:
@@ -431,6 +461,8 @@ def poses(
     ] = None,
     every: EveryOpt = None,
     max_frames: MaxFramesOpt = None,
+    skip_blurred: SkipBlurredOpt = False,
+    min_change: MinChangeOpt = None,
     topic: TopicOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
@@ -481,7 +513,7 @@ def poses(
             workdir=workdir,
             timestamps=timestamps,
             fps=fps,
-            selection=frame_selection(every, max_frames),
+            selection=frame_selection(every, max_frames, skip_blurred, min_change),
         )
         return
     from acs_cli.stages.poses import PosesConfig, run_poses
@@ -513,7 +545,7 @@ def poses(
         workers=workers,
         timestamps=timestamps,
         fps=fps,
-        selection=frame_selection(every, max_frames),
+        selection=frame_selection(every, max_frames, skip_blurred, min_change),
         topic=topic,
     )
     with _progress("detecting") as progress:

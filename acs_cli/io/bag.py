@@ -31,6 +31,7 @@ from acs_cli.io.video import (
     FrameSelection,
     VideoFrame,
     VideoRead,
+    ViewFilter,
     images_in_order,
 )
 
@@ -163,6 +164,7 @@ def read_bag_frames(
             rep.count = count
             wanted = selection.indices(count)
         rep.estimate = -(-count // selection.every)
+        view = ViewFilter(selection if only is None else EVERY_FRAME)
         last_ns: int | None = None
         repeated = 0
         for index, (conn, _t, raw) in enumerate(reader.messages(connections=conns)):
@@ -175,14 +177,17 @@ def read_bag_frames(
             if last_ns is not None and t_ns <= last_ns:
                 repeated += 1
                 continue
+            image = _to_gray(msg, conn.msgtype, topic, p)
+            if view.active and not rep.judged(view.judge(image)):
+                continue
             last_ns = t_ns
             rep.kept += 1
-            image = _to_gray(msg, conn.msgtype, topic, p)
             yield DecodedFrame(VideoFrame(p, index, t_ns, topic), image)
     finally:
         reader.close()
     if only is None and rep.kept == 0:
         raise InputError(f"no image on topic {topic}", path=p)
+    rep.note_skipped(selection)
     if repeated:
         rep.notes.append(
             f"{repeated} image(s) skipped: their header.stamp does not increase past the "

@@ -95,7 +95,7 @@ WORLDS = ("separate", "shared")
 #: Camera keys that only apply to a camera given as an image folder.
 _IMAGE_KEYS = ("front_end", "intrinsics", "timestamps", "fps")
 #: Keys of a camera entry that go with ``video`` (frame selection, see acs_cli.io.video).
-_VIDEO_KEYS = ("every", "max_frames")
+_VIDEO_KEYS = ("every", "max_frames", "skip_blurred", "min_change")
 #: Settings of a body that every recording of it must give alike.
 _BODY_KEYS = ("unknown_scale", "model", "front_end", "intrinsics")
 #: A run config's board fields when it names a target instead (unused then; the defaults
@@ -121,6 +121,10 @@ class CameraSpec:
     #: holds the video file
     every: int = 1
     max_frames: int | None = None
+    #: with ``video`` or ``bag``: skip blurred frames, and views that barely change
+    #: (``--skip-blurred``, ``--min-change``)
+    skip_blurred: bool = False
+    min_change: float | None = None
     #: with ``bag``: the image topic (``images`` then holds the bag)
     topic: str | None = None
 
@@ -193,6 +197,10 @@ class RigCameraSpec:
     #: holds the video file
     every: int = 1
     max_frames: int | None = None
+    #: with ``video`` or ``bag``: skip blurred frames, and views that barely change
+    #: (``--skip-blurred``, ``--min-change``)
+    skip_blurred: bool = False
+    min_change: float | None = None
     #: with ``bag``: the image topic (``images`` then holds the bag)
     topic: str | None = None
     #: with ``poses``: the file holds ``T_cam_world`` (a robot's ``T_flange_base``): inverted
@@ -397,6 +405,18 @@ class FrameSource(Section):
     )
     max_frames: Frames | None = Field(
         default=None, description="with video or bag: at most this many frames, spread evenly"
+    )
+    skip_blurred: bool | None = Field(
+        default=None,
+        description="with video or bag: skip frames whose sharpness is below half the median "
+        "of the last 15 selected frames",
+    )
+    min_change: float | None = Field(
+        default=None,
+        gt=0.0,
+        lt=1.0,
+        description="with video or bag: skip frames that differ from the last kept one by less "
+        "than this share of the grey range",
     )
     bag: ConfigPath | None = Field(
         default=None, description="instead of images: a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap)"
@@ -709,7 +729,8 @@ def _frames_path(cam: RunCamera | RigCamera) -> str | None:
 
 def _camera_video(cam: RunCamera | RigCamera, key: str, path: Path) -> None:
     """``images``, ``video`` and ``bag`` exclude each other; a video's or bag's frames carry
-    their times; ``every`` and ``max_frames`` go with ``video`` or ``bag``, ``topic`` with
+    their times; ``every``, ``max_frames``, ``skip_blurred`` and ``min_change`` go with
+    ``video`` or ``bag``, ``topic`` with
     ``bag`` (which needs it)."""
     given = [k for k in ("images", "video", "bag") if cam.given(k)]
     if len(given) > 1:
@@ -814,6 +835,8 @@ def parse_run_config(doc: Any, path: Path) -> RunConfig:
             cam.fps,
             every=cam.every or 1,
             max_frames=cam.max_frames,
+            skip_blurred=bool(cam.skip_blurred),
+            min_change=cam.min_change,
             topic=cam.topic,
         )
 
@@ -1065,6 +1088,8 @@ def _camera_specs(
             fps=cam.fps,
             every=cam.every or 1,
             max_frames=cam.max_frames,
+            skip_blurred=bool(cam.skip_blurred),
+            min_change=cam.min_change,
             topic=cam.topic,
             invert=cam.invert,
         )

@@ -11,6 +11,17 @@ Rules (``docs/formats.md``, "Video files"):
 - selection: ``every=N`` keeps frames 0, N, 2N, ...; ``max_frames=M`` then keeps at most M of
   those, spread evenly over them (``round(linspace(0, K - 1, M))`` of the K left, which needs
   the frame count: a pass that reads the packets without decoding them);
+- with ``skip_blurred``, a selected frame is skipped when its sharpness (the variance of the
+  Laplacian of the frame scaled to at most ``THUMB_WIDTH`` pixels wide) is below
+  ``BLUR_FRACTION`` of the median sharpness of the last ``BLUR_WINDOW`` selected frames, itself
+  included (motion blur, focus hunting: relative to the recording around it, so that the
+  rule does not depend on the scene's texture);
+- with ``min_change``, a selected frame is skipped when it differs from the last kept frame
+  by less than that share of the grey range (the mean absolute difference of the frames
+  scaled to ``CHANGE_WIDTH`` pixels wide, over 255): a camera standing still gives the same
+  view again;
+- both rules run on the frames ``every`` and ``max_frames`` select, in that order, and are
+  counted in the notes (so ``max_frames`` is then an upper bound);
 - a frame whose time does not increase past the last kept frame's is skipped (noted);
 - a damaged or truncated file gives the frames that decode and a note; no frame at all, or a
   file that is not a video, is an :class:`~acs_cli.errors.InputError`.
@@ -34,12 +45,17 @@ from acs_cli.io.atomic import file_sha256
 from acs_cli.io.images import IMAGE_SUFFIXES
 
 __all__ = [
+    "BLUR_FRACTION",
+    "BLUR_WINDOW",
+    "CHANGE_WIDTH",
     "EVERY_FRAME",
+    "THUMB_WIDTH",
     "VIDEO_SUFFIXES",
     "DecodedFrame",
     "FrameSelection",
     "VideoFrame",
     "VideoRead",
+    "ViewFilter",
     "count_frames",
     "estimate_frames",
     "frame_name",
@@ -47,6 +63,7 @@ __all__ = [
     "is_video_path",
     "read_frame_images",
     "read_video_frames",
+    "sharpness",
     "video_sha256",
 ]
 
@@ -54,6 +71,14 @@ __all__ = [
 #: images is expected is also tried as a video.
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi", ".webm", ".m4v", ".mpg", ".mpeg", ".ts")
 _NS = 10**9
+#: Frames are judged for blur at most this wide (pixels): the same rule at any resolution.
+THUMB_WIDTH = 640
+#: A frame is blurred below this share of the recent frames' median sharpness ...
+BLUR_FRACTION = 0.5
+#: ... over this many selected frames (the frame itself included).
+BLUR_WINDOW = 15
+#: Frames are compared with the last kept one at this width (pixels).
+CHANGE_WIDTH = 160
 
 
 def frame_name(index: int) -> str:
@@ -81,18 +106,34 @@ class FrameSelection:
 
     every: int = 1
     max_frames: int | None = None
+    #: skip frames blurred against the recording around them (module doc)
+    skip_blurred: bool = False
+    #: skip frames that differ from the last kept one by less than this share of the grey
+    #: range (module doc); None: keep them
+    min_change: float | None = None
 
     def check(self) -> None:
-        """Raise :class:`InputError` for a non-positive ``every`` or ``max_frames``."""
+        """Raise :class:`InputError` for a non-positive ``every`` or ``max_frames``, or a
+        ``min_change`` outside ``(0, 1)``."""
         if int(self.every) < 1:
             raise InputError(f"--every must be a positive number of frames, got {self.every}")
         if self.max_frames is not None and int(self.max_frames) < 1:
             raise InputError(f"--max-frames must be positive, got {self.max_frames}")
+        if self.min_change is not None and not 0.0 < float(self.min_change) < 1.0:
+            raise InputError(
+                f"--min-change must be a share of the grey range between 0 and 1, got "
+                f"{self.min_change}"
+            )
 
     @property
     def trivial(self) -> bool:
         """True when every frame is kept."""
-        return self.every == 1 and self.max_frames is None
+        return (
+            self.every == 1
+            and self.max_frames is None
+            and not self.skip_blurred
+            and self.min_change is None
+        )
 
     def describe(self) -> str:
         """The rule in words."""
@@ -101,7 +142,23 @@ class FrameSelection:
             parts.append(f"1 frame in {self.every}")
         if self.max_frames is not None:
             parts.append(f"at most {self.max_frames} frames spread evenly")
+        if self.skip_blurred:
+            parts.append(
+                f"blurred ones skipped (sharpness below {BLUR_FRACTION:g} of the last "
+                f"{BLUR_WINDOW} frames' median)"
+            )
+        if self.min_change is not None:
+            parts.append(f"views changed by less than {100 * self.min_change:g}% skipped")
         return ", then ".join(parts) if parts else "every frame"
+
+    def plain(self) -> dict[str, Any]:
+        """The rule for an artifact's header."""
+        return {
+            "every": self.every,
+            "max_frames": self.max_frames,
+            "skip_blurred": self.skip_blurred,
+            "min_change": self.min_change,
+        }
 
     def indices(self, count: int) -> set[int] | None:
         """The frame indices kept from a video of ``count`` frames (None: every n-th,
@@ -154,6 +211,60 @@ class DecodedFrame:
     image: NDArray[np.uint8]
 
 
+def _thumb(image: NDArray[np.uint8], width: int) -> NDArray[np.uint8]:
+    """``image`` scaled (area averaging) to at most ``width`` pixels wide."""
+    import cv2
+
+    h, w = image.shape[:2]
+    if w <= width:
+        return image
+    return np.asarray(
+        cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
+    )
+
+
+def sharpness(image: NDArray[np.uint8]) -> float:
+    """The variance of the Laplacian of ``image`` scaled to :data:`THUMB_WIDTH`: higher for
+    sharper frames of one scene."""
+    import cv2
+
+    return float(cv2.Laplacian(_thumb(image, THUMB_WIDTH), cv2.CV_64F).var())
+
+
+class ViewFilter:
+    """The blur and change rules of a :class:`FrameSelection` (module doc), frame by frame.
+
+    :meth:`judge` is given each selected frame in order and says why it is skipped (None:
+    kept); it keeps what the rules need: the last ``BLUR_WINDOW`` sharpnesses and the last
+    kept frame's thumbnail.
+    """
+
+    def __init__(self, selection: FrameSelection) -> None:
+        self.selection = selection
+        self.recent: list[float] = []
+        self.last: NDArray[np.float32] | None = None
+
+    @property
+    def active(self) -> bool:
+        return self.selection.skip_blurred or self.selection.min_change is not None
+
+    def judge(self, image: NDArray[np.uint8]) -> str | None:
+        """``"blurred"``, ``"unchanged"`` or None (kept)."""
+        if self.selection.skip_blurred:
+            s = sharpness(image)
+            self.recent = [*self.recent[-(BLUR_WINDOW - 1) :], s]
+            if s < BLUR_FRACTION * float(np.median(self.recent)):
+                return "blurred"
+        if self.selection.min_change is not None:
+            thumb = _thumb(image, CHANGE_WIDTH).astype(np.float32)
+            if self.last is not None and self.last.shape == thumb.shape:
+                change = float(np.mean(np.abs(thumb - self.last))) / 255.0
+                if change < self.selection.min_change:
+                    return "unchanged"
+            self.last = thumb
+        return None
+
+
 @dataclass
 class VideoRead:
     """What a pass over a video saw (filled in as its frames are decoded).
@@ -178,6 +289,33 @@ class VideoRead:
     count: int | None = None
     estimate: int | None = None
     notes: list[str] = field(default_factory=list)
+    #: selected frames skipped by the blur and change rules (:class:`ViewFilter`)
+    blurred: int = 0
+    unchanged: int = 0
+
+    def judged(self, verdict: str | None) -> bool:
+        """Count a :meth:`ViewFilter.judge` verdict; True when the frame is kept."""
+        if verdict == "blurred":
+            self.blurred += 1
+        elif verdict == "unchanged":
+            self.unchanged += 1
+        return verdict is None
+
+    def note_skipped(self, selection: FrameSelection) -> None:
+        """Add the note that counts the frames the blur and change rules skipped."""
+        parts = []
+        if self.blurred:
+            parts.append(
+                f"{self.blurred} as blurred (sharpness below {BLUR_FRACTION:g} of the last "
+                f"{BLUR_WINDOW} frames' median)"
+            )
+        if self.unchanged:
+            parts.append(
+                f"{self.unchanged} as too close to the last kept view (a change below "
+                f"{100 * (selection.min_change or 0.0):g}% of the grey range)"
+            )
+        if parts:
+            self.notes.append("frames skipped: " + "; ".join(parts))
 
 
 def video_sha256(path: Path) -> str:
@@ -312,6 +450,7 @@ def read_video_frames(
         guess = estimate_frames(p)
         rep.estimate = None if guess is None else -(-guess // selection.every)
     last_wanted = max(wanted) if wanted else None
+    view = ViewFilter(selection if only is None else EVERY_FRAME)
     container = _open(p)
     errors = _ffmpeg_error()
     try:
@@ -361,10 +500,12 @@ def read_video_frames(
                 if kept_ns is not None and t_ns <= kept_ns:
                     repeated += 1
                     continue
+                image = np.ascontiguousarray(frame.to_ndarray(format="gray"))
+                if view.active and not rep.judged(view.judge(image)):
+                    continue
                 kept_ns = t_ns
                 rep.kept += 1
-                image = frame.to_ndarray(format="gray")
-                yield DecodedFrame(VideoFrame(p, i, t_ns), np.ascontiguousarray(image))
+                yield DecodedFrame(VideoFrame(p, i, t_ns), image)
             if last_wanted is not None and only is not None and index > last_wanted:
                 break
         if only is None and first_error is None and last_ns is not None:
@@ -375,6 +516,7 @@ def read_video_frames(
     if only is None and rep.kept == 0:
         why = f" ({first_error})" if first_error else ""
         raise InputError(f"no frame of the video decodes{why}", path=p)
+    rep.note_skipped(selection)
     if bad_packets:
         rep.notes.append(
             f"the video is damaged ({first_error}): used the {rep.decoded} frames that decode"

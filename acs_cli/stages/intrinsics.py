@@ -515,8 +515,9 @@ def detect_folder(
         )
     if not selection.trivial:
         raise InputError(
-            "--every and --max-frames (every, max_frames) select frames of a video file; "
-            "this is a folder of images",
+            "--every, --max-frames, --skip-blurred and --min-change (every, max_frames, "
+            "skip_blurred, min_change) select frames of a video file; this is a folder of "
+            "images",
             path=folder,
         )
     images = list_images(folder)
@@ -737,8 +738,9 @@ def _detect_video(
     frames_info: dict[str, Any] = {
         "decoded": report.decoded,
         "kept": len(refs),
-        "every": selection.every,
-        "max_frames": selection.max_frames,
+        **selection.plain(),
+        "skipped_blurred": report.blurred,
+        "skipped_unchanged": report.unchanged,
         "times": "header.stamp" if bag else "presentation timestamps (pts * time_base), seconds",
     }
     if bag:

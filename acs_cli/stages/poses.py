@@ -554,8 +554,9 @@ def _video_frames_to(
     if size is None:  # pragma: no cover - read_video_frames raises first
         raise InputError("no frame of the video decodes", path=video)
     notes = list(report.notes)
-    counts = {"decoded": report.decoded, "kept": len(times), "every": selection.every,
-              "max_frames": selection.max_frames}  # fmt: skip
+    counts = {"decoded": report.decoded, "kept": len(times), **selection.plain(),
+              "skipped_blurred": report.blurred,
+              "skipped_unchanged": report.unchanged}  # fmt: skip
     if not selection.trivial:
         notes.insert(0, f"video: used {len(times)} of {report.decoded} frames "
                         f"({selection.describe()})")  # fmt: skip
@@ -690,7 +691,8 @@ def run_sfm_poses(
     config.selection.check()
     if not video and not config.selection.trivial:
         raise InputError(
-            "--every and --max-frames select frames of a video file; this is a folder of images",
+            "--every, --max-frames, --skip-blurred and --min-change select frames of a video "
+            "file; this is a folder of images",
             path=images_dir,
         )
     paths = [] if video else list_images(images_dir)

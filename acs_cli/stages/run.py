@@ -313,11 +313,16 @@ def _selection_options(selection: FrameSelection) -> dict[str, Any]:
     """A stage's options naming a video's frame selection (none for every frame)."""
     if selection.trivial:
         return {}
-    return {"every": selection.every, "max_frames": selection.max_frames}
+    out: dict[str, Any] = {"every": selection.every, "max_frames": selection.max_frames}
+    if selection.skip_blurred:
+        out["skip_blurred"] = True
+    if selection.min_change is not None:
+        out["min_change"] = selection.min_change
+    return out
 
 
 def _selection(cam: CameraSpec | RigCameraSpec) -> FrameSelection:
-    return FrameSelection(cam.every, cam.max_frames)
+    return FrameSelection(cam.every, cam.max_frames, cam.skip_blurred, cam.min_change)
 
 
 def _target_options(board: tuple[int, int, float], target: MarkerTarget | None) -> dict[str, Any]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -13,7 +14,7 @@ from cli_runner import acscal
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.trajectory import read_trajectory
 from sample_data_gen.render import render_scenario
-from sample_data_gen.video import folder_to_video
+from sample_data_gen.video import folder_to_video, write_video
 
 FRAMES = 16
 
@@ -83,6 +84,38 @@ def test_max_frames_and_every_are_reported(recording: dict, tmp_path: Path) -> N
     kept = {"frame_000000", "frame_000004", "frame_000010", "frame_000014"}
     assert art.trajectory.names is not None and set(art.trajectory.names) <= kept
     assert art.header["video"]["max_frames"] == 4 and art.header["video"]["every"] == 2
+
+
+def test_blurred_frames_and_repeated_views_are_skipped_and_counted(
+    recording: dict, tmp_path: Path
+) -> None:
+    """The camera stops after frame 6 (two repeats of its view) and frame 10 is smeared by a
+    fast pan: --min-change drops the repeats, --skip-blurred the smeared frame."""
+    frames = [
+        cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted(recording["folder"].glob("*.png"))
+    ]
+    frames[10] = cv2.blur(frames[10], (41, 1))
+    frames = [*frames[:7], frames[6], frames[6], *frames[7:]]  # frames 7 and 8 repeat 6
+    video = write_video(tmp_path / "stop.mkv", frames, [0.1 * i for i in range(len(frames))])
+    npz = tmp_path / "poses.npz"
+    res = acscal(
+        "poses", video, "--intrinsics", recording["intr"], "-o", npz,
+        "--min-change", "0.05", "--skip-blurred",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    info = PosesArtifact.load(npz).header["video"]
+    assert info["skipped_unchanged"] == 2 and info["skipped_blurred"] >= 1
+    assert info["skip_blurred"] is True and info["min_change"] == 0.05
+    assert info["kept"] + info["skipped_unchanged"] + info["skipped_blurred"] == len(frames)
+    assert f"{info['skipped_blurred']} as blurred" in res.stderr
+    assert "2 as too close to the last kept view" in res.stderr
+    names = set(PosesArtifact.load(npz).trajectory.names or [])
+    assert not names & {"frame_000007", "frame_000008", "frame_000012"}  # 12: smeared 10
+    folder = acscal(
+        "poses", recording["folder"], "--intrinsics", recording["intr"], "-o", tmp_path / "f.npz",
+        "--skip-blurred",
+    )  # fmt: skip
+    assert folder.returncode == 2 and "select frames of a video file" in folder.stderr
 
 
 def test_truncated_video_warns_and_uses_what_decodes(recording: dict, tmp_path: Path) -> None:

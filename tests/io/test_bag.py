@@ -11,6 +11,7 @@ from acs_cli.errors import InputError
 from acs_cli.io.bag import is_bag_path, read_bag_frames, read_bag_images
 from acs_cli.io.video import FrameSelection, VideoFrame, VideoRead
 from sample_data_gen.bag import write_bag
+from sample_data_gen.video import panning_scene
 
 TOPIC = "/cam/image_raw"
 #: header.stamp values a float of seconds would round: exact to the nanosecond
@@ -81,3 +82,14 @@ def test_not_a_bag_is_an_input_error(tmp_path: Path) -> None:
     fake.write_text("not a bag\n")
     with pytest.raises(InputError, match="cannot read the ROS bag"):
         list(read_bag_frames(fake, TOPIC))
+
+
+def test_blurred_and_repeated_images_of_a_topic_are_skipped(tmp_path: Path) -> None:
+    frames, blurred, repeated = panning_scene()
+    times = [TIMES[0] + k * 33_333_333 for k in range(len(frames))]
+    bag = write_bag(tmp_path / "pan.bag", TOPIC, frames, times)
+    report = VideoRead()
+    selection = FrameSelection(skip_blurred=True, min_change=0.02)
+    kept = [f.ref.index for f in read_bag_frames(bag, TOPIC, selection, report)]
+    assert kept == [i for i in range(len(frames)) if i not in blurred | repeated]
+    assert (report.blurred, report.unchanged) == (2, 3) and report.notes[0].startswith("frames")

@@ -16,8 +16,9 @@ from acs_cli.io.video import (
     frame_name,
     read_frame_images,
     read_video_frames,
+    sharpness,
 )
-from sample_data_gen.video import write_video
+from sample_data_gen.video import panning_scene, write_video
 
 TIMES = [0.0, 0.1, 0.25, 0.3, 0.42, 0.5, 0.61, 0.75, 0.8, 0.93]
 
@@ -97,3 +98,28 @@ def test_no_frame_or_not_a_video_is_an_input_error(mkv: Path, tmp_path: Path) ->
                         (image, "image file")):  # fmt: skip
         with pytest.raises(InputError, match=words):
             list(read_video_frames(path))
+
+
+def test_blurred_frames_and_repeated_views_are_skipped(tmp_path: Path) -> None:
+    frames, blurred, repeated = panning_scene()
+    assert sharpness(frames[5]) < 0.5 * sharpness(frames[4])
+    video = write_video(tmp_path / "pan.mkv", frames, [0.04 * i for i in range(len(frames))])
+    cases = [
+        (FrameSelection(skip_blurred=True), blurred, (2, 0)),
+        (FrameSelection(min_change=0.02), repeated, (0, 3)),
+        (FrameSelection(skip_blurred=True, min_change=0.02), blurred | repeated, (2, 3)),
+        (FrameSelection(every=2, skip_blurred=True), set(range(1, 24, 2)) | {12}, (1, 0)),
+    ]
+    for selection, skipped, counts in cases:
+        report = VideoRead()
+        kept = [f.ref.index for f in read_video_frames(video, selection, report)]
+        assert kept == [i for i in range(len(frames)) if i not in skipped], selection
+        assert (report.blurred, report.unchanged) == counts
+        assert report.kept == len(kept) and report.decoded == len(frames)
+        assert len(report.notes) == 1 and report.notes[0].startswith("frames skipped: ")
+        assert not selection.trivial and "skipped" in selection.describe()
+    # re-reading frames by index applies no rule
+    assert [f.ref.index for f in read_video_frames(video, FrameSelection(), only=[5, 9])] == [5, 9]
+    for bad in (0.0, 1.0, -0.1):
+        with pytest.raises(InputError, match="--min-change"):
+            FrameSelection(min_change=bad).check()

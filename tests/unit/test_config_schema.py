@@ -109,12 +109,24 @@ def test_null_is_a_key_left_out(tmp_path: Path) -> None:
 
 def test_a_camera_takes_a_video_with_its_frame_selection(tmp_path: Path) -> None:
     doc = copy.deepcopy(RIG)
-    doc["cameras"]["cam2"] = {"video": "rec/c2.mp4", "every": 3, "max_frames": 40}
+    doc["cameras"]["cam2"] = {
+        "video": "rec/c2.mp4",
+        "every": 3,
+        "max_frames": 40,
+        "skip_blurred": True,
+        "min_change": 0.02,
+    }
     cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
     cam = cfg.cameras["cam2"]
     assert cam.images == tmp_path / "rec" / "c2.mp4"
-    assert (cam.every, cam.max_frames) == (3, 40)
-    assert (cfg.cameras["cam0"].every, cfg.cameras["cam0"].max_frames) == (1, None)
+    assert (cam.every, cam.max_frames, cam.skip_blurred, cam.min_change) == (3, 40, True, 0.02)
+    cam0 = cfg.cameras["cam0"]
+    assert (cam0.every, cam0.max_frames, cam0.skip_blurred, cam0.min_change) == (
+        1,
+        None,
+        False,
+        None,
+    )
 
 
 @pytest.mark.parametrize(
@@ -123,7 +135,13 @@ def test_a_camera_takes_a_video_with_its_frame_selection(tmp_path: Path) -> None
         ({"video": "v.mp4", "images": "imgs"}, "cameras.cam2", "give one of 'poses'"),
         ({"video": "v.mp4", "poses": "c.tum"}, "cameras.cam2", "give one of 'poses'"),
         ({"video": "v.mp4", "fps": 30}, "cameras.cam2.fps", "carry their own times"),
-        ({"images": "imgs", "every": 2}, "cameras.cam2", "'every', 'max_frames' go with 'video'"),
+        (
+            {"images": "imgs", "every": 2},
+            "cameras.cam2",
+            "'every', 'max_frames', 'skip_blurred', 'min_change' go with 'video'",
+        ),
+        ({"images": "imgs", "skip_blurred": True}, "cameras.cam2", "go with 'video' or 'bag'"),
+        ({"video": "v.mp4", "min_change": 1.5}, "cameras.cam2.min_change", "less than 1"),
         ({"video": "v.mp4", "every": 0}, "cameras.cam2.every", "must be at least 1"),
         ({"bag": "r.bag"}, "cameras.cam2.topic", "missing (a bag needs its image topic)"),
         ({"images": "imgs", "topic": "/c"}, "cameras.cam2.topic", "goes with 'bag'"),

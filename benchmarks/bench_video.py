@@ -1,0 +1,125 @@
+"""Video input: speed against a PNG folder, and memory against the recording's length.
+
+Issue 21's two figures, each from real ``acscal`` processes on rendered 1920x1080 frames:
+
+1. **Speed.** ``acscal poses`` on the same frames as a PNG folder and as an H.264 ``.mp4``
+   (``sample_data_gen.video.write_video``), each with an empty detections cache, best of
+   ``--repeats`` runs: frames per second of the whole command, and their ratio (aim: the
+   video at least 0.8x the folder).
+2. **Memory.** ``acscal poses --every K`` on a 1-minute and a 10-minute H.264 video at
+   ``--fps`` (the frames of a short render looped, so that the long video costs encoding time
+   only): the peak resident memory of the process (``ru_maxrss`` of the child), which must
+   not grow with the length (aim: the 10-minute one within a small margin of the 1-minute one).
+
+Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_video.py`` (about 10 min on the
+project's 2-core machine; ``--quick`` for a smaller check).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sample_data_gen.render import render_scenario
+from sample_data_gen.video import write_video
+
+ACSCAL = Path(sys.executable).with_name("acscal")
+
+
+def _run(*args: str | Path) -> float:
+    """Wall seconds of one ``acscal`` command."""
+    t0 = time.perf_counter()
+    res = subprocess.run([str(ACSCAL), *map(str, args)], capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise SystemExit(f"acscal {' '.join(map(str, args))} failed:\n{res.stderr}")
+    return seconds
+
+
+def _peak(*args: str | Path) -> int:
+    """Peak resident memory (KiB) of one ``acscal`` command, measured alone."""
+    code = (
+        "import resource, subprocess, sys;"
+        "subprocess.run(sys.argv[1:], check=True, capture_output=True);"
+        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(ACSCAL), *map(str, args)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return int(out.stdout.strip())
+
+
+def _frames(folder: Path) -> list[np.ndarray]:
+    return [
+        np.asarray(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)) for p in sorted(folder.glob("*.png"))
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=60, help="frames of the speed test")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--fps", type=float, default=10.0, help="frame rate of the memory videos")
+    ap.add_argument("--every", type=int, default=50, help="--every of the memory runs")
+    ap.add_argument("--quick", action="store_true", help="30 frames, 1 and 3 minutes")
+    args = ap.parse_args(argv)
+    n_frames, long_min = (30, 3) if args.quick else (args.frames, 10)
+    work = Path(tempfile.mkdtemp(prefix="bench_video_"))
+    try:
+        scene = render_scenario(
+            work / "render", "fixed_joint", seed=5, frames=n_frames, size=(1920, 1080),
+            board_distance=0.6, supersample=1,
+        )  # fmt: skip
+        folder = scene / "cam_a"
+        frames = _frames(folder)
+        times = [i / args.fps for i in range(len(frames))]
+        mp4 = write_video(work / "cam_a.mp4", frames, times)
+        intr = work / "intrinsics.yaml"
+        _run("intrinsics", folder, "-o", intr)
+
+        print(f"speed: acscal poses on {len(frames)} frames of 1920x1080 (best of {args.repeats})")
+        best: dict[str, float] = {}
+        for name, src in (("PNG folder", folder), ("H.264 video", mp4)):
+            runs = []
+            for r in range(args.repeats):
+                out = work / f"poses_{name[:3]}_{r}" / "poses.npz"
+                runs.append(_run("poses", src, "--intrinsics", intr, "-o", out))
+            best[name] = min(runs)
+            print(f"  {name:12s} {best[name]:6.2f} s  {len(frames) / best[name]:6.2f} frames/s")
+        ratio = best["PNG folder"] / best["H.264 video"]
+        print(f"  video/folder frames per second: {ratio:.2f} (aim >= 0.8)")
+
+        print(f"memory: acscal poses --every {args.every} on H.264 1080p at {args.fps:g} fps")
+        peaks = {}
+        for minutes in (1, long_min):
+            n = round(60 * minutes * args.fps)
+            looped = (frames[i % len(frames)] for i in range(n))
+            video = write_video(
+                work / f"long_{minutes}.mp4", looped, [i / args.fps for i in range(n)]
+            )
+            out = work / f"mem_{minutes}" / "poses.npz"
+            peaks[minutes] = _peak(
+                "poses", video, "--intrinsics", intr, "-o", out, "--every", str(args.every)
+            )
+            print(f"  {minutes:2d} min ({n} frames): peak {peaks[minutes] / 1024:7.1f} MiB")
+            video.unlink()
+        growth = peaks[long_min] / peaks[1]
+        print(f"  {long_min} min / 1 min peak memory: {growth:.3f} (aim <= 1.05)")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
