@@ -442,8 +442,9 @@ def urdf_from_rig(
         u.comment("Lengths in metres, angles in radians.")
     if articulations:
         u.comment(
-            "A hinge's limits are the range of its angle over the calibration's frames, "
-            f"widened by {_num(limit_margin_deg)} deg on either side; other revolute limits "
+            "A hinge's limits are the range of its angle over the calibration's frames (as "
+            f"rig.yaml records it), widened by {_num(limit_margin_deg)} deg on either side; "
+            "other revolute limits "
             f"are [-pi, pi]. Effort ({_num(_EFFORT)}) and velocity ({_num(_VELOCITY)}) are "
             "placeholders URDF requires, not calibrated values."
         )
