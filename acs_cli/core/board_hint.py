@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from acs_cli.core.checkerboard import downscaled
+
 __all__ = ["HINT_WIDTH", "board_size_hint", "larger_board_sizes", "nearby_board_sizes"]
 
 #: Images are tried at most this wide (pixels): the quick check needs no detail.
@@ -42,16 +44,6 @@ def larger_board_sizes(cols: int, rows: int) -> list[tuple[int, int]]:
     return [(cols + 1, rows + 1), (cols + 1, rows), (cols, rows + 1)]
 
 
-def _small(gray: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    h, w = gray.shape[:2]
-    if w <= HINT_WIDTH:
-        return gray
-    scale = HINT_WIDTH / w
-    return np.asarray(
-        cv2.resize(gray, (HINT_WIDTH, round(h * scale)), interpolation=cv2.INTER_AREA)
-    )
-
-
 def board_size_hint(
     images: Sequence[NDArray[np.uint8]], sizes: Sequence[tuple[int, int]]
 ) -> tuple[tuple[int, int], int] | None:
@@ -69,7 +61,7 @@ def board_size_hint(
     ((cols, rows), count) or None
         None when no size is found in any image.
     """
-    small = [_small(np.asarray(g, dtype=np.uint8)) for g in images]
+    small = [downscaled(np.asarray(g, dtype=np.uint8), HINT_WIDTH) for g in images]
     best: tuple[tuple[int, int], int] | None = None
     for size in sizes:
         count = sum(bool(cv2.findChessboardCorners(g, size, flags=_FLAGS)[0]) for g in small)

@@ -69,6 +69,7 @@ __all__ = [
     "check_widths",
     "corner_spacing_px",
     "detect_checkerboard",
+    "downscaled",
     "normalise_order",
     "refine_saddle",
     "refine_x_junction",
@@ -537,6 +538,16 @@ def check_levels(width: int, cols: int, rows: int) -> list[int]:
         if level not in out:
             out.append(level)
     return out
+
+
+def downscaled(image: NDArray[np.uint8], width: int) -> NDArray[np.uint8]:
+    """``image`` ``(h, w)`` scaled down (area averaging) to ``width`` pixels wide, the aspect
+    kept; as it is when no wider."""
+    h, w = image.shape[:2]
+    if w <= width:
+        return image
+    size = (width, max(1, round(h * width / w)))
+    return np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.uint8)
 
 
 def _half(img: NDArray[np.uint8]) -> NDArray[np.uint8]:

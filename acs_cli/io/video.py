@@ -211,24 +211,14 @@ class DecodedFrame:
     image: NDArray[np.uint8]
 
 
-def _thumb(image: NDArray[np.uint8], width: int) -> NDArray[np.uint8]:
-    """``image`` scaled (area averaging) to at most ``width`` pixels wide."""
-    import cv2
-
-    h, w = image.shape[:2]
-    if w <= width:
-        return image
-    return np.asarray(
-        cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
-    )
-
-
 def sharpness(image: NDArray[np.uint8]) -> float:
     """The variance of the Laplacian of ``image`` scaled to :data:`THUMB_WIDTH`: higher for
     sharper frames of one scene."""
     import cv2
 
-    return float(cv2.Laplacian(_thumb(image, THUMB_WIDTH), cv2.CV_64F).var())
+    from acs_cli.core.checkerboard import downscaled
+
+    return float(cv2.Laplacian(downscaled(image, THUMB_WIDTH), cv2.CV_64F).var())
 
 
 class ViewFilter:
@@ -256,7 +246,9 @@ class ViewFilter:
             if s < BLUR_FRACTION * float(np.median(self.recent)):
                 return "blurred"
         if self.selection.min_change is not None:
-            thumb = _thumb(image, CHANGE_WIDTH).astype(np.float32)
+            from acs_cli.core.checkerboard import downscaled
+
+            thumb = downscaled(image, CHANGE_WIDTH).astype(np.float32)
             if self.last is not None and self.last.shape == thumb.shape:
                 change = float(np.mean(np.abs(thumb - self.last))) / 255.0
                 if change < self.selection.min_change:
@@ -300,6 +292,21 @@ class VideoRead:
         elif verdict == "unchanged":
             self.unchanged += 1
         return verdict is None
+
+    def outcome(self, selection: FrameSelection, kept: int) -> tuple[list[str], dict[str, Any]]:
+        """The notes (the selection's line first, when there is one) and the artifact
+        header's ``video`` counts of a pass that kept ``kept`` frames."""
+        notes = list(self.notes)
+        if not selection.trivial:
+            notes.insert(0, f"video: used {kept} of {self.decoded} frames ({selection.describe()})")
+        counts = {
+            "decoded": self.decoded,
+            "kept": kept,
+            **selection.plain(),
+            "skipped_blurred": self.blurred,
+            "skipped_unchanged": self.unchanged,
+        }
+        return notes, counts
 
     def note_skipped(self, selection: FrameSelection) -> None:
         """Add the note that counts the frames the blur and change rules skipped."""

@@ -731,18 +731,10 @@ def _detect_video(
     if progress is not None:
         progress(len(found), len(refs))  # the estimated total, corrected
     dets = [found[i] for i in range(len(refs))]
-    kept = f"{len(refs)} of {report.decoded} frames"
-    notes = [*report.notes]
-    if not selection.trivial:
-        notes.insert(0, f"video: used {kept} ({selection.describe()})")
-    frames_info: dict[str, Any] = {
-        "decoded": report.decoded,
-        "kept": len(refs),
-        **selection.plain(),
-        "skipped_blurred": report.blurred,
-        "skipped_unchanged": report.unchanged,
-        "times": "header.stamp" if bag else "presentation timestamps (pts * time_base), seconds",
-    }
+    notes, frames_info = report.outcome(selection, len(refs))
+    frames_info["times"] = (
+        "header.stamp" if bag else "presentation timestamps (pts * time_base), seconds"
+    )
     if bag:
         frames_info["topic"] = topic
     return FolderDetections(

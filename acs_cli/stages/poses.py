@@ -553,13 +553,7 @@ def _video_frames_to(
             progress("decoding video", k + 1, max(k + 1, report.estimate or report.count or 0))
     if size is None:  # pragma: no cover - read_video_frames raises first
         raise InputError("no frame of the video decodes", path=video)
-    notes = list(report.notes)
-    counts = {"decoded": report.decoded, "kept": len(times), **selection.plain(),
-              "skipped_blurred": report.blurred,
-              "skipped_unchanged": report.unchanged}  # fmt: skip
-    if not selection.trivial:
-        notes.insert(0, f"video: used {len(times)} of {report.decoded} frames "
-                        f"({selection.describe()})")  # fmt: skip
+    notes, counts = report.outcome(selection, len(times))
     return size, times, notes, counts
 
 
