@@ -313,6 +313,27 @@ def _size_in(
     return board_size_hint(read_images([images[int(i)] for i in pick]), sizes)
 
 
+def _larger_ruled_out(
+    images: Sequence[ImageRef], corners: Sequence[np.ndarray | None], cols: int, rows: int
+) -> bool:
+    """Whether the images' own pixels rule out a larger board than ``cols x rows`` in every
+    one of ``images`` (up to :data:`HINT_IMAGES` of those with a board, evenly spread; their
+    ``corners`` as found): every side's continuation score below
+    :data:`acs_cli.core.board_hint.EXTENSION_SCREEN`, so no search is needed."""
+    from acs_cli.core.board_hint import EXTENSION_SCREEN, board_extension_scores
+
+    pick = np.unique(np.round(np.linspace(0, len(images) - 1, HINT_IMAGES)).astype(int))
+    greys = read_images([images[int(i)] for i in pick])
+    for i, grey in zip(pick, greys, strict=True):
+        c = corners[int(i)]
+        if c is None:
+            return False
+        scores = board_extension_scores(grey, c, cols, rows)
+        if not np.all(np.isfinite(scores)) or float(np.max(scores)) >= EXTENSION_SCREEN:
+            return False
+    return True
+
+
 def few_boards(
     folder: Path,
     images: Sequence[ImageRef],
@@ -322,6 +343,7 @@ def few_boards(
     need: int,
     *,
     part_is_error: bool,
+    corners: Sequence[np.ndarray | None] | None = None,
 ) -> str | None:
     """Check the board size against the images (a wrong ``--board`` is named, issue 13).
 
@@ -332,7 +354,9 @@ def few_boards(
     - The images where it was found show a larger board (OpenCV finds an 8x6 board inside a
       9x6 one, at a different place in each image): :class:`InputError` when
       ``part_is_error`` (poses: the board's frame would jump), else a warning (intrinsics:
-      the part's geometry is still right).
+      the part's geometry is still right). With the ``corners`` found (one per image, None
+      where none), the images' pixels are asked first (:func:`_larger_ruled_out`); the larger
+      sizes are searched for only where they cannot rule it out.
 
     Returns
     -------
@@ -344,6 +368,10 @@ def few_boards(
     k, n = int(sum(found)), len(images)
     if k >= need and k >= FEW_BOARDS * n:
         with_board = [p for p, f in zip(images, found, strict=True) if f]
+        if corners is not None:
+            found_corners = [c for c, f in zip(corners, found, strict=True) if f]
+            if _larger_ruled_out(with_board, found_corners, cols, rows):
+                return None
         larger = _size_in(with_board, larger_board_sizes(cols, rows))
         if larger is None or 2 * larger[1] < min(len(with_board), HINT_IMAGES):
             return None
@@ -817,7 +845,14 @@ def run_intrinsics(
         with_board = [i for i, d in enumerate(fd.detections) if d.found]
         found = [d.found for d in fd.detections]
         board_note = few_boards(
-            images_dir, fd.images, found, cols, rows, MIN_VIEWS, part_is_error=False
+            images_dir,
+            fd.images,
+            found,
+            cols,
+            rows,
+            MIN_VIEWS,
+            part_is_error=False,
+            corners=[d.corners for d in fd.detections],
         )
         obj = board_points(cols, rows, config.square)
         img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]

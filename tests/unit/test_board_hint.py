@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-from acs_cli.core.board_hint import board_size_hint, larger_board_sizes, nearby_board_sizes
+from acs_cli.core.board_hint import (
+    EXTENSION_SCREEN,
+    board_extension_scores,
+    board_size_hint,
+    larger_board_sizes,
+    nearby_board_sizes,
+)
 
 
 def _board(cols: int, rows: int, square: int = 40) -> np.ndarray:
@@ -34,3 +41,21 @@ def test_the_size_the_images_show_is_found() -> None:
     assert board_size_hint(images, larger_board_sizes(8, 6)) == ((9, 6), 2)
     # nothing of the kind on a blank image
     assert board_size_hint([np.full((900, 1200), 128, np.uint8)], nearby_board_sizes(9, 6)) is None
+
+
+def test_the_pixels_say_where_the_board_goes_on() -> None:
+    img = _board(9, 6)
+    ok, corners = cv2.findChessboardCorners(img, (9, 6))
+    assert ok
+    grid = corners.reshape(6, 9, 2)
+    whole = board_extension_scores(img, grid.reshape(-1, 2), 9, 6)
+    assert np.all(np.isfinite(whole)) and np.max(np.abs(whole)) < EXTENSION_SCREEN
+    # the corners of an 8x6 part (the first eight columns): the board goes on to the right
+    part = board_extension_scores(img, grid[:, :8].reshape(-1, 2), 8, 6)
+    assert part[1] > 0.8 and np.max(np.abs(part[[0, 2, 3]])) < EXTENSION_SCREEN
+    # and of a 9x5 part (the last five rows): it goes on upwards
+    part = board_extension_scores(img, grid[1:].reshape(-1, 2), 9, 5)
+    assert part[2] > 0.8 and np.max(np.abs(part[[0, 1, 3]])) < EXTENSION_SCREEN
+    # a flat grey image has no checker pattern to judge by
+    flat = np.full_like(img, 128)
+    assert np.all(np.isnan(board_extension_scores(flat, grid.reshape(-1, 2), 9, 6)))
