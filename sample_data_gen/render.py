@@ -141,7 +141,26 @@ def _undistort(K: FloatArray, dist: FloatArray, pix: np.ndarray) -> np.ndarray:
     return np.stack([x, y], axis=1)
 
 
+#: Cameras built lately, by their parameters: a scenario's cameras are rebuilt for each of
+#: its sequences, and a test process renders the same seeded cameras many times (each ray
+#: map is a second of Newton steps over a million samples).
+_CAMERAS: dict[tuple[bytes, bytes, tuple[int, int], int], Camera] = {}
+_CAMERAS_KEPT = 8
+
+
 def _build_camera(K: FloatArray, dist: FloatArray, size: tuple[int, int], s: int) -> Camera:
+    key = (np.asarray(K, float).tobytes(), np.asarray(dist, float).tobytes(), tuple(size), s)
+    cam = _CAMERAS.get(key)
+    if cam is None:
+        cam = _new_camera(K, dist, size, s)
+        cam.rays.setflags(write=False)  # shared by every render of this camera
+        if len(_CAMERAS) >= _CAMERAS_KEPT:
+            _CAMERAS.pop(next(iter(_CAMERAS)))
+        _CAMERAS[key] = cam
+    return cam
+
+
+def _new_camera(K: FloatArray, dist: FloatArray, size: tuple[int, int], s: int) -> Camera:
     gx, gy = _sample_grid(size, s)
     pix = np.stack([gx.ravel(), gy.ravel()], axis=1)
     rays = _undistort(K, dist, pix).astype(np.float32).reshape((*gx.shape, 2))
