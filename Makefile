@@ -3,8 +3,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # pytest-xdist workers for `make unit` (0: one process). Each module runs on one worker
-# (--dist loadscope: its module fixtures are built once), and each worker's BLAS on one
-# thread (two workers on two cores; threaded BLAS under contention spins).
+# (--dist loadscope: its module fixtures are built once), handed out in collection order
+# (--no-loadscope-reorder: tests/conftest.py puts the longest first), and each worker's BLAS
+# on one thread (two workers on two cores; threaded BLAS under contention spins).
 WORKERS ?= 2
 SERIAL_BLAS := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
@@ -31,10 +32,10 @@ typecheck: install
 # `make test` leaves out the statistical studies (the `slow` marker: an estimator's stds
 # against its error spread over many seeded trials); `make slow` runs them
 unit: install
-	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope -m "not slow"
+	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope --no-loadscope-reorder -m "not slow"
 
 slow: install
-	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope -m slow
+	$(SERIAL_BLAS) $(BIN)/pytest -q -n $(WORKERS) --dist loadscope --no-loadscope-reorder -m slow
 
 test: lint typecheck unit
 

@@ -23,17 +23,24 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20240607)
 
 
-#: The longest modules (seconds of CPU each, measured with --durations), run first: xdist's
-#: loadscope hands whole modules to the workers in collection order, and a long module
-#: handed out last keeps one worker busy while the other is done.
+#: The longest modules (seconds of worker time each, measured with a timeline of the suite),
+#: run first: xdist's loadscope hands whole modules to the workers in collection order (with
+#: ``--no-loadscope-reorder``, as the Makefile runs it; by default xdist 3.8 orders them by
+#: their number of tests), and a long module handed out last keeps one worker busy while the
+#: other is done (the demo, last, was 80 s of one worker alone).
 LONG_MODULES = (
-    "tests/unit/test_time_offset.py",
-    "tests/unit/test_core_relpose.py",
-    "tests/e2e/test_faults.py",
-    "tests/e2e/test_cli_trajectories.py",
-    "tests/e2e/test_cli_video.py",
     "tests/e2e/test_demo.py",
+    "tests/e2e/test_faults.py",
+    "tests/unit/test_core_relpose.py",
+    "tests/unit/test_time_offset.py",
+    "tests/e2e/test_cli_rig.py",
+    "tests/e2e/test_cli_run.py",
+    "tests/e2e/test_cli_video.py",
+    "tests/unit/test_diagnose.py",
+    "tests/e2e/test_cli_report.py",
     "tests/unit/test_rig_bundle.py",
+    "tests/unit/test_core_joint.py",
+    "tests/e2e/test_cli_recordings.py",
 )
 
 
