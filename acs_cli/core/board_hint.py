@@ -83,10 +83,11 @@ def board_size_hint(
 
 
 #: Largest continuation score (:func:`board_extension_scores`) that rules a larger board
-#: out without a search. On OpenCV's photographs, the sides of a 9x6 board found whole score
-#: up to 0.29 (lens blur, lighting, extrapolation) and the missing column of a part of it
-#: 0.29 or more: a screen, not a decision. Rendered boards score about 0.
-EXTENSION_SCREEN = 0.15
+#: out without a search. On OpenCV's 26 photographs of a 9x6 board, the sides of the board
+#: found whole score at most 0.23 (lens blur, lighting, extrapolation), and the missing side
+#: of an 8x6, 7x6 or 9x5 part of it at least 0.33: a screen, the search still decides above
+#: it. Rendered boards score about 0.
+EXTENSION_SCREEN = 0.25
 #: Where in a square its brightness is sampled (bilinear coordinates in its four corners):
 #: its centre and four points away from its edges, so that blur and an extrapolated corner
 #: a little off still land inside it.
@@ -193,5 +194,6 @@ def board_extension_scores(
         if good.sum() < max(2, sa.size // 2):
             continue
         par = np.where((sa[good] + sb[good]) % 2 == 0, 1.0, -1.0)
-        out[k] = float(np.mean((vals[good] - mid) * par)) / contrast
+        # about the side's own mean: an odd number of squares of a plain margin scores 0
+        out[k] = float(np.mean((vals[good] - np.mean(vals[good])) * par)) / contrast
     return out

@@ -328,8 +328,10 @@ def _larger_ruled_out(
         c = corners[int(i)]
         if c is None:
             return False
+        # a side the image cannot tell (NaN: mostly out of view) hides no larger board the
+        # search could find here: that board is not in view whole
         scores = board_extension_scores(grey, c, cols, rows)
-        if not np.all(np.isfinite(scores)) or float(np.max(scores)) >= EXTENSION_SCREEN:
+        if float(np.max(np.nan_to_num(scores, nan=0.0))) >= EXTENSION_SCREEN:
             return False
     return True
 
