@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 WORKERS ?= 2
 SERIAL_BLAS := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-.PHONY: install demo test lint typecheck unit slow fuzz bench clean
+.PHONY: install demo showcase test lint typecheck unit slow fuzz bench clean
 
 install: $(STAMP)
 
@@ -19,8 +19,13 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
+# the newcomer's demo (within 90 s on a 2-core machine); `make showcase`: the markerless
+# calibration (structure from motion, a few minutes)
 demo: install
 	$(BIN)/python -m sample_data_gen.demo demo_out
+
+showcase: install
+	$(BIN)/python -m sample_data_gen.demo demo_out --only markerless
 
 lint: install
 	$(BIN)/ruff check acs_cli sample_data_gen tests benchmarks examples

@@ -5,9 +5,11 @@
 unknown scale, self-calibration) and prints each result beside the truth.
 
 Then it calibrates from images: it renders the checkerboard image sample set into
-``OUT_DIR/images`` (when missing), runs ``acscal run configs/fixed_joint.yaml`` and
-``acscal run configs/overlap.yaml`` (for an ``OUT_DIR`` other than the repository's
-``demo_out``, copies of the configs pointing at ``OUT_DIR`` are written to
+``OUT_DIR/images`` (when missing), encodes the overlap scenario's two cameras as videos
+(``images/overlap/cam_a.mkv``, lossless FFV1 at 10 fps), runs ``acscal run
+configs/fixed_joint.yaml`` (image folders) and ``acscal run configs/overlap.yaml`` (the
+videos: each frame's time is its presentation timestamp) (for an ``OUT_DIR`` other than the
+repository's ``demo_out``, copies of the configs pointing at ``OUT_DIR`` are written to
 ``OUT_DIR/configs``) and prints the joint and the relative pose beside the rendered truth,
 and the path of each run's HTML report (``acscal run`` writes ``report.html`` at its end).
 
@@ -15,12 +17,13 @@ Then an AprilGrid: it renders one camera filming Kalibr's 6x6 AprilGrid into
 ``OUT_DIR/aprilgrid`` (when missing; half the frames show only part of the grid), runs
 ``acscal intrinsics --target`` on it and prints the intrinsics beside the truth.
 
-Last, markerless: it renders two cameras of a rig moving through a textured room into
-``OUT_DIR/markerless`` (when missing), builds each camera's trajectory by structure from
-motion (``acscal poses --sfm``, intrinsics from a calibration: here the renderer's, written
-as ``acscal intrinsics`` files), calibrates the pair with ``acscal relpose
---self-calibrate --unknown-scale`` and prints the scale factor and the relative pose beside
-the truth.
+With ``--markerless`` (``make showcase`` runs ``--only markerless``), last, the markerless
+showcase, minutes of structure from motion: it renders two cameras of a rig moving through a
+textured room into ``OUT_DIR/markerless`` (when missing), builds each camera's trajectory by
+structure from motion (``acscal poses --sfm``, intrinsics from a calibration: here the
+renderer's, written as ``acscal intrinsics`` files), calibrates the pair with ``acscal
+relpose --self-calibrate --unknown-scale`` and prints the scale factor and the relative pose
+beside the truth.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import os
 import subprocess
 import sys
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -49,16 +53,46 @@ RUN_CONFIGS = ("fixed_joint", "overlap")
 console = Console(highlight=False, width=None if sys.stdout.isatty() else 120)
 
 
-def _run(*args: str | Path, show: bool = False) -> None:
+Command = tuple[str | Path, ...]
+
+
+def _execute(args: Command) -> subprocess.CompletedProcess[str]:
     cmd = [str(ACSCAL), *map(str, args)]
-    console.print(f"[bold]$ acscal {' '.join(map(str, args))}[/]")
     env = dict(os.environ, COLUMNS=str(console.width))
-    res = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    return subprocess.run(cmd, capture_output=True, text=True, env=env)
+
+
+def _report(args: Command, res: subprocess.CompletedProcess[str], show: bool = False) -> None:
+    console.print(f"[bold]$ acscal {' '.join(map(str, args))}[/]")
     if res.returncode != 0:
         console.print(res.stdout + res.stderr, markup=False)
         raise SystemExit(f"demo: acscal failed with exit code {res.returncode}")
     if show:
         console.print(res.stdout.rstrip(), markup=False)
+
+
+def _run(*args: str | Path, show: bool = False) -> None:
+    _report(args, _execute(args), show)
+
+
+def _run_chains(chains: Sequence[Sequence[Command]]) -> None:
+    """Run each chain's commands in order, the chains side by side (two at a time: this
+    machine's cores), and print every command as :func:`_run` does, in the chains' order.
+    A failed command stops its chain; the first failure, in that order, ends the demo."""
+
+    def chain(cmds: Sequence[Command]) -> list[subprocess.CompletedProcess[str]]:
+        done = []
+        for args in cmds:
+            done.append(_execute(args))
+            if done[-1].returncode != 0:
+                break
+        return done
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        results = list(pool.map(chain, chains))
+    for cmds, done in zip(chains, results, strict=True):
+        for args, res in zip(cmds, done, strict=False):
+            _report(args, res)
 
 
 def _load(path: Path) -> dict[str, Any]:
@@ -84,19 +118,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=20, help="rendered images per camera")
     ap.add_argument("--size", type=_size, default=(640, 480), metavar="WxH", help="image size")
     ap.add_argument("--no-images", action="store_true", help="skip the image-chain part")
-    ap.add_argument("--no-markerless", action="store_true", help="skip the markerless (SfM) part")
     ap.add_argument("--no-target", action="store_true", help="skip the AprilGrid intrinsics part")
+    ap.add_argument(
+        "--markerless",
+        action="store_true",
+        help="also the markerless showcase (structure from motion: minutes; `make showcase`)",
+    )
+    ap.add_argument(
+        "--no-markerless", action="store_true", help="leave the markerless showcase out (default)"
+    )
+    ap.add_argument(
+        "--only",
+        action="append",
+        choices=PARTS,
+        metavar="PART",
+        help=f"run only this part (repeatable): {', '.join(PARTS)}",
+    )
     args = ap.parse_args(argv)
     out: Path = args.out_dir
-    _trajectory_demo(out, args.seed)
-    _rig_demo(out, args.seed)
-    if not args.no_images:
+    parts = set(args.only or PARTS)
+    if args.only is None:
+        for flag, part in ((args.no_images, "images"), (args.no_target, "target")):
+            if flag:
+                parts.discard(part)
+        if not args.markerless or args.no_markerless:
+            parts.discard("markerless")
+    if "trajectories" in parts:
+        _trajectory_demo(out, args.seed)
+    if "rig" in parts:
+        _rig_demo(out, args.seed)
+    if "images" in parts:
         _image_demo(out, args.seed, args.frames, args.size)
-    if not args.no_target:
+    if "target" in parts:
         _target_demo(out, args.seed)
-    if not args.no_markerless:
+    if "markerless" in parts:
         _markerless_demo(out, args.seed)
     return 0
+
+
+#: The demo's parts, in the order they run (``--only``).
+PARTS = ("trajectories", "rig", "images", "target", "markerless")
 
 
 #: Frames of the AprilGrid demo (640x480; every other one shows 30-70 % of the grid).
@@ -236,20 +297,28 @@ def _trajectory_demo(out: Path, seed: int) -> None:
     def poses(scn: str) -> list[str | Path]:
         return ["--poses-a", data / scn / "cam_a.tum", "--poses-b", data / scn / "cam_b.tum"]
 
-    for method in ("paper", "refined"):
-        _run("joint", "--fixed-joint", *poses("fixed_joint"), "--method", method,
-             "-o", res / f"joint_fixed_{method}.yaml")  # fmt: skip
-        _run("joint", "--overlap", *poses("overlap"), "--method", method,
-             "-o", res / f"joint_overlap_{method}.yaml")  # fmt: skip
-        _run("relpose", "--joint", res / f"joint_fixed_{method}.yaml", *poses("general"),
-             "--method", method, "-o", res / f"relpose_{method}.yaml")  # fmt: skip
-        _run("joint", "--fixed-joint", *poses("fixed_joint_scaled"), "--method", method,
-             "-o", res / f"joint_fixed_scaled_{method}.yaml")  # fmt: skip
-        _run("relpose", "--unknown-scale", "--joint", res / f"joint_fixed_scaled_{method}.yaml",
+    def commands(method: str) -> list[Command]:
+        return [
+            ("joint", "--fixed-joint", *poses("fixed_joint"), "--method", method,
+             "-o", res / f"joint_fixed_{method}.yaml"),
+            ("joint", "--overlap", *poses("overlap"), "--method", method,
+             "-o", res / f"joint_overlap_{method}.yaml"),
+            ("relpose", "--joint", res / f"joint_fixed_{method}.yaml", *poses("general"),
+             "--method", method, "-o", res / f"relpose_{method}.yaml"),
+            ("joint", "--fixed-joint", *poses("fixed_joint_scaled"), "--method", method,
+             "-o", res / f"joint_fixed_scaled_{method}.yaml"),
+            ("relpose", "--unknown-scale", "--joint", res / f"joint_fixed_scaled_{method}.yaml",
              *poses("general_scaled"), "--method", method,
-             "-o", res / f"relpose_scaled_{method}.yaml")  # fmt: skip
-    _run("relpose", "--self-calibrate", "--unknown-scale", *poses("general_scaled"),
-         "-o", res / "relpose_selfcal_scaled.yaml")  # fmt: skip
+             "-o", res / f"relpose_scaled_{method}.yaml"),
+        ]  # fmt: skip
+
+    selfcal: Command = (
+        "relpose", "--self-calibrate", "--unknown-scale", *poses("general_scaled"),
+        "-o", res / "relpose_selfcal_scaled.yaml",
+    )  # fmt: skip
+    # the paper's method and ours side by side (each chain: a joint, then the relative pose
+    # that reads it); the self-calibration after the quicker paper's chain
+    _run_chains([[*commands("paper"), selfcal], commands("refined")])
 
     truth = _load(data / "general" / "truth.yaml")
     truth_s = _load(data / "general_scaled" / "truth.yaml")
@@ -364,6 +433,25 @@ def _images_ok(images: Path, frames: int, size: tuple[int, int]) -> bool:
     return True
 
 
+#: The rendered scenario whose run reads video files (``configs/overlap.yaml``), and their
+#: frame rate: each frame's time is its presentation timestamp.
+VIDEO_SCENARIO, VIDEO_FPS = "overlap", 10.0
+
+
+def _videos_for(images: Path) -> None:
+    """Encode :data:`VIDEO_SCENARIO`'s image folders as lossless videos beside them
+    (``cam_a.mkv``, FFV1), unless they are there and newer than the folders' images."""
+    from sample_data_gen.video import folder_to_video
+
+    for cam in ("cam_a", "cam_b"):
+        folder = images / VIDEO_SCENARIO / cam
+        video = folder.with_suffix(".mkv")
+        newest = max(p.stat().st_mtime for p in folder.glob("*.png"))
+        if not video.is_file() or video.stat().st_mtime < newest:
+            console.print(f"encoding {_show(folder)} as the video {_show(video)}")
+            folder_to_video(folder, video, fps=VIDEO_FPS)
+
+
 def _config_for(name: str, out: Path) -> Path:
     """The run config of ``name``: ``configs/<name>.yaml`` itself when ``out`` is the
     repository's ``demo_out``, else a copy in ``out/configs`` with its paths moved to ``out``."""
@@ -380,16 +468,18 @@ def _config_for(name: str, out: Path) -> Path:
 
 
 def _check_config(config: Path, images: Path) -> Path:
-    """The run folder of ``config``, after checking its image folders are under ``images``."""
+    """The run folder of ``config``, after checking its image folders and videos are under
+    ``images``."""
     doc = _load(config)
     base = config.parent
-    folders = [c["images"] for c in doc["cameras"].values() if c.get("images")]
+    inputs = (c.get("images") or c.get("video") for c in doc["cameras"].values())
+    folders = [f for f in inputs if f]
     if doc.get("relpose"):
         folders += list(doc["relpose"]["images"].values())
     for f in folders:
         p = (base / f).resolve()
         if not p.is_relative_to(images.resolve()):
-            raise SystemExit(f"demo: {config}: image folder {f} is not under {images}")
+            raise SystemExit(f"demo: {config}: {f} is not under {images}")
     return Path(os.path.normpath(base / doc["output"]))
 
 
@@ -408,6 +498,7 @@ def _image_demo(out: Path, seed: int, frames: int, size: tuple[int, int]) -> Non
             f"\nrendering the image sample set ({frames} frames, {size[0]}x{size[1]}) into {images}"
         )
         render_sample_set(images, seed=seed, size=size, frames=frames)
+    _videos_for(images)
     runs: dict[str, Path] = {}
     for name in RUN_CONFIGS:
         config = _config_for(name, out)

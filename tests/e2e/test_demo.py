@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import yaml
+
 REPO = Path(__file__).resolve().parents[2]
 NUMBER = r"[+-]\d+\.\d+"
 VECTOR = rf"\[{NUMBER}, {NUMBER}, {NUMBER}\]"
@@ -48,6 +50,10 @@ def test_demo_prints_both_tables(tmp_path: Path) -> None:
     assert (out / "configs" / "fixed_joint.yaml").is_file()
     assert (out / "run_fixed_joint" / "relpose.yaml").is_file()
     assert (out / "run_overlap" / "joint.yaml").is_file()
+    # the overlap run reads the two cameras' videos (make demo: one calibration from video)
+    intr = yaml.safe_load((out / "run_overlap" / "cam_a" / "intrinsics.yaml").read_text())
+    assert intr["video"]["decoded"] == 12
+    assert (out / "images" / "overlap" / "cam_a.mkv").is_file()
     assert (out / "images" / "general" / "truth.yaml").is_file()
     errors = [
         float(m)
