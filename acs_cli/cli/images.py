@@ -490,8 +490,6 @@ def poses(
             -o cam_a/poses.npz --tum cam_a/poses.txt
     """
     if sfm:
-        if topic is not None:
-            raise InputError("--sfm does not read ROS bags yet; --topic applies to board poses")
         if target is not None:
             raise InputError(
                 "--target describes a calibration target, which --sfm does not use; leave it out"
@@ -514,6 +512,7 @@ def poses(
             timestamps=timestamps,
             fps=fps,
             selection=frame_selection(every, max_frames, skip_blurred, min_change),
+            topic=topic,
         )
         return
     from acs_cli.stages.poses import PosesConfig, run_poses
@@ -622,6 +621,7 @@ def _sfm_poses(
     timestamps: Path | None,
     fps: float | None,
     selection: FrameSelection,
+    topic: str | None,
 ) -> None:
     """``acscal poses --sfm``: the markerless front end."""
     from acs_cli.stages.poses import SfmPosesConfig, run_sfm_poses
@@ -645,6 +645,7 @@ def _sfm_poses(
         timestamps=timestamps,
         fps=fps,
         selection=selection,
+        topic=topic,
     )
     with _phase_progress() as progress:
         run = run_sfm_poses(images_dir, intrinsics_file, output, cfg, progress)

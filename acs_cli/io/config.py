@@ -1058,8 +1058,6 @@ def _camera_specs(
                 key,
                 f"{', '.join(repr(k) for k in _IMAGE_KEYS)} go with 'images', 'video' or 'bag'",
             )
-        if cam.given("bag") and cam.front_end == "sfm":
-            raise _fail(path, f"{key}.front_end", "sfm does not read ROS bags yet (use board)")
         _camera_times(cam, key, path)
         _camera_video(cam, key, path)
         if cam.invert and not cam.given("poses"):

@@ -37,7 +37,7 @@ from acs_cli.core.targets import MIN_POSE_CORNERS, Checkerboard, MarkerTarget, p
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header
 from acs_cli.io.atomic import atomic_write_bytes, check_distinct_output, check_writable
-from acs_cli.io.bag import is_bag_path
+from acs_cli.io.bag import is_bag_path, read_bag_frames
 from acs_cli.io.detections import cache_path_for
 from acs_cli.io.images import list_images, read_gray
 from acs_cli.io.intrinsics import BoardSpec, IntrinsicsArtifact
@@ -441,6 +441,10 @@ class SfmPosesConfig:
         ``--sfm`` run made); default: a temporary folder, removed afterwards.
     timestamps, fps
         As :class:`PosesConfig`'s.
+    selection : FrameSelection
+        The frames of a video or a bag used.
+    topic : str, optional
+        A ROS bag's image topic (its ``header.stamp`` are the times).
     """
 
     tum: Path | None = None
@@ -455,6 +459,7 @@ class SfmPosesConfig:
     timestamps: Path | None = None
     fps: float | None = None
     selection: FrameSelection = field(default_factory=FrameSelection)
+    topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -538,16 +543,25 @@ def _sfm_camera(intrinsics: Path) -> SfmCamera:
 
 
 def _video_frames_to(
-    video: Path, folder: Path, selection: FrameSelection, progress: SfmProgress | None
+    video: Path,
+    folder: Path,
+    selection: FrameSelection,
+    progress: SfmProgress | None,
+    topic: str | None = None,
 ) -> tuple[tuple[int, int], dict[str, int], list[str], dict[str, Any]]:
-    """Decode a video's kept frames into ``folder`` as PNG files (``frame_000123.png``), one
-    at a time; their size, their times (ns) by file name, the reader's notes and the
-    frame counts (for the header)."""
+    """Decode a video's (a bag's ``topic``'s) kept frames into ``folder`` as PNG files
+    (``frame_000123.png``), one at a time; their size, their times (ns) by file name, the
+    reader's notes and the frame counts (for the header)."""
     report = VideoRead()
     times: dict[str, int] = {}
     size: tuple[int, int] | None = None
     folder.mkdir(parents=True, exist_ok=True)
-    for k, frame in enumerate(read_video_frames(video, selection, report)):
+    frames = (
+        read_bag_frames(video, topic, selection, report)
+        if is_bag_path(video)
+        else read_video_frames(video, selection, report)
+    )
+    for k, frame in enumerate(frames):
         got = (int(frame.image.shape[1]), int(frame.image.shape[0]))
         size = size or got
         if got != size:  # pragma: no cover - one stream has one size
@@ -563,6 +577,8 @@ def _video_frames_to(
     if size is None:  # pragma: no cover - read_video_frames raises first
         raise InputError("no frame of the video decodes", path=video)
     notes, counts = report.outcome(selection, len(times))
+    if topic is not None:
+        counts["topic"] = topic
     return size, times, notes, counts
 
 
@@ -688,8 +704,7 @@ def run_sfm_poses(
     if config.refine_intrinsics and intrinsics is None:
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
     stamps = _time_source(config)
-    if is_bag_path(images_dir):
-        raise InputError("--sfm does not read ROS bags yet (board poses do)", path=images_dir)
+    bag = is_bag_path(images_dir)
     video = _video_times_check(images_dir, config)
     config.selection.check()
     if not video and not config.selection.trivial:
@@ -725,7 +740,7 @@ def run_sfm_poses(
         if video:  # COLMAP reads files: the kept frames go to the work folder, as PNG
             folder = work / "frames"
             size, frame_ns, notes, counts = _video_frames_to(
-                images_dir, folder, config.selection, progress
+                images_dir, folder, config.selection, progress, config.topic if bag else None
             )
             all_names = list(frame_ns)
         else:
@@ -741,7 +756,7 @@ def run_sfm_poses(
 
     names = list(result.registered_names)
     if video:
-        times = video_times([frame_ns[n] for n in names])
+        times = video_times([frame_ns[n] for n in names], bag=bag)
     else:
         times = _image_times(names, all_names, stamps, config)
     traj = _trajectory(times, result.T_world_cam, names, output)
@@ -752,7 +767,7 @@ def run_sfm_poses(
     n_images = len(all_names)
     header = make_header(
         "poses",
-        {"video" if video else "images": images_dir}
+        {("bag" if bag else "video") if video else "images": images_dir}
         | ({"intrinsics": intrinsics} if intrinsics is not None else {}),
         method=(
             f"incremental structure from motion ({pycolmap_version()}): SIFT features, "

@@ -541,6 +541,7 @@ def _sfm_stage(
         timestamps=cam.timestamps,
         fps=cam.fps,
         selection=_selection(cam),
+        topic=cam.topic,
         **config.sfm,
     )
 
@@ -553,7 +554,7 @@ def _sfm_stage(
     if cam.timestamps is not None:
         inputs["timestamps"] = cam.timestamps
     options = {"front_end": "sfm", **config.sfm} | ({"fps": cam.fps} if cam.fps else {})
-    options |= _selection_options(_selection(cam))
+    options |= _selection_options(_selection(cam)) | ({"topic": cam.topic} if cam.topic else {})
     return _Stage(f"sfm {name}", "poses", inputs, options, [npz], do_sfm), npz
 
 

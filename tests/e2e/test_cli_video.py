@@ -291,12 +291,32 @@ def test_run_config_points_two_cameras_at_one_bag(tmp_path: Path) -> None:
         assert "header.stamp" in art.header["timestamps_from"]
 
 
-def test_sfm_refuses_a_bag_in_one_line(tmp_path: Path) -> None:
+def test_sfm_poses_from_a_ros_bag(tmp_path: Path) -> None:
+    import cv2
+    from test_cli_sfm import FAST, _render
+
     from sample_data_gen.bag import write_bag
 
-    frame = np.zeros((24, 32), np.uint8)
-    bag = write_bag(tmp_path / "r.bag", "/cam/image_raw", [frame, frame], [1, 2])
-    res = acscal("poses", bag, "--sfm", "-o", tmp_path / "p.npz")
-    assert res.returncode == 2
-    assert res.stderr.strip().endswith("--sfm does not read ROS bags yet (board poses do)")
-    assert not (tmp_path / "p.npz").exists()
+    folder = tmp_path / "frames"
+    _render(folder, 12)
+    pngs = sorted(folder.glob("*.png"))
+    stamps = [1_700_000_000_000_000_003 + k * 200_000_001 for k in range(len(pngs))]
+    frames = (cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in pngs)
+    bag = write_bag(tmp_path / "in" / "walk.bag", "/cam/image_raw", frames, stamps)
+    out = tmp_path / "poses.npz"
+    # a bag needs its topic: the one-line refusal lists the image topics
+    res = acscal("poses", bag, "--sfm", "-o", out, *FAST)
+    assert res.returncode == 2 and "/cam/image_raw" in res.stderr.strip().splitlines()[-1]
+    assert not out.exists()
+    res = acscal("poses", bag, "--topic", "/cam/image_raw", "--sfm", "-o", out, *FAST)
+    assert res.returncode == 0, res.stderr
+    assert "12 of 12 images registered" in res.stdout
+    art = PosesArtifact.load(out)
+    names = art.trajectory.names
+    assert names is not None
+    # each image's header.stamp, to the nanosecond
+    want = [stamps[int(n.removeprefix("frame_").removesuffix(".png"))] for n in names]
+    assert list(art.trajectory.timestamps_ns) == want
+    assert "header.stamp" in art.header["timestamps_from"]
+    assert "bag" in art.header["inputs"] and art.header["video"]["topic"] == "/cam/image_raw"
+    assert sorted(p.name for p in bag.parent.iterdir()) == ["walk.bag"]

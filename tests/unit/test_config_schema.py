@@ -147,11 +147,6 @@ def test_a_camera_takes_a_video_with_its_frame_selection(tmp_path: Path) -> None
         ({"images": "imgs", "topic": "/c"}, "cameras.cam2.topic", "goes with 'bag'"),
         ({"bag": "r.bag", "topic": "/c", "fps": 30}, "cameras.cam2.fps", "own times"),
         ({"bag": "r.bag", "video": "v.mp4", "topic": "/c"}, "cameras.cam2", "give one of"),
-        (
-            {"bag": "r.bag", "topic": "/c", "front_end": "sfm", "scale": "unknown"},
-            "cameras.cam2.front_end",
-            "does not read ROS bags",
-        ),
     ],
 )
 def test_a_bad_video_or_bag_entry_is_one_line_naming_its_key(
@@ -171,3 +166,10 @@ def test_a_camera_takes_a_bag_with_its_topic(tmp_path: Path) -> None:
     cam = parse_rig_config(doc, tmp_path / "rig.yaml").cameras["cam2"]
     assert cam.images == tmp_path / "rec" / "run.bag"
     assert (cam.topic, cam.every) == ("/cam2/image_raw", 2)
+
+
+def test_a_bag_camera_may_use_structure_from_motion(tmp_path: Path) -> None:
+    doc = copy.deepcopy(RIG)
+    doc["cameras"]["cam2"] = {"bag": "r.bag", "topic": "/c", "front_end": "sfm", "scale": "unknown"}
+    cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert cfg.cameras["cam2"].topic == "/c" and cfg.cameras["cam2"].front_end == "sfm"
