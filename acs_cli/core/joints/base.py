@@ -27,6 +27,7 @@ on the right (``R @ Exp(theta)``, docs/conventions.md). This package is pure num
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,10 +56,24 @@ def unit(v: FloatArray) -> FloatArray:
 
 
 def tangent_basis(u: FloatArray) -> FloatArray:
-    """``(3, 2)``: two unit vectors across the unit vector ``u`` (and across each other)."""
-    a = np.eye(3)[int(np.argmin(np.abs(u)))]
-    b1 = unit(np.cross(u, a))
-    return np.stack([b1, np.cross(u, b1)], axis=1)
+    """``(3, 2)``: two unit vectors across the unit vector ``u`` (and across each other).
+
+    ``b1 = unit(u x e_k)`` with ``e_k`` the axis ``u`` is least along, ``b2 = u x b1``. In
+    scalar arithmetic: the joints' geometry Jacobians (central differences) call this tens of
+    thousands of times a solve, where numpy's per-call overhead on 3-vectors dominated."""
+    x, y, z = float(u[0]), float(u[1]), float(u[2])
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax <= ay and ax <= az:  # u x e_x
+        c1, c2, c3 = 0.0, z, -y
+    elif ay <= az:  # u x e_y
+        c1, c2, c3 = -z, 0.0, x
+    else:  # u x e_z
+        c1, c2, c3 = y, -x, 0.0
+    n = max(math.sqrt(c1 * c1 + c2 * c2 + c3 * c3), 1e-300)
+    c1, c2, c3 = c1 / n, c2 / n, c3 / n
+    return np.array(
+        [[c1, y * c3 - z * c2], [c2, z * c1 - x * c3], [c3, x * c2 - y * c1]], dtype=float
+    )
 
 
 def single_axis(R: FloatArray) -> FloatArray | None:
