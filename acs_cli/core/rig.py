@@ -23,10 +23,13 @@ walks it from the reference camera, each step forward along its edge's ``T_q_p``
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from acs_cli.core.joints import JOINT_MODELS, joint_types
+from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
 
 #: The joint types an edge can have: the registry's (:mod:`acs_cli.core.joints`).
@@ -241,3 +244,33 @@ def rig_topology(
                 f"{key}: the rig falls into {len(groups)} separate pieces; join them with a joint"
             )
     return RigTopology(cams, tuple(edges), reference)
+
+
+def oriented_axis(
+    axis_in: Mapping[str, FloatArray], body: str, direction: FloatArray
+) -> tuple[dict[str, FloatArray], float]:
+    """A hinge's axis in each body's frame, its sign chosen to point along ``direction``.
+
+    Parameters
+    ----------
+    axis_in : mapping of str to ndarray, shape (3,)
+        The unit axis in each of the joint's two bodies' frames (one line, one sign).
+    body : str
+        The body whose frame ``direction`` is in (one of ``axis_in``'s).
+    direction : ndarray, shape (3,)
+        Where the user wants the axis to point (any length).
+
+    Returns
+    -------
+    axis_in : dict of str to ndarray, shape (3,)
+        Both flipped when the axis makes an obtuse angle with ``direction``.
+    angle_deg : float
+        The angle between the axis so chosen and ``direction`` (0 to 90 deg): near 90, the
+        direction barely tells the sign.
+    """
+    u = np.asarray(axis_in[body], dtype=float)
+    d = np.asarray(direction, dtype=float)
+    cos = float(u @ d) / max(float(np.linalg.norm(u) * np.linalg.norm(d)), 1e-300)
+    sign = -1.0 if cos < 0 else 1.0
+    out: dict[str, FloatArray] = {c: sign * np.asarray(v, dtype=float) for c, v in axis_in.items()}
+    return out, float(np.degrees(np.arccos(min(abs(cos), 1.0))))

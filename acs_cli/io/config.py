@@ -218,6 +218,11 @@ class RigJointSpec:
     position_in: dict[str, np.ndarray] = field(default_factory=dict)
     position_std: float | None = None
     fixed_joint: dict[str, Path] = field(default_factory=dict)
+    #: a hinge's axis sign: ``(body, direction)`` (acute with the direction in that body's
+    #: frame) or ``towards`` a body (pointing from the joint to its origin); None: the
+    #: default (largest component in the first body positive)
+    axis_direction: tuple[str, np.ndarray] | None = None
+    axis_towards: str | None = None
 
 
 @dataclass(frozen=True)
@@ -536,6 +541,16 @@ class Reference(Section):
     recording: Name | None = Field(default=None, description="default: the first recording")
 
 
+class AxisConvention(Section):
+    """Which way a hinge's axis points: ``direction`` in body ``in``'s frame (the axis makes
+    an acute angle with it), or ``towards`` a named body (the axis points from the joint
+    towards that body's origin at the reference instant)."""
+
+    direction: Vector3 | None = Field(default=None, description="a direction, in body 'in'")
+    in_: Name | None = Field(default=None, alias="in", description="one of the joint's bodies")
+    towards: Name | None = Field(default=None, description="a body of the rig")
+
+
 class Joint(Section):
     """A joint between two cameras."""
 
@@ -547,6 +562,11 @@ class Joint(Section):
     position_std: Positive | None = Field(default=None, description="the prior's one-sigma, metres")
     fixed_joint: dict[str, ConfigPath] | None = Field(
         default=None, description="a fixed-joint session (a trajectory) per camera"
+    )
+    axis: AxisConvention | None = Field(
+        default=None,
+        description="hinge: which way its axis points (default: largest component in the "
+        "first body positive)",
     )
 
 
@@ -1006,6 +1026,13 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
     _check_recordings(recordings, joints, path)
+    for j in joints.values():
+        if j.axis_towards is not None and j.axis_towards not in cameras:
+            raise _fail(
+                path,
+                f"joints.{j.name}.axis.towards",
+                f"must name one of the rig's bodies ({', '.join(cameras)})",
+            )
     board, target = _board_or_target(m, path)
     image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
     if image_cams and board is None and target is None:
@@ -1110,7 +1137,32 @@ def _joint_spec(name: str, j: Joint, path: Path) -> RigJointSpec:
             raise _fail(path, f"{key}.fixed_joint", f"a {j.type} joint has no fixed-joint session")
         _unknown_keys(j.fixed_joint, between, f"{key}.fixed_joint", path)
         fixed = {n: _resolve(v, path) for n, v in j.fixed_joint.items()}
-    return RigJointSpec(name, between, j.type, pos, j.position_std, fixed)
+    direction, towards = _axis_convention(key, j, between, path)
+    return RigJointSpec(name, between, j.type, pos, j.position_std, fixed, direction, towards)
+
+
+def _axis_convention(
+    key: str, j: Joint, between: tuple[str, str], path: Path
+) -> tuple[tuple[str, np.ndarray] | None, str | None]:
+    """A joint's ``axis`` (:class:`AxisConvention`), checked: ``(body, direction)`` or
+    ``towards``."""
+    a = j.axis
+    if a is None:
+        return None, None
+    if not joint_model(j.type).has_axis:
+        raise _fail(path, f"{key}.axis", f"a {j.type} joint has no axis")
+    if a.towards is not None:
+        if a.direction is not None or a.in_ is not None:
+            raise _fail(path, f"{key}.axis", "give 'direction' with 'in', or 'towards', not both")
+        return None, a.towards
+    if a.direction is None or a.in_ is None:
+        raise _fail(path, f"{key}.axis", "give 'direction' with 'in' (a body), or 'towards'")
+    if a.in_ not in between:
+        raise _fail(path, f"{key}.axis.in", f"must be one of the joint's bodies {list(between)}")
+    d = np.asarray(a.direction, dtype=float)
+    if not float(np.linalg.norm(d)) > 0:
+        raise _fail(path, f"{key}.axis.direction", "must not be zero")
+    return (a.in_, d), None
 
 
 def _body_settings(recordings: dict[str, RigRecordingSpec], path: Path) -> dict[str, RigCameraSpec]:

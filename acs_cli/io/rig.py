@@ -29,7 +29,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         between: [p, q]
         position_in: {p: [3], q: [3]}   # ball centre, or the hinge point (nearest p's centre)
         position_std_in: {p: [3], q: [3]}
-        axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, largest component in p > 0
+        axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, signed as joints.<n>.axis says
+                                        # (default: largest component in p > 0)
         axis_std_deg_in: {p: float, q: float}
         wobble_rms_deg: float           # a hinge: its bodies' RMS rotation off the axis
         angle_range_deg: [lo, hi]       # a hinge: its angle over the frames used, zero at

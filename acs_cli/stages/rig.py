@@ -42,7 +42,7 @@ from acs_cli.core.quality import (
     length_scale,
     std_rule,
 )
-from acs_cli.core.rig import RigJoint, rig_topology
+from acs_cli.core.rig import RigJoint, oriented_axis, rig_topology
 from acs_cli.core.rig_bundle import (
     CameraViews,
     PoseBodyEstimate,
@@ -261,6 +261,49 @@ def hinge_wobble_deg(e: EdgeEstimate) -> float | None:
     if rot is None or rot.size == 0:
         return None
     return float(np.degrees(np.sqrt(np.mean(np.sum(rot**2, axis=1)))))
+
+
+#: Angle (deg) between a hinge's axis and the direction its config's ``axis`` gives beyond
+#: which that direction barely tells the sign (a warning).
+AXIS_DIRECTION_WARN_DEG = 80.0
+
+
+def oriented_axes(config: RigRunConfig, est: RigEstimate) -> tuple[RigEstimate, list[str]]:
+    """The hinges' axes with the signs the config's ``joints.<name>.axis`` asks for (the
+    default, largest component in the first body positive, elsewhere), and warnings where
+    the direction given is nearly across the axis or cannot be evaluated."""
+    edges = dict(est.edges)
+    notes: list[str] = []
+    for name, spec in config.joints.items():
+        e = edges.get(name)
+        if e is None or not e.axis_in:
+            continue
+        if spec.axis_direction is not None:
+            body, d = spec.axis_direction
+            what = f"[{d[0]:+g}, {d[1]:+g}, {d[2]:+g}] in {body}'s frame"
+        elif spec.axis_towards is not None:
+            body = e.joint.between[0]
+            T_p, T_t = est.cameras[body].T_cam_ref, est.cameras[spec.axis_towards].T_cam_ref
+            if T_p is None or T_t is None:
+                notes.append(
+                    f"joint {name}: its axis keeps the default sign: {body} or "
+                    f"{spec.axis_towards} has no pose at the reference instant, so 'towards "
+                    f"{spec.axis_towards}' cannot be evaluated"
+                )
+                continue
+            # the named body's origin in p's frame, from the joint's point
+            d = (T_p @ se3.invert_transforms(T_t))[:3, 3] - e.position_in[body]
+            what = f"towards {spec.axis_towards}"
+        else:
+            continue
+        axis, angle = oriented_axis(e.axis_in, body, d)
+        if angle > AXIS_DIRECTION_WARN_DEG:
+            notes.append(
+                f"joint {name}: its axis is {angle:.0f} deg from the direction its 'axis' "
+                f"gives ({what}): that direction barely tells which way the axis points"
+            )
+        edges[name] = dataclasses.replace(e, axis_in=axis)
+    return dataclasses.replace(est, edges=edges), notes
 
 
 def hinge_angle_range(est: RigEstimate, name: str) -> tuple[float, float] | None:
@@ -509,6 +552,8 @@ def run_rig(
         both |= {j: p for j, p in held.items() if j not in priors}
         est, sections, notes = rig_bundle(config, files, trajectories, index, est, turns, both)
         warnings += notes
+    est, axis_notes = oriented_axes(config, est)
+    warnings += axis_notes
     ref_unknown = config.cameras[config.reference_camera].unknown_scale
     unit = f"{config.reference_camera} units" if ref_unknown else "m"
     warnings += est.warnings  # joints that fit their declared type poorly

@@ -71,7 +71,7 @@ def test_the_schema_accepts_the_example_configs_and_refuses_a_typo() -> None:
         ({"joints.j01.position_in.cam0": [0, 0, True]}, "joints.j01.position_in.cam0", "three"),
         ({"joints.j01.position_in.cam0": [0, 0, ".inf"]}, "joints.j01.position_in.cam0", "three"),
         ({"joints.j01.position_in.cam9": [0, 0, 1]}, "joints.j01.position_in.cam9", "unknown key"),
-        ({"joints.j01.colour": 1}, "joints.j01.colour", "known keys: between, fixed_joint"),
+        ({"joints.j01.colour": 1}, "joints.j01.colour", "known keys: axis, between, fixed_joint"),
         ({"reference": {"camera": 3}}, "reference.camera", "must be a name (a string), got int 3"),
         ({"cameras.cam0": {"poses": "  "}}, "cameras.cam0.poses", "must be a path (a string)"),
         ({"sfm": {"max_features": 8}}, "sfm.max_features", "must be at least 16, got 8"),
@@ -173,3 +173,35 @@ def test_a_bag_camera_may_use_structure_from_motion(tmp_path: Path) -> None:
     doc["cameras"]["cam2"] = {"bag": "r.bag", "topic": "/c", "front_end": "sfm", "scale": "unknown"}
     cfg = parse_rig_config(doc, tmp_path / "rig.yaml")
     assert cfg.cameras["cam2"].topic == "/c" and cfg.cameras["cam2"].front_end == "sfm"
+
+
+@pytest.mark.parametrize(
+    ("axis", "key", "says"),
+    [
+        ({"towards": "nobody"}, "joints.j12.axis.towards", "must name one of the rig's bodies"),
+        ({"direction": [0, 0, 1]}, "joints.j12.axis", "give 'direction' with 'in'"),
+        ({"direction": [0, 0, 1], "in": "cam0"}, "joints.j12.axis.in", "joint's bodies"),
+        ({"direction": [0, 0, 0], "in": "cam1"}, "joints.j12.axis.direction", "not be zero"),
+        ({"towards": "cam0", "in": "cam1"}, "joints.j12.axis", "not both"),
+    ],
+)
+def test_a_bad_axis_convention_is_one_line_naming_its_key(
+    tmp_path: Path, axis: dict[str, Any], key: str, says: str
+) -> None:
+    doc = copy.deepcopy(RIG)
+    doc["joints"]["j12"] = {"between": ["cam1", "cam2"], "type": "hinge", "axis": axis}
+    with pytest.raises(InputError) as info:
+        parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert info.value.message.startswith(f"key '{key}': "), info.value.message
+    assert says in info.value.message
+
+
+def test_a_ball_joint_has_no_axis_to_orient(tmp_path: Path) -> None:
+    doc = copy.deepcopy(RIG)
+    doc["joints"]["j12"] = {
+        "between": ["cam1", "cam2"],
+        "type": "ball",
+        "axis": {"towards": "cam0"},
+    }
+    with pytest.raises(InputError, match="a ball joint has no axis"):
+        parse_rig_config(doc, tmp_path / "rig.yaml")

@@ -367,3 +367,71 @@ def test_markerless_cameras_plan_an_sfm_stage(tmp_path: Path) -> None:
     board = text.replace(", front_end: sfm, intrinsics: a.yaml", ", intrinsics: a.yaml")
     with pytest.raises(InputError, match=r"cameras\.a\.intrinsics"):
         parse_rig_config(__import__("yaml").safe_load(board), tmp_path / "rig.yaml")
+
+
+def test_a_hinge_axis_points_the_way_the_config_says(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """Issue 22, item 2: ``joints.<name>.axis`` picks the sign of a hinge's axis (a direction
+    in one of its bodies, or towards a named body); the angle range turns with it."""
+    import yaml
+
+    rec = rig_recording(rng, 40, joints=JOINTS, sigma_rot_deg=0.3, sigma_trans=0.01)
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
+    base = (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
+        "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
+        "  h12: {between: [cam1, cam2], type: hinge%s}\n"
+    )
+
+    def solve(axis: str, name: str) -> tuple[RigArtifact, list[str]]:
+        text = base % axis
+        (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+        cfg = parse_rig_config(yaml.safe_load(text), tmp_path / "rig.yaml")
+        run = run_rig(cfg, output=tmp_path / f"{name}.yaml")
+        return run.artifact, run.artifact.warnings
+
+    plain, _ = solve("", "plain")
+    u = plain.joints["h12"].axis_in["cam2"]
+    # the default: largest component in the first body (cam1) positive
+    u1 = plain.joints["h12"].axis_in["cam1"]
+    assert u1[int(np.argmax(np.abs(u1)))] > 0
+    for d, flipped in ((-u, True), (u, False)):
+        want = f", axis: {{direction: [{d[0]:.6f}, {d[1]:.6f}, {d[2]:.6f}], in: cam2}}"
+        art, warnings = solve(want, "given")
+        sign = -1.0 if flipped else 1.0
+        for c in ("cam1", "cam2"):
+            np.testing.assert_allclose(
+                art.joints["h12"].axis_in[c], sign * plain.joints["h12"].axis_in[c]
+            )
+        lo, hi = plain.joints["h12"].angle_range_deg
+        rng_deg = art.joints["h12"].angle_range_deg
+        assert rng_deg == pytest.approx((-hi, -lo) if flipped else (lo, hi), abs=1e-6)
+        assert not any("barely tells" in w for w in warnings)
+    # the URDF follows: the revolute joint's axis turns round with it
+    import xml.etree.ElementTree as ET
+
+    from acs_cli.stages.export import run_rig_export
+
+    def urdf_axis(name: str) -> np.ndarray:
+        out = tmp_path / f"{name}.urdf"
+        run_rig_export(tmp_path / f"{name}.yaml", out, "urdf")
+        joint = next(j for j in ET.parse(out).getroot().iter("joint") if j.get("name") == "h12")
+        return np.array([float(v) for v in joint.find("axis").get("xyz").split()])  # type: ignore[union-attr]
+
+    np.testing.assert_allclose(urdf_axis("given"), urdf_axis("plain"), atol=1e-9)  # u: kept
+    solve(f", axis: {{direction: [{-u[0]:.6f}, {-u[1]:.6f}, {-u[2]:.6f}], in: cam2}}", "flip")
+    np.testing.assert_allclose(urdf_axis("flip"), -urdf_axis("plain"), atol=1e-9)
+    # towards a body: the axis points from the joint to that body's origin
+    art, _ = solve(", axis: {towards: cam0}", "towards")
+    T1 = art.cameras["cam1"].T_cam_ref
+    T0 = art.cameras["cam0"].T_cam_ref
+    to0 = (T1 @ np.linalg.inv(T0))[:3, 3] - art.joints["h12"].position_in["cam1"]
+    assert float(art.joints["h12"].axis_in["cam1"] @ to0) > 0
+    # across the axis: a warning that the direction barely tells
+    across = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+    axis = f", axis: {{direction: [{across[0]:.9f}, {across[1]:.9f}, {across[2]:.9f}], in: cam2}}"
+    _, warnings = solve(axis, "across")
+    assert any("joint h12: its axis is" in w and "barely tells" in w for w in warnings)
