@@ -19,8 +19,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
-# the newcomer's demo (within 90 s on a 2-core machine); `make showcase`: the markerless
-# calibration (structure from motion, a few minutes)
+# the newcomer's demo (target: within 90 s on a 2-core machine; 70 s measured); `make
+# showcase`: the markerless calibration (structure from motion; target: within 6 min, 5 min
+# 15 s measured)
 demo: install
 	$(BIN)/python -m sample_data_gen.demo demo_out
 
