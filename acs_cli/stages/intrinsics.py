@@ -338,14 +338,12 @@ def _larger_ruled_out(
 
 def few_boards(
     folder: Path,
-    images: Sequence[ImageRef],
-    found: Sequence[bool],
+    fd: FolderDetections,
     cols: int,
     rows: int,
     need: int,
     *,
     part_is_error: bool,
-    corners: Sequence[np.ndarray | None] | None = None,
 ) -> str | None:
     """Check the board size against the images (a wrong ``--board`` is named, issue 13).
 
@@ -356,9 +354,9 @@ def few_boards(
     - The images where it was found show a larger board (OpenCV finds an 8x6 board inside a
       9x6 one, at a different place in each image): :class:`InputError` when
       ``part_is_error`` (poses: the board's frame would jump), else a warning (intrinsics:
-      the part's geometry is still right). With the ``corners`` found (one per image, None
-      where none), the images' pixels are asked first (:func:`_larger_ruled_out`); the larger
-      sizes are searched for only where they cannot rule it out.
+      the part's geometry is still right). The images' pixels around the corners found are
+      asked first (:func:`_larger_ruled_out`); the larger sizes are searched for only where
+      they cannot rule it out.
 
     Returns
     -------
@@ -367,13 +365,13 @@ def few_boards(
     """
     from acs_cli.core.board_hint import larger_board_sizes
 
+    images, found = fd.images, [d.found for d in fd.detections]
     k, n = int(sum(found)), len(images)
     if k >= need and k >= FEW_BOARDS * n:
         with_board = [p for p, f in zip(images, found, strict=True) if f]
-        if corners is not None:
-            found_corners = [c for c, f in zip(corners, found, strict=True) if f]
-            if _larger_ruled_out(with_board, found_corners, cols, rows):
-                return None
+        corners = [d.corners for d in fd.detections if d.found]
+        if _larger_ruled_out(with_board, corners, cols, rows):
+            return None
         larger = _size_in(with_board, larger_board_sizes(cols, rows))
         if larger is None or 2 * larger[1] < min(len(with_board), HINT_IMAGES):
             return None
@@ -845,17 +843,7 @@ def run_intrinsics(
     board_note = None
     if target is None:
         with_board = [i for i, d in enumerate(fd.detections) if d.found]
-        found = [d.found for d in fd.detections]
-        board_note = few_boards(
-            images_dir,
-            fd.images,
-            found,
-            cols,
-            rows,
-            MIN_VIEWS,
-            part_is_error=False,
-            corners=[d.corners for d in fd.detections],
-        )
+        board_note = few_boards(images_dir, fd, cols, rows, MIN_VIEWS, part_is_error=False)
         obj = board_points(cols, rows, config.square)
         img_pts = [np.asarray(fd.detections[i].corners) for i in with_board]
         obj_pts = [obj] * len(img_pts)

@@ -323,17 +323,7 @@ def run_poses(
         raise no_target_error(images_dir, target, fd.images, n_some)
     board_note = None
     if target is None:  # a wrong --board is named (exit 2) rather than posing a few images
-        found = [d.found for d in fd.detections]
-        board_note = few_boards(
-            images_dir,
-            fd.images,
-            found,
-            cols,
-            rows,
-            1,
-            part_is_error=True,
-            corners=[d.corners for d in fd.detections],
-        )
+        board_note = few_boards(images_dir, fd, cols, rows, 1, part_is_error=True)
     if not names:
         raise no_board_error(images_dir, cols, rows, len(fd.images))
     if fd.times_ns is not None:

@@ -154,6 +154,11 @@ def test_a_bad_video_or_bag_entry_is_one_line_naming_its_key(
 ) -> None:
     doc = copy.deepcopy(RIG)
     doc["cameras"]["cam2"] = entry
+    _refused_naming(doc, tmp_path, key, says)
+
+
+def _refused_naming(doc: dict[str, Any], tmp_path: Path, key: str, says: str) -> None:
+    """``doc`` is refused in one line that starts with ``key`` and says ``says``."""
     with pytest.raises(InputError) as info:
         parse_rig_config(doc, tmp_path / "rig.yaml")
     assert info.value.message.startswith(f"key '{key}': "), info.value.message
@@ -190,10 +195,7 @@ def test_a_bad_axis_convention_is_one_line_naming_its_key(
 ) -> None:
     doc = copy.deepcopy(RIG)
     doc["joints"]["j12"] = {"between": ["cam1", "cam2"], "type": "hinge", "axis": axis}
-    with pytest.raises(InputError) as info:
-        parse_rig_config(doc, tmp_path / "rig.yaml")
-    assert info.value.message.startswith(f"key '{key}': "), info.value.message
-    assert says in info.value.message
+    _refused_naming(doc, tmp_path, key, says)
 
 
 def test_a_ball_joint_has_no_axis_to_orient(tmp_path: Path) -> None:
