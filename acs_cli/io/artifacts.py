@@ -286,16 +286,22 @@ def _distinct_nodes(node: yaml.Node, seen: set[int]) -> bool:
     return shared
 
 
-#: libyaml's parser where PyYAML was built with it (the wheels are): the same documents and
-#: marks as the pure-Python one, ten times faster (a rig.yaml: 49 ms pure, 5 ms with it)
+#: libyaml's scanner and parser where PyYAML was built with it (the wheels are): the same
+#: events and marks as the pure-Python ones, several times faster. The nodes are composed in
+#: Python (:class:`_StrictLoader`): libyaml's composer recurses in C without a limit, and a
+#: 200 kB document nested 100,000 deep crashed the process (Python's raises RecursionError).
 _SafeLoader: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class _StrictLoader(_SafeLoader):  # type: ignore[valid-type,misc]
+class _StrictLoader(yaml.composer.Composer, _SafeLoader):  # type: ignore[valid-type,misc]
     """A safe loader that refuses a key repeated in one mapping (YAML forbids it; PyYAML
     would silently keep the last value) and aliases that expand the document by more than
     :data:`YAML_ALIAS_BUDGET` values (an alias bomb: a few kilobytes that every walk over the
     data, or a message quoting it, sees as gigabytes)."""
+
+    def __init__(self, stream: Any) -> None:
+        _SafeLoader.__init__(self, stream)
+        yaml.composer.Composer.__init__(self)
 
     def get_single_node(self) -> Any:
         node = super().get_single_node()

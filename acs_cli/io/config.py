@@ -1154,6 +1154,15 @@ def _axis_convention(
     if a.towards is not None:
         if a.direction is not None or a.in_ is not None:
             raise _fail(path, f"{key}.axis", "give 'direction' with 'in', or 'towards', not both")
+        if a.towards == between[0]:
+            # the hinge's point is the axis point nearest that body's centre: seen from it,
+            # the body lies across the axis, which tells no sign
+            raise _fail(
+                path,
+                f"{key}.axis.towards",
+                f"{between[0]} lies across the axis (the joint's point is the axis point "
+                f"nearest its centre): name another body ({between[1]}, or any of the rig)",
+            )
         return None, a.towards
     if a.direction is None or a.in_ is None:
         raise _fail(path, f"{key}.axis", "give 'direction' with 'in' (a body), or 'towards'")

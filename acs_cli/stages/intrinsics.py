@@ -331,6 +331,8 @@ def _larger_ruled_out(
         # a side the image cannot tell (NaN: mostly out of view) hides no larger board the
         # search could find here: that board is not in view whole
         scores = board_extension_scores(grey, c, cols, rows)
+        if np.all(np.isnan(scores)):  # no checker pattern measured at all: search
+            return False
         if float(np.max(np.nan_to_num(scores, nan=0.0))) >= EXTENSION_SCREEN:
             return False
     return True

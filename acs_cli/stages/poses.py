@@ -695,6 +695,8 @@ def run_sfm_poses(
         raise InputError("--refine-intrinsics needs --intrinsics (a calibration to refine)")
     stamps = _time_source(config)
     bag = is_bag_path(images_dir)
+    if config.topic is not None and not bag:
+        raise InputError(f"--topic ({config.topic}) applies to ROS bags", path=images_dir)
     video = _video_times_check(images_dir, config)
     config.selection.check()
     if not video and not config.selection.trivial:

@@ -200,6 +200,8 @@ def test_sfm_poses_from_a_video(tmp_path: Path) -> None:
     _render(folder, 12)
     video, times = folder_to_video(folder, tmp_path / "in" / "walk.mkv", fps=5, jitter=0.2)
     out, tum = tmp_path / "poses.npz", tmp_path / "poses.txt"
+    res = acscal("poses", video, "--sfm", "--topic", "/cam", "-o", out)  # not a bag
+    assert res.returncode == 2 and "--topic (/cam) applies to ROS bags" in res.stderr
     res = acscal("poses", video, "--sfm", "-o", out, "--tum", tum, "--every", "1", *FAST)
     assert res.returncode == 0, res.stderr
     assert "12 of 12 images registered" in res.stdout

@@ -274,6 +274,16 @@ def test_a_yaml_alias_bomb_is_refused(pair: Path, tmp_path: Path) -> None:
     _no_traceback(res)
 
 
+def test_yaml_nested_a_hundred_thousand_deep_is_one_line(tmp_path: Path) -> None:
+    # 200 kB that libyaml's own composer recursed on in C until the process crashed
+    # (SIGSEGV); nodes are composed in Python, which stops cleanly
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text("[" * 100_000 + "]" * 100_000)
+    res = acscal("run", cfg, timeout=60)
+    assert res.returncode == 2 and "not valid YAML" in res.stderr, res.stderr
+    _no_traceback(res)
+
+
 def test_merged_defaults_in_a_run_config_still_load(tmp_path: Path) -> None:
     cfg = tmp_path / "run.yaml"
     cfg.write_text(

@@ -188,6 +188,7 @@ def test_a_bag_camera_may_use_structure_from_motion(tmp_path: Path) -> None:
         ({"direction": [0, 0, 1], "in": "cam0"}, "joints.j12.axis.in", "joint's bodies"),
         ({"direction": [0, 0, 0], "in": "cam1"}, "joints.j12.axis.direction", "not be zero"),
         ({"towards": "cam0", "in": "cam1"}, "joints.j12.axis", "not both"),
+        ({"towards": "cam1"}, "joints.j12.axis.towards", "cam1 lies across the axis"),
     ],
 )
 def test_a_bad_axis_convention_is_one_line_naming_its_key(
