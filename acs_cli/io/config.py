@@ -1015,7 +1015,7 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
         raise _fail(
             path, "reference.camera", f"{ref_cam} is not in the reference recording {ref_rec}"
         )
-    joints = {name: _joint_spec(name, j, path) for name, j in m.joints.items()}
+    joints = {name: _joint_spec(name, j, list(cameras), path) for name, j in m.joints.items()}
     if not joints:
         raise _fail(
             path, "joints", "names no joint: a rig needs two cameras and a joint between them"
@@ -1026,13 +1026,6 @@ def parse_rig_config(doc: Any, path: Path) -> RigRunConfig:
     except InputError as exc:
         raise InputError(exc.message, path=path) from None
     _check_recordings(recordings, joints, path)
-    for j in joints.values():
-        if j.axis_towards is not None and j.axis_towards not in cameras:
-            raise _fail(
-                path,
-                f"joints.{j.name}.axis.towards",
-                f"must name one of the rig's bodies ({', '.join(cameras)})",
-            )
     board, target = _board_or_target(m, path)
     image_cams = [n for n, s in cameras.items() if s.images is not None and s.front_end == "board"]
     if image_cams and board is None and target is None:
@@ -1121,8 +1114,9 @@ def _camera_specs(
     return cameras
 
 
-def _joint_spec(name: str, j: Joint, path: Path) -> RigJointSpec:
-    """One joint of a rig config (its graph is checked by :func:`rig_topology`)."""
+def _joint_spec(name: str, j: Joint, bodies: list[str], path: Path) -> RigJointSpec:
+    """One joint of a rig config (its graph is checked by :func:`rig_topology`); ``bodies``:
+    the rig's."""
     key = f"joints.{name}"
     between = (j.between[0], j.between[-1])
     pos: dict[str, np.ndarray] = {}
@@ -1137,12 +1131,12 @@ def _joint_spec(name: str, j: Joint, path: Path) -> RigJointSpec:
             raise _fail(path, f"{key}.fixed_joint", f"a {j.type} joint has no fixed-joint session")
         _unknown_keys(j.fixed_joint, between, f"{key}.fixed_joint", path)
         fixed = {n: _resolve(v, path) for n, v in j.fixed_joint.items()}
-    direction, towards = _axis_convention(key, j, between, path)
+    direction, towards = _axis_convention(key, j, between, bodies, path)
     return RigJointSpec(name, between, j.type, pos, j.position_std, fixed, direction, towards)
 
 
 def _axis_convention(
-    key: str, j: Joint, between: tuple[str, str], path: Path
+    key: str, j: Joint, between: tuple[str, str], bodies: list[str], path: Path
 ) -> tuple[tuple[str, np.ndarray] | None, str | None]:
     """A joint's ``axis`` (:class:`AxisConvention`), checked: ``(body, direction)`` or
     ``towards``."""
@@ -1154,6 +1148,12 @@ def _axis_convention(
     if a.towards is not None:
         if a.direction is not None or a.in_ is not None:
             raise _fail(path, f"{key}.axis", "give 'direction' with 'in', or 'towards', not both")
+        if a.towards not in bodies:
+            raise _fail(
+                path,
+                f"{key}.axis.towards",
+                f"must name one of the rig's bodies ({', '.join(bodies)})",
+            )
         if a.towards == between[0]:
             # the hinge's point is the axis point nearest that body's centre: seen from it,
             # the body lies across the axis, which tells no sign

@@ -300,6 +300,12 @@ def board_advice(
     )
 
 
+def _spread(n: int) -> list[int]:
+    """Up to :data:`HINT_IMAGES` indices of ``n`` items, evenly spread: the images the
+    board-size checks look at."""
+    return [int(i) for i in np.unique(np.round(np.linspace(0, n - 1, HINT_IMAGES)))]
+
+
 def _size_in(
     images: Sequence[ImageRef], sizes: Sequence[tuple[int, int]]
 ) -> tuple[tuple[int, int], int] | None:
@@ -309,23 +315,18 @@ def _size_in(
 
     if not images:
         return None
-    pick = np.unique(np.round(np.linspace(0, len(images) - 1, HINT_IMAGES)).astype(int))
-    return board_size_hint(read_images([images[int(i)] for i in pick]), sizes)
+    return board_size_hint(read_images([images[i] for i in _spread(len(images))]), sizes)
 
 
 def _larger_ruled_out(
-    images: Sequence[ImageRef], corners: Sequence[np.ndarray | None], cols: int, rows: int
+    greys: Sequence[np.ndarray], corners: Sequence[np.ndarray | None], cols: int, rows: int
 ) -> bool:
     """Whether the images' own pixels rule out a larger board than ``cols x rows`` in every
-    one of ``images`` (up to :data:`HINT_IMAGES` of those with a board, evenly spread; their
-    ``corners`` as found): every side's continuation score below
-    :data:`acs_cli.core.board_hint.EXTENSION_SCREEN`, so no search is needed."""
+    one of ``greys`` (with the ``corners`` found in each): every side's continuation score
+    below :data:`acs_cli.core.board_hint.EXTENSION_SCREEN`, so no search is needed."""
     from acs_cli.core.board_hint import EXTENSION_SCREEN, board_extension_scores
 
-    pick = np.unique(np.round(np.linspace(0, len(images) - 1, HINT_IMAGES)).astype(int))
-    greys = read_images([images[int(i)] for i in pick])
-    for i, grey in zip(pick, greys, strict=True):
-        c = corners[int(i)]
+    for grey, c in zip(greys, corners, strict=True):
         if c is None:
             return False
         # a side the image cannot tell (NaN: mostly out of view) hides no larger board the
@@ -365,23 +366,23 @@ def few_boards(
     str or None
         A warning, or None.
     """
-    from acs_cli.core.board_hint import larger_board_sizes
+    from acs_cli.core.board_hint import board_size_hint, larger_board_sizes
 
     images, found = fd.images, [d.found for d in fd.detections]
     k, n = int(sum(found)), len(images)
     if k >= need and k >= FEW_BOARDS * n:
-        with_board = [p for p, f in zip(images, found, strict=True) if f]
-        corners = [d.corners for d in fd.detections if d.found]
-        if _larger_ruled_out(with_board, corners, cols, rows):
+        with_board = [i for i, f in enumerate(found) if f]
+        tried = [with_board[i] for i in _spread(len(with_board))]
+        greys = read_images([images[i] for i in tried])  # read once: the screen, the search
+        if _larger_ruled_out(greys, [fd.detections[i].corners for i in tried], cols, rows):
             return None
-        larger = _size_in(with_board, larger_board_sizes(cols, rows))
-        if larger is None or 2 * larger[1] < min(len(with_board), HINT_IMAGES):
+        larger = board_size_hint(greys, larger_board_sizes(cols, rows))
+        if larger is None or 2 * larger[1] < len(tried):
             return None
         (c, r), m = larger
         text = (
-            f"the images show a {c}x{r} board (found in {m} of "
-            f"{min(len(with_board), HINT_IMAGES)} images tried), of which --board {cols}x{rows} "
-            f"is a part: give --board {c}x{r} (inner corners)"
+            f"the images show a {c}x{r} board (found in {m} of {len(tried)} images tried), "
+            f"of which --board {cols}x{rows} is a part: give --board {c}x{r} (inner corners)"
         )
         if part_is_error:
             raise InputError(text + "; a part would put the board's origin at a different "

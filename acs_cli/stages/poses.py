@@ -732,7 +732,7 @@ def run_sfm_poses(
         if video:  # COLMAP reads files: the kept frames go to the work folder, as PNG
             folder = work / "frames"
             size, frame_ns, notes, counts = _video_frames_to(
-                images_dir, folder, config.selection, progress, config.topic if bag else None
+                images_dir, folder, config.selection, progress, config.topic
             )
             all_names = list(frame_ns)
         else:
