@@ -76,7 +76,7 @@ __all__ = [
 ]
 
 #: Recorded in detection caches: bump when the detector's output can change.
-DETECTOR_VERSION = "acscal-checkerboard-6"
+DETECTOR_VERSION = "acscal-checkerboard-7"
 #: Width (pixels) about which the coarse search runs (the first pyramid level at least
 #: :data:`LEVEL_SLACK` times as wide), unless the board's squares need a wider one.
 COARSE_WIDTH = 640
@@ -138,6 +138,103 @@ def corner_spacing_px(corners: NDArray[np.floating], cols: int, rows: int) -> fl
     dx = np.linalg.norm(np.diff(g, axis=1), axis=2)
     dy = np.linalg.norm(np.diff(g, axis=0), axis=2)
     return float(min(dx.min() if dx.size else np.inf, dy.min() if dy.size else np.inf))
+
+
+#: A coarse corner further than this fraction of the local corner spacing from the board's
+#: smooth grid (:func:`smooth_grid`) is re-seeded on it.
+RESEED_FRACTION = 0.25
+
+
+def _cubic_terms(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The ten monomials of degree <= 3 in ``x``, ``y`` (shape (n,) each), shape (n, 10)."""
+    return np.column_stack(
+        [np.ones_like(x), x, y, x * x, x * y, y * y, x**3, x * x * y, x * y * y, y**3]
+    )
+
+
+def smooth_grid(
+    corners: NDArray[np.floating], cols: int, rows: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The board's grid as a smooth map of its corners, fitted so that a few wrong corners
+    do not move it.
+
+    The map is a homography from the grid's indices to the image (least median of
+    squares, ``cv2.findHomography`` with ``LMEDS``: perspective) plus a cubic polynomial of
+    the indices (lens distortion, which is smooth over a board), fitted by least squares
+    reweighted five times, corners off by more than three robust standard deviations (and
+    0.05 px) given no weight.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (cols * rows, 2)
+        Corners row by row, pixels.
+    cols, rows : int
+        Inner corners along the board's x and y axes.
+
+    Returns
+    -------
+    grid : ndarray, shape (cols * rows, 2)
+        Where the map puts each corner, pixels.
+    spacing : ndarray, shape (cols * rows,)
+        The map's smaller step between neighbouring corners there, pixels.
+    Or None when the board has under 16 corners (too few to tell a wrong one) or no
+    homography fits.
+    """
+    c = np.asarray(corners, dtype=float).reshape(-1, 2)
+    if c.shape[0] < 16 or not np.all(np.isfinite(c)):
+        return None
+    jj, ii = np.meshgrid(np.arange(rows, dtype=float), np.arange(cols, dtype=float), indexing="ij")
+    obj = np.column_stack([ii.ravel(), jj.ravel()])
+    H, _ = cv2.findHomography(obj, c, cv2.LMEDS)
+    if H is None:
+        return None
+    base = np.asarray(cv2.perspectiveTransform(obj[:, None, :], H), float).reshape(-1, 2)
+    # the polynomial on indices scaled to [-1, 1] (well-conditioned); skipped on boards too
+    # small to hold it with room to spare
+    A = _cubic_terms(
+        (obj[:, 0] - 0.5 * (cols - 1)) / max(0.5 * (cols - 1), 1.0),
+        (obj[:, 1] - 0.5 * (rows - 1)) / max(0.5 * (rows - 1), 1.0),
+    )
+    r = c - base
+    fit = np.zeros_like(r)
+    if c.shape[0] >= 3 * A.shape[1]:
+        w = np.ones(c.shape[0])
+        for _ in range(5):
+            coef = np.linalg.lstsq(A * w[:, None], r * w[:, None], rcond=None)[0]
+            fit = A @ coef
+            e = np.linalg.norm(r - fit, axis=1)
+            w = (e <= 3.0 * 1.4826 * float(np.median(e)) + 0.05).astype(float)
+    grid = base + fit
+    g = grid.reshape(rows, cols, 2)
+    step_x = np.linalg.norm(np.gradient(g, axis=1), axis=2)
+    step_y = np.linalg.norm(np.gradient(g, axis=0), axis=2)
+    return grid, np.minimum(step_x, step_y).ravel()
+
+
+def reseed_outliers(
+    corners: NDArray[np.floating], cols: int, rows: int
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Move corners far off the board's smooth grid onto it (:func:`smooth_grid`).
+
+    A corner further than :data:`RESEED_FRACTION` of the local spacing from the grid is
+    placed on it: through motion blur a coarse search can put a few corners along the
+    board's border several pixels off, and from there no local refinement finds the
+    corner. Elsewhere the grid is within a fraction of a pixel of the corner, well inside
+    the refinement's reach.
+
+    Returns
+    -------
+    corners : ndarray, shape (cols * rows, 2)
+    moved : ndarray of bool, shape (cols * rows,)
+    """
+    c = np.asarray(corners, dtype=float).reshape(-1, 2).copy()
+    smooth = smooth_grid(c, cols, rows)
+    if smooth is None:
+        return c, np.zeros(c.shape[0], dtype=bool)
+    grid, step = smooth
+    moved = np.linalg.norm(c - grid, axis=1) > RESEED_FRACTION * step
+    c[moved] = grid[moved]
+    return c, moved
 
 
 def normalise_order(corners: NDArray[np.floating], cols: int, rows: int) -> NDArray[np.float64]:
@@ -666,6 +763,7 @@ def detect_checkerboard(
     coarse, level = seen
     scale = float(2**level)
     c = (coarse.reshape(-1, 2).astype(float) + 0.5) * scale - 0.5
+    c = reseed_outliers(c, cols, rows)[0]
     spacing = corner_spacing_px(c, cols, rows)
     if not np.isfinite(spacing) or spacing < 4.0:
         return None
@@ -694,6 +792,6 @@ def detect_checkerboard(
             start[far] = _subpix(roi, coarse_local[far], windows, _SUBPIX_COARSE_CRITERIA)
             out[far] = _fit(roi, start, cols, rows, radius, MAX_FIT_SHIFT)[0][far]
     out += offset
-    if not np.all(np.isfinite(out)):
-        return None
+    if not np.all(np.isfinite(out)) or np.any(reseed_outliers(out, cols, rows)[1]):
+        return None  # a corner the refinement left far off the board's grid: not trusted
     return normalise_order(out, cols, rows)
