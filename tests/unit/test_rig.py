@@ -188,3 +188,34 @@ def test_a_moved_hinge_points_covariance_is_its_geometrys_propagated(
             rms = np.sqrt(np.trace(Cf[3 * c : 3 * c + 3, 3 * c : 3 * c + 3]))
             axis_rms = np.sqrt(np.trace(C[6 + 3 * c : 9 + 3 * c, 6 + 3 * c : 9 + 3 * c]))
             assert rms == pytest.approx(50.0 * axis_rms, rel=0.01)
+
+
+def test_a_hinge_point_moved_to_where_the_data_pin_the_axis_keeps_its_small_std(
+    rng: np.random.Generator,
+) -> None:
+    """A hinge whose best-determined point ``z`` lies 2 units along the axis from the default
+    point ``o = z - 2 u``: ``o`` and ``u`` are strongly correlated. Moved back to ``z``, the
+    point has ``z``'s 1 mm std across the axis: its cross-covariance with the axis cancels
+    the axis's share; without it the std would be 17 mm."""
+    g0, _, G = _hinge(rng)
+    s0 = 2.0
+    u = (g0[6:9], g0[9:])
+    z = (g0[:3] + s0 * u[0], g0[3:6] + s0 * u[1])
+    g = np.concatenate([z[0] - s0 * u[0], z[1] - s0 * u[1], u[0], u[1]])
+    # d(o_p, o_q, u_p, u_q) by (z_p, z_q, a_p, a_q): do = dz - s0 B da, du = B da
+    D = G.copy()
+    D[0:3, 6:8] = -s0 * G[6:9, 6:8]
+    D[3:6, 8:10] = -s0 * G[9:12, 8:10]
+    S = np.diag([1e-3**2] * 6 + [np.radians(0.5) ** 2] * 4)
+    C = D @ S @ D.T
+    x, Cx = hinge_point_from_nearest(g, C, 1, z[1])
+    np.testing.assert_allclose(x, np.stack(z), atol=1e-12)
+    for c in (0, 1):
+        Cc = Cx[3 * c : 3 * c + 3, 3 * c : 3 * c + 3]
+        B = tangent_basis(u[c])
+        np.testing.assert_allclose(B.T @ Cc @ B, 1e-6 * np.eye(2), atol=1e-15)  # across
+        assert np.sqrt(np.linalg.eigvalsh(Cc)[-1]) < 1.5e-3  # along: z_q's share, at most
+    no_cross = C.copy()
+    no_cross[:6, 6:] = no_cross[6:, :6] = 0.0
+    _, Cn = hinge_point_from_nearest(g, no_cross, 1, z[1])
+    assert np.sqrt(np.linalg.eigvalsh(Cn[3:, 3:])[-1]) > 0.015
