@@ -7,7 +7,8 @@ rigid body; an edge joins two cameras and has a type:
   ``p``'s frame and at ``position_in[q]`` in camera ``q``'s, whatever the articulation.
 - ``hinge``: a revolute joint. An axis fixed in both bodies (``axis_in[p]``, ``axis_in[q]``,
   unit vectors) and a point on it, the same physical point in both cameras. The point is
-  the one on the axis nearest camera ``p``'s optical centre (``p`` the edge's first camera).
+  the one on the axis nearest camera ``p``'s optical centre (``p`` the edge's first camera),
+  unless the rig config chooses another (:func:`hinge_point_from_nearest`).
 - ``rigid``: both cameras on one body; ``T_q_p`` is constant.
 
 The pose between any two cameras at one instant chains along the tree's unique path, as in
@@ -17,7 +18,9 @@ uses its inverse.
 
 This module is topology and chaining only (no estimation): :class:`RigTopology` validates
 a tree (every error names the offending key) and answers paths (:meth:`RigTopology.tree_order`
-walks it from the reference camera, each step forward along its edge's ``T_q_p`` or back).
+walks it from the reference camera, each step forward along its edge's ``T_q_p`` or back);
+and the conventions a rig config chooses for a hinge's outputs (:func:`oriented_axis`,
+:func:`hinge_point_from_nearest`).
 """
 
 from __future__ import annotations
@@ -274,3 +277,63 @@ def oriented_axis(
     sign = -1.0 if cos < 0 else 1.0
     out: dict[str, FloatArray] = {c: sign * np.asarray(v, dtype=float) for c, v in axis_in.items()}
     return out, float(np.degrees(np.arccos(min(abs(cos), 1.0))))
+
+
+def hinge_point_from_nearest(
+    geometry: FloatArray, covariance: FloatArray, side: int, nearest: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """A hinge's point moved along its axis to the one nearest a given point, in both
+    bodies' frames, with its covariance.
+
+    The axis is the line ``o_b + s u_b`` in body ``b``'s frame (``b`` the ``side`` the given
+    point ``y`` is in); its point nearest ``y`` is at ``s = u_b . (y - o_b)``, and the same
+    physical point is ``x_c = o_c + s u_c`` in either body ``c`` (``o_p``, ``o_q`` are one
+    physical point, ``u_p``, ``u_q`` one direction). The covariance is first order over the
+    whole geometry (its cross-covariances included): with ``d = y - o_b``,
+
+    - ``dx_b = (I - u_b u_b^T) do_b + (u_b d^T + s I) du_b``;
+    - ``dx_c = do_c + s du_c - u_c u_b^T do_b + u_c d^T du_b`` for the other body ``c``,
+
+    so that a point far along the axis has the axis's angular uncertainty times ``|s|``
+    across it. The axes' sign does not matter (``-u`` with its cross-covariances' signs
+    turned gives the same point and covariance).
+
+    Parameters
+    ----------
+    geometry : ndarray, shape (12,)
+        ``(o_p, o_q, u_p, u_q)`` concatenated: a point of the axis in ``p``'s and ``q``'s
+        frames (the same physical point; reference units) and the unit axis in each (the
+        same direction).
+    covariance : ndarray, shape (12, 12)
+        Covariance of ``geometry`` (reference units squared; the axes' rows unitless).
+    side : {0, 1}
+        Which body's frame ``nearest`` is in: ``p`` (0) or ``q`` (1).
+    nearest : ndarray, shape (3,)
+        The given point in that body's frame (reference units).
+
+    Returns
+    -------
+    points : ndarray, shape (2, 3)
+        The axis point nearest ``nearest``, in ``p``'s frame then ``q``'s (reference units).
+    covariance : ndarray, shape (6, 6)
+        Covariance of ``points`` flattened (``x_p`` then ``x_q``).
+    """
+    g = np.asarray(geometry, dtype=float)
+    C = np.asarray(covariance, dtype=float)
+    if g.shape != (12,) or C.shape != (12, 12) or side not in (0, 1):
+        raise ValueError("a hinge's geometry is (12,) with a (12, 12) covariance, side 0 or 1")
+    o = (g[0:3], g[3:6])
+    u = (g[6:9], g[9:12])
+    d = np.asarray(nearest, dtype=float) - o[side]
+    s = float(u[side] @ d)
+    points = np.stack([o[0] + s * u[0], o[1] + s * u[1]])
+    # J = d(x_p, x_q) / d(o_p, o_q, u_p, u_q): the move s along each body's axis, then s's
+    # own derivatives (ds = -u_b^T do_b + d^T du_b) carried along each axis
+    J = np.zeros((6, 12))
+    eye = np.eye(3)
+    for c in (0, 1):
+        J[3 * c : 3 * c + 3, 3 * c : 3 * c + 3] = eye
+        J[3 * c : 3 * c + 3, 6 + 3 * c : 9 + 3 * c] = s * eye
+        J[3 * c : 3 * c + 3, 3 * side : 3 * side + 3] -= np.outer(u[c], u[side])
+        J[3 * c : 3 * c + 3, 6 + 3 * side : 9 + 3 * side] += np.outer(u[c], d)
+    return points, J @ C @ J.T

@@ -1244,6 +1244,8 @@ def _assemble(
             axis_std_deg_in=astd,
             T_q_p=T_q_p,
             position_own_in={c: (pos[c], pcov[c]) for c in (p, q)},
+            geometry=g,
+            geometry_covariance=Cg,
         )  # fmt: skip  (a metric rig: each camera's own units are the reference's)
     worlds = []
     names = () if recs is None else recs.names

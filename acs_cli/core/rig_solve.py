@@ -441,6 +441,14 @@ class EdgeEstimate:
     #: (:mod:`acs_cli.core.correlated`): what the motion's geometry determines, for the tests
     #: of degenerate motion; empty when nothing grew
     position_cov_model_in: dict[str, FloatArray] = field(default_factory=dict)
+    #: a ball's or hinge's geometry as solved, ``(o_p, o_q[, u_p, u_q])`` concatenated
+    #: ((6,) or (12,), reference units; the default point, the axes with the solve's sign:
+    #: ``position_in`` and ``axis_in`` may be moved or turned round after the solve), and its
+    #: whole covariance: the cross-covariances a quantity of several parts needs (a hinge's
+    #: point moved along its axis, :func:`acs_cli.core.rig.hinge_point_from_nearest`);
+    #: empty where not known
+    geometry: FloatArray = field(default_factory=lambda: np.zeros(0))
+    geometry_covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def motion_cov_in(self, c: str) -> FloatArray:
         """``position_cov_model_in[c]`` when the covariance grew, else ``position_cov_in[c]``."""
@@ -1876,6 +1884,8 @@ def _assemble(
         axis: dict[str, FloatArray] = {}
         astd: dict[str, float] = {}
         own_in: dict[str, tuple[FloatArray, FloatArray]] = {}
+        g: FloatArray = np.zeros(0)
+        Cg: FloatArray = np.zeros((0, 0))
         model = joint_model(j.type)
         if model.has_point:
             cols = L.edge_columns(j.name)
@@ -1932,6 +1942,8 @@ def _assemble(
             noise=noise.get(j.name, {}),
             residual_blocks={kind: v[m] for kind, v in b.items()},
             position_own_in=own_in,
+            geometry=g,
+            geometry_covariance=Cg,
         )
     return RigEstimate(topo, k, cams, edges, cost, nfev, recordings=recs, worlds=worlds)
 

@@ -223,6 +223,10 @@ class RigJointSpec:
     #: default (largest component in the first body positive)
     axis_direction: tuple[str, np.ndarray] | None = None
     axis_towards: str | None = None
+    #: a hinge's reported point: ``(body, point)``, the axis point nearest ``point`` (in
+    #: that body's frame, the rig's length unit); None: the default (nearest the first
+    #: body's origin)
+    point_nearest: tuple[str, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -357,6 +361,11 @@ Vector3 = Annotated[
     list[Annotated[float, Field(allow_inf_nan=False)]],
     Field(min_length=3, max_length=3),
     _say("must be three numbers (m)"),
+]
+Point3 = Annotated[
+    list[Annotated[float, Field(allow_inf_nan=False)]],
+    Field(min_length=3, max_length=3),
+    _say("must be three numbers (the rig's length unit)"),
 ]
 
 
@@ -551,6 +560,14 @@ class AxisConvention(Section):
     towards: Name | None = Field(default=None, description="a body of the rig")
 
 
+class PointConvention(Section):
+    """Where a hinge's point is reported: the axis point nearest ``nearest``, a point in
+    body ``in``'s frame (the rig's length unit: the reference camera's trajectory unit)."""
+
+    nearest: Point3 = Field(description="a point, in body 'in' (the rig's length unit)")
+    in_: Name = Field(alias="in", description="one of the joint's bodies")
+
+
 class Joint(Section):
     """A joint between two cameras."""
 
@@ -567,6 +584,11 @@ class Joint(Section):
         default=None,
         description="hinge: which way its axis points (default: largest component in the "
         "first body positive)",
+    )
+    point: PointConvention | None = Field(
+        default=None,
+        description="hinge: where its point is reported (default: the axis point nearest the "
+        "first body's origin)",
     )
 
 
@@ -1132,7 +1154,29 @@ def _joint_spec(name: str, j: Joint, bodies: list[str], path: Path) -> RigJointS
         _unknown_keys(j.fixed_joint, between, f"{key}.fixed_joint", path)
         fixed = {n: _resolve(v, path) for n, v in j.fixed_joint.items()}
     direction, towards = _axis_convention(key, j, between, bodies, path)
-    return RigJointSpec(name, between, j.type, pos, j.position_std, fixed, direction, towards)
+    nearest = _point_convention(key, j, between, path)
+    return RigJointSpec(
+        name, between, j.type, pos, j.position_std, fixed, direction, towards, nearest
+    )
+
+
+def _point_convention(
+    key: str, j: Joint, between: tuple[str, str], path: Path
+) -> tuple[str, np.ndarray] | None:
+    """A joint's ``point`` (:class:`PointConvention`), checked: ``(body, point)``."""
+    pt = j.point
+    if pt is None:
+        return None
+    if not joint_model(j.type).has_axis:
+        what = (
+            f"a {j.type} joint's point is its centre, not a choice"
+            if joint_model(j.type).has_point
+            else f"a {j.type} joint has no point"
+        )
+        raise _fail(path, f"{key}.point", f"{what}: only a hinge's point is chosen, along its axis")
+    if pt.in_ not in between:
+        raise _fail(path, f"{key}.point.in", f"must be one of the joint's bodies {list(between)}")
+    return pt.in_, np.asarray(pt.nearest, dtype=float)
 
 
 def _axis_convention(

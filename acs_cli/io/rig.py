@@ -27,7 +27,8 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
       <name>:
         type: ball | hinge | rigid
         between: [p, q]
-        position_in: {p: [3], q: [3]}   # ball centre, or the hinge point (nearest p's centre)
+        position_in: {p: [3], q: [3]}   # ball centre, or the hinge point (nearest p's centre,
+                                        # or as joints.<n>.point says: header.frames tells)
         position_std_in: {p: [3], q: [3]}
         axis_in: {p: [3], q: [3]}       # hinge only: unit vectors, signed as joints.<n>.axis says
                                         # (default: largest component in p > 0)

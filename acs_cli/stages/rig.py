@@ -42,7 +42,7 @@ from acs_cli.core.quality import (
     length_scale,
     std_rule,
 )
-from acs_cli.core.rig import RigJoint, oriented_axis, rig_topology
+from acs_cli.core.rig import RigJoint, hinge_point_from_nearest, oriented_axis, rig_topology
 from acs_cli.core.rig_bundle import (
     CameraViews,
     PoseBodyEstimate,
@@ -306,6 +306,50 @@ def oriented_axes(config: RigRunConfig, est: RigEstimate) -> tuple[RigEstimate, 
     return dataclasses.replace(est, edges=edges), notes
 
 
+def chosen_points(config: RigRunConfig, est: RigEstimate) -> RigEstimate:
+    """The hinges' points where the config's ``joints.<name>.point`` puts them: the axis
+    point nearest the point given (in one of the joint's bodies), in both bodies' frames,
+    with the covariance propagated from the joint's whole geometry (point and axis,
+    :func:`~acs_cli.core.rig.hinge_point_from_nearest`); the default (the axis point
+    nearest the first body's origin) elsewhere.
+
+    A moved point's copies of the default one in each camera's own units and under
+    independent noise alone (``position_own_in``, ``position_cov_model_in``: the two-camera
+    commands' and the degeneracy tests', not the rig's outputs) are dropped, not left stale.
+    """
+    edges = dict(est.edges)
+    for name, spec in config.joints.items():
+        e = edges.get(name)
+        if e is None or spec.point_nearest is None:
+            continue
+        body, given = spec.point_nearest
+        p, q = e.joint.between
+        x, C = hinge_point_from_nearest(
+            e.geometry, e.geometry_covariance, e.joint.between.index(body), given
+        )
+        edges[name] = dataclasses.replace(
+            e,
+            position_in={p: x[0], q: x[1]},
+            position_cov_in={p: C[:3, :3], q: C[3:, 3:]},
+            position_own_in={},
+            position_cov_model_in={},
+        )
+    return dataclasses.replace(est, edges=edges)
+
+
+def point_notes(config: RigRunConfig) -> str:
+    """What rig.yaml's ``position_in`` is, for its header's ``frames``: the joint in each
+    camera's frame, and for each hinge whose point the config chooses, which."""
+    chosen = [
+        f"hinge {name}: the axis point nearest [{g[0]:g}, {g[1]:g}, {g[2]:g}] in {body}'s frame"
+        for name, j in config.joints.items()
+        if j.point_nearest is not None
+        for body, g in [j.point_nearest]
+    ]
+    text = "the joint in each camera's frame"
+    return text if not chosen else f"{text} ({'; '.join(chosen)})"
+
+
 def hinge_angle_range(est: RigEstimate, name: str) -> tuple[float, float] | None:
     """A hinge's angle range over its frames used (deg, :func:`hinge_angle_range_deg`):
     zero at the rig's relative pose at the reference instant (``T_cam_ref``, the URDF's
@@ -562,6 +606,9 @@ def run_rig(
     warnings += [] if note is None else [note]
     verdict = judge(rig_verdict_measures(est, tracks[config.reference_camera]), config.accept_weak)
     warnings += verdict.warnings()
+    # the hinges' points the config chooses: reported, not judged (the verdict above is the
+    # calibration's, at the default point, whatever point the config asks for)
+    est = chosen_points(config, est)
     art = dataclasses.replace(
         rig_artifact(est, unit, warnings, None if single else config.reference_recording),
         # the reference instant as the config gives it: a frame of the reference recording
@@ -617,7 +664,7 @@ def run_rig(
             "T_cam_ref": f"maps {config.reference_camera}'s frame at reference frame "
             f"{config.reference_frame} of recording {config.reference_recording} "
             f"(t = {slots[est.reference_frame]:.9f}) into the camera's",
-            "position_in": "the joint in each camera's frame",
+            "position_in": point_notes(config),
             "axis_in": "hinge axis (unit) in each camera's frame",
         },
     )

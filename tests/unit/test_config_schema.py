@@ -208,3 +208,49 @@ def test_a_ball_joint_has_no_axis_to_orient(tmp_path: Path) -> None:
     }
     with pytest.raises(InputError, match="a ball joint has no axis"):
         parse_rig_config(doc, tmp_path / "rig.yaml")
+
+
+@pytest.mark.parametrize(
+    ("point", "key", "says"),
+    [
+        ({"nearest": [0, 0, 1]}, "joints.j12.point.in", "missing (required)"),
+        ({"in": "cam2"}, "joints.j12.point.nearest", "missing (required)"),
+        ({"nearest": [0, 0, 1], "in": "cam0"}, "joints.j12.point.in", "joint's bodies"),
+        ({"nearest": [0, 1], "in": "cam2"}, "joints.j12.point.nearest", "three numbers"),
+        ({"nearest": [0, 0, ".nan"], "in": "cam2"}, "joints.j12.point.nearest", "three numbers"),
+        ({"nearest": [0, 0, 1], "in": "cam2", "at": 1}, "joints.j12.point.at", "unknown key"),
+        ([0, 0, 1], "joints.j12.point", "must be a mapping"),
+    ],
+)
+def test_a_bad_hinge_point_is_one_line_naming_its_key(
+    tmp_path: Path, point: Any, key: str, says: str
+) -> None:
+    doc = copy.deepcopy(RIG)
+    doc["joints"]["j12"] = {"between": ["cam1", "cam2"], "type": "hinge", "point": point}
+    with pytest.raises(InputError) as info:
+        parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert info.value.message.startswith(f"key '{key}': "), info.value.message
+    assert says in info.value.message and "\n" not in info.value.message
+
+
+@pytest.mark.parametrize(
+    ("joint_type", "says"),
+    [("ball", "a ball joint's point is its centre"), ("rigid", "a rigid joint has no point")],
+)
+def test_only_a_hinge_point_is_chosen(tmp_path: Path, joint_type: str, says: str) -> None:
+    doc = copy.deepcopy(RIG)
+    point = {"nearest": [0, 0, 1], "in": "cam2"}
+    doc["joints"]["j12"] = {"between": ["cam1", "cam2"], "type": joint_type, "point": point}
+    with pytest.raises(InputError) as info:
+        parse_rig_config(doc, tmp_path / "rig.yaml")
+    assert info.value.message.startswith("key 'joints.j12.point': " + says), info.value.message
+
+
+def test_a_hinge_point_is_kept_with_its_body(tmp_path: Path) -> None:
+    doc = copy.deepcopy(RIG)
+    point = {"nearest": [0.1, -0.2, 1.5], "in": "cam2"}
+    doc["joints"]["j12"] = {"between": ["cam1", "cam2"], "type": "hinge", "point": point}
+    spec = parse_rig_config(doc, tmp_path / "rig.yaml").joints["j12"]
+    assert spec.point_nearest is not None and spec.point_nearest[0] == "cam2"
+    assert spec.point_nearest[1].tolist() == [0.1, -0.2, 1.5]
+    assert spec.axis_direction is None and spec.axis_towards is None

@@ -195,6 +195,31 @@ def _through_lenses(
     return views, truth
 
 
+def test_the_bundles_hinge_carries_its_whole_geometry(solved: tuple) -> None:
+    """The bundle's hinge has its geometry and whole covariance (not the pose-based
+    solve's): a point moved along its axis (a rig config's ``joints.<name>.point``) is
+    propagated from them, as for the pose-based solve."""
+    from acs_cli.core.rig import hinge_point_from_nearest
+
+    rec, est, ba, _ref = solved
+    e, e0 = ba.estimate.edges["j12"], est.edges["j12"]
+    np.testing.assert_allclose(
+        e.geometry[:6], np.concatenate([e.position_in["cam1"], e.position_in["cam2"]])
+    )
+    np.testing.assert_allclose(e.geometry_covariance[:3, :3], e.position_cov_in["cam1"])
+    assert abs(float(e.geometry[6:9] @ e.axis_in["cam1"])) == pytest.approx(1.0)
+    assert not np.allclose(e.geometry, e0.geometry)
+    # 0.3 m along the axis from the point nearest cam1's centre, in cam1's frame
+    truth = rec.rig.edges["j12"]
+    assert truth.axis_p is not None and truth.axis_q is not None
+    x, C = hinge_point_from_nearest(
+        e.geometry, e.geometry_covariance, 0, truth.o_p + 0.3 * truth.axis_p
+    )
+    for c, want in enumerate((truth.o_p + 0.3 * truth.axis_p, truth.o_q + 0.3 * truth.axis_q)):
+        err = np.linalg.norm(x[c] - want)
+        assert err < 4 * np.sqrt(np.trace(C[3 * c : 3 * c + 3, 3 * c : 3 * c + 3])), (c, err)
+
+
 def test_fisheye_and_rational_cameras_with_partial_views() -> None:
     """A rig of fisheye and rational cameras, each missing 30-70% of its corners in half
     the frames: the intrinsics and the joints within their reported uncertainty."""

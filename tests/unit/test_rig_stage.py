@@ -10,7 +10,7 @@ import pytest
 from acs_cli.errors import InputError
 from acs_cli.io.rig import RigArtifact
 from acs_cli.io.trajectory import write_tum
-from acs_cli.stages.rig import RigRunConfig, parse_rig_config, run_rig
+from acs_cli.stages.rig import RigRun, RigRunConfig, parse_rig_config, run_rig
 from sample_data_gen.rig_sim import fixed_joint_motion, rig_recording
 
 JOINTS = (("j01", ("cam0", "cam1"), "ball"), ("h12", ("cam1", "cam2"), "hinge"))
@@ -435,3 +435,97 @@ def test_a_hinge_axis_points_the_way_the_config_says(
     axis = f", axis: {{direction: [{across[0]:.9f}, {across[1]:.9f}, {across[2]:.9f}], in: cam2}}"
     _, warnings = solve(axis, "across")
     assert any("joint h12: its axis is" in w and "barely tells" in w for w in warnings)
+
+
+def test_a_hinge_point_is_reported_where_the_config_says(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """Issue 22, item 2: ``joints.<name>.point: {nearest, in}`` reports a hinge's point as the
+    axis point nearest a point given in one of its bodies: the same physical point in both,
+    its std propagated from the point and the axis; rig.yaml, the joint's trajectory,
+    ``acscal trajectory``'s joint and the URDF follow; the verdict does not move."""
+    import xml.etree.ElementTree as ET
+
+    import yaml
+
+    from acs_cli.core import se3
+    from acs_cli.core.rig import hinge_point_from_nearest
+    from acs_cli.io.trajectory import read_trajectory
+    from acs_cli.stages.export import run_rig_export
+    from acs_cli.stages.rig import trajectories_from_rig
+
+    rec = rig_recording(rng, 40, joints=JOINTS, sigma_rot_deg=0.3, sigma_trans=0.01)
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
+    base = (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
+        "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
+        "  h12: {between: [cam1, cam2], type: hinge%s}\n"
+    )
+
+    def solve(extra: str, name: str) -> tuple[RigRun, Path]:
+        text = base % extra
+        (tmp_path / "rig.yaml").write_text(text, encoding="utf-8")
+        cfg = parse_rig_config(yaml.safe_load(text), tmp_path / "rig.yaml")
+        out = tmp_path / name / "rig.yaml"
+        return run_rig(cfg, output=out), out
+
+    plain_run, plain_file = solve("", "plain")
+    plain = plain_run.artifact
+    h = plain.joints["h12"]
+    u2 = h.axis_in["cam2"]
+    given = h.position_in["cam2"] + 1.5 * u2 + np.cross(u2, [0.0, 0.0, 0.2])
+    g = ", ".join(f"{v:.9f}" for v in given)
+    run, moved_file = solve(f", point: {{nearest: [{g}], in: cam2}}", "moved")
+    moved = run.artifact
+    m = moved.joints["h12"]
+    T_ref = {c: np.linalg.inv(moved.cameras[c].T_cam_ref) for c in ("cam1", "cam2")}
+    # one physical point (at the reference instant), on the axis, nearest the point given
+    np.testing.assert_allclose(
+        se3.transform_points(T_ref["cam1"], m.position_in["cam1"]),
+        se3.transform_points(T_ref["cam2"], m.position_in["cam2"]),
+        atol=1e-3,
+    )
+    for c in ("cam1", "cam2"):
+        step = m.position_in[c] - h.position_in[c]
+        np.testing.assert_allclose(np.cross(step, h.axis_in[c]), 0.0, atol=1e-12)
+        assert float(step @ h.axis_in[c]) == pytest.approx(1.5, abs=1e-6)
+    assert float((given - m.position_in["cam2"]) @ u2) == pytest.approx(0.0, abs=1e-9)
+    # the std: propagated from the geometry (point, axis, their cross-covariance), not
+    # copied: larger 1.5 units along the axis
+    e = run.estimate.edges["h12"]
+    _, C = hinge_point_from_nearest(e.geometry, e.geometry_covariance, 1, given)
+    np.testing.assert_allclose(m.position_std_in["cam1"], np.sqrt(np.diag(C)[:3]), rtol=1e-6)
+    np.testing.assert_allclose(m.position_std_in["cam2"], np.sqrt(np.diag(C)[3:]), rtol=1e-6)
+    for c in ("cam1", "cam2"):
+        assert np.linalg.norm(m.position_std_in[c]) > np.linalg.norm(h.position_std_in[c])
+    # the rest is the same rig: axes, angles, the other joint, the verdict, the warnings
+    for c in ("cam1", "cam2"):
+        np.testing.assert_allclose(m.axis_in[c], h.axis_in[c])
+    assert m.angle_range_deg == h.angle_range_deg
+    for c in ("cam0", "cam1"):
+        np.testing.assert_allclose(
+            moved.joints["j01"].position_in[c], plain.joints["j01"].position_in[c]
+        )
+    assert moved.verdict == plain.verdict and moved.warnings == plain.warnings
+    assert "the axis point nearest" in moved.header["frames"]["position_in"]
+    assert "nearest" not in plain.header["frames"]["position_in"]
+    # the joint's trajectory (and acscal trajectory's): moved by the step in cam1's frame
+    step1 = m.position_in["cam1"] - h.position_in["cam1"]
+    tp = read_trajectory(plain_file.parent / "trajectories" / "h12.tum").T_world_cam
+    tm = read_trajectory(moved_file.parent / "trajectories" / "h12.tum").T_world_cam
+    np.testing.assert_allclose(tm[:, :3, 3] - tp[:, :3, 3], tp[:, :3, :3] @ step1, atol=1e-6)
+    trajs = {c: read_trajectory(tmp_path / f"{c}.tum") for c in ("cam0", "cam1", "cam2")}
+    _, Jp = trajectories_from_rig(plain, trajs)["h12"]
+    _, Jm = trajectories_from_rig(moved, trajs)["h12"]
+    np.testing.assert_allclose(Jm[:, :3, 3] - Jp[:, :3, 3], Jp[:, :3, :3] @ step1, atol=1e-9)
+
+    # the URDF: the revolute joint's origin (in its parent body, cam1's axes) moves with it
+    def urdf_origin(rig_file: Path) -> np.ndarray:
+        out = rig_file.parent / "rig.urdf"
+        run_rig_export(rig_file, out, "urdf")
+        joint = next(j for j in ET.parse(out).getroot().iter("joint") if j.get("name") == "h12")
+        return np.array([float(v) for v in joint.find("origin").get("xyz").split()])  # type: ignore[union-attr]
+
+    np.testing.assert_allclose(urdf_origin(moved_file) - urdf_origin(plain_file), step1, atol=1e-3)

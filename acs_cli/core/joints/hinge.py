@@ -3,7 +3,9 @@
 An axis fixed in both bodies (``u_p``, ``u_q``, unit vectors) and a point on it, the same
 physical point in both cameras: ``G_p o_p = G_q o_q`` and ``R_Gp u_p = R_Gq u_q`` at every
 frame. The reported point is the axis point nearest camera ``p``'s centre
-(``o_p . u_p = 0``), the axis's sign has its largest component in ``p`` positive.
+(``o_p . u_p = 0``), the axis's sign has its largest component in ``p`` positive (a rig
+config may choose others after the solve: :func:`acs_cli.core.rig.oriented_axis`,
+:func:`acs_cli.core.rig.hinge_point_from_nearest`).
 
 Unknowns (9): ``o_p`` in the plane across ``u_p`` through ``p``'s centre (2), ``o_q`` (3),
 and each axis as a 2-dof step ``u = unit(u0 + B a)`` from its starting direction ``u0``
