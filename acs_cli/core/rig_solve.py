@@ -434,6 +434,11 @@ class EdgeEstimate:
     #: the raw constraint residuals over the inlier frames, by kind (``pos``, ``rot``,
     #: ``trans``: ``(m, 3)`` each, see ``_edge_blocks``)
     residual_blocks: dict[str, FloatArray] = field(default_factory=dict)
+    #: every frame of the edge (indices into the rig's timeline, the rejected ones too) and
+    #: the raw residuals at each of them by kind, ``(len(frames), 3)`` each: the joint's
+    #: residual over time (``inliers`` says which frames were used)
+    frames: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    frame_residuals: dict[str, FloatArray] = field(default_factory=dict)
     #: ``position_in`` and ``position_cov_in`` in each camera's own trajectory units (they
     #: differ from the reference's under unknown scale): camera -> (position, covariance)
     position_own_in: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
@@ -1941,6 +1946,8 @@ def _assemble(
             inliers=np.asarray(st.frames[j.name][m]),
             noise=noise.get(j.name, {}),
             residual_blocks={kind: v[m] for kind, v in b.items()},
+            frames=np.asarray(st.frames[j.name]),
+            frame_residuals=dict(b),
             position_own_in=own_in,
             geometry=g,
             geometry_covariance=Cg,

@@ -52,11 +52,13 @@ ANGLE_COLUMNS = (
 
 @dataclass(frozen=True)
 class JointAngleSeries:
-    """One joint's angles over its frames' ``times`` ``(n,)``."""
+    """One joint's angles over its frames' ``times`` ``(n,)``; ``zero``: the frame (index into
+    ``times``) at which they are zero, when known."""
 
     joint: str
     times: FloatArray
     angles: HingeAngles | BallAngles
+    zero: int | None = None
 
 
 def _num(x: float) -> str:

@@ -22,17 +22,21 @@ from acs_cli.core.se3 import FloatArray
 from acs_cli.report.verdict import COVERAGE_GRID
 
 __all__ = [
+    "AngleSeries",
     "CameraView",
     "CornerErrorData",
     "CoverageData",
     "ReprojectionData",
     "ResidualSeries",
+    "angles_figure",
+    "camera_name",
     "corner_errors_figure",
     "coverage_counts",
     "coverage_figure",
     "coverage_fraction",
     "reprojection_figure",
     "residuals_figure",
+    "rig_of_many_figure",
     "rig_reference_figure",
     "rig_trajectory_figure",
 ]
@@ -43,6 +47,17 @@ COLOR_JOINT = "#2ca02c"
 COLOR_REJECTED = "#d62728"
 #: Camera frame -> display frame: (x, y, z) -> (x, z, -y), so that "up" is up.
 _DISPLAY = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def camera_name(camera: str) -> str:
+    """How a camera is named in the report: a pair's ``a`` and ``b`` as ``A`` and ``B``, a
+    rig's cameras by their names (``camera {camera_name(c)}``)."""
+    return camera.upper() if camera in ("a", "b") else camera
+
+
+def _color(camera: str, color: str | None) -> str:
+    """A camera's colour: its own, else a pair's (A blue, B orange)."""
+    return color or (COLOR_A if camera == "a" else COLOR_B)
 
 
 @dataclass(frozen=True)
@@ -80,6 +95,33 @@ class ResidualSeries:
 
 
 @dataclass(frozen=True)
+class AngleSeries:
+    """One panel of the joint-angle figure: a joint's angles over time.
+
+    Attributes
+    ----------
+    title : str
+    x : ndarray, shape (n,)
+        Timestamps (s) or frame numbers.
+    values : ndarray, shape (n, k)
+        ``k`` angles per frame (deg): a hinge's angle, a ball's rotation vector.
+    labels : tuple of str
+        The ``k`` curves' names.
+    rejected : ndarray of bool, shape (n,)
+        Frames the estimator rejected as outliers.
+    zero : float or None
+        The time at which the angles are zero (the reference instant), if among ``x``.
+    """
+
+    title: str
+    x: FloatArray
+    values: FloatArray
+    labels: tuple[str, ...]
+    rejected: np.ndarray
+    zero: float | None = None
+
+
+@dataclass(frozen=True)
 class ReprojectionData:
     """One camera's reprojection errors.
 
@@ -96,6 +138,8 @@ class ReprojectionData:
         Per-image RMS (px) of each poses file, by file name.
     pose_images : dict of str to list of str
         The image names of each poses file (when it records them), as ``poses``.
+    color : str or None
+        The camera's colour (None: a pair's, A blue and B orange).
     """
 
     camera: str
@@ -104,6 +148,7 @@ class ReprojectionData:
     overall_rms: float | None = None
     poses: dict[str, FloatArray] = field(default_factory=dict)
     pose_images: dict[str, list[str]] = field(default_factory=dict)
+    color: str | None = None
 
 
 @dataclass(frozen=True)
@@ -137,12 +182,15 @@ class CornerErrorData:
         Detected minus projected (pixels).
     centre : ndarray, shape (2,)
         The principal point ``(cx, cy)`` (pixels), the centre of the radial plot.
+    color : str or None
+        The camera's colour (None: a pair's, A blue and B orange).
     """
 
     camera: str
     positions: FloatArray
     residuals: FloatArray
     centre: FloatArray
+    color: str | None = None
 
 
 def _png(fig: Figure, dpi: int) -> bytes:
@@ -358,11 +406,15 @@ def rig_of_many_figure(
     T_ref_cam: dict[str, FloatArray],
     joints: Sequence[tuple[str, str, str, str, FloatArray | None]],
     paths: dict[str, FloatArray],
+    instants: FloatArray,
+    at_instants: dict[str, FloatArray],
+    reference: str,
     unit: str,
     dpi: int = 100,
 ) -> bytes:
-    """A rig of many cameras in 3-D: each camera (frustum and name) at the reference instant,
-    each joint as a link through its point (rigid edges dashed), each path over time.
+    """A rig of many cameras in 3-D: left, each camera (frustum and name) at the reference
+    instant and each joint as a link through its point (rigid edges dashed); right, the rig
+    as a stick figure at a few instants, coloured by time, over each camera's path.
 
     Parameters
     ----------
@@ -371,7 +423,14 @@ def rig_of_many_figure(
     joints : sequence of (name, type, p, q, point)
         ``point`` ``(3,)`` in the same frame, or None for a rigid edge.
     paths : dict of str to ndarray, shape (n, 3)
-        Paths over time (cameras and joints), same frame.
+        Cameras' and joints' positions over time in the reference camera's frame at each
+        instant (NaN where none): drawn as dots on the right.
+    instants : ndarray, shape (k,)
+        The times at which to draw the rig on the right (none: no right panel).
+    at_instants : dict of str to ndarray, shape (k, 3)
+        ``paths`` at ``instants``: the rig drawn as links, coloured by time.
+    reference : str
+        The reference camera (whose frame the right panel is in).
     unit : str
     dpi : int
 
@@ -384,47 +443,128 @@ def rig_of_many_figure(
     pts = np.vstack([*centres.values(), *[j[4] for j in joints if j[4] is not None]])
     extent = float(np.ptp(pts, axis=0).max()) if pts.shape[0] > 1 else 1.0
     size = max(0.08 * extent, 1e-3)
-    fig = Figure(figsize=(11.0, 5.4))
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.14, top=0.9, wspace=0.12)
-    for panel, with_paths in ((1, False), (2, True)):
-        ax = fig.add_subplot(1, 2, panel, projection="3d")
-        segs_all = [_disp(pts)]
-        for i, (c, T) in enumerate(T_ref_cam.items()):
-            color = f"C{i % 10}"
-            segs = _frustum_segments(T[None], CameraView(), size)
-            segs_all.append(segs.reshape(-1, 3))
-            ax.add_collection3d(Line3DCollection(segs, colors=color, linewidths=0.9))
-            d = _disp(centres[c][None])[0]
-            ax.text(d[0], d[1], d[2], f" {c}", fontsize=8, color=color)
-            if with_paths and c in paths:
-                pp = _disp(paths[c])
-                ax.plot(pp[:, 0], pp[:, 1], pp[:, 2], ".", color=color, ms=1.5)
-                segs_all.append(pp)
-        for name, jtype, p, q, point in joints:
-            a, b = _disp(centres[p][None])[0], _disp(centres[q][None])[0]
-            if point is None:
-                ax.plot(*np.stack([a, b]).T, "--", color="#555555", lw=1.2)
-                continue
-            j = _disp(point[None])[0]
-            ax.plot(*np.stack([a, j, b]).T, "-", color=COLOR_JOINT, lw=1.6)
-            ax.plot([j[0]], [j[1]], [j[2]], "o", color=COLOR_JOINT, ms=5)
-            ax.text(j[0], j[1], j[2], f" {name} ({jtype})", fontsize=7, color="#145214")
-            if with_paths and name in paths:
-                pp = _disp(paths[name])
-                ax.plot(pp[:, 0], pp[:, 1], pp[:, 2], ".", color=COLOR_JOINT, ms=1.5, alpha=0.6)
-                segs_all.append(pp)
-        _equal_axes(ax, np.vstack(segs_all))
-        ax.view_init(elev=22.0, azim=-60.0)
-        ax.set_title(
-            "the rig over time (camera and joint paths)" if with_paths
-            else "the rig at the reference instant",
-            fontsize=9,
-        )  # fmt: skip
+    colors = {c: f"C{i % 10}" for i, c in enumerate(T_ref_cam)}
+    over_time = instants.size > 0 and bool(at_instants)
+    fig = Figure(figsize=(11.0, 5.6) if over_time else (6.4, 5.6))
+    fig.subplots_adjust(left=0.02, right=0.94 if over_time else 0.98, bottom=0.06, top=0.9,
+                        wspace=0.08)  # fmt: skip
+    ax = fig.add_subplot(1, 2 if over_time else 1, 1, projection="3d")
+    segs_all = [_disp(pts)]
+    for c, T in T_ref_cam.items():
+        segs = _frustum_segments(T[None], CameraView(), size)
+        segs_all.append(segs.reshape(-1, 3))
+        ax.add_collection3d(Line3DCollection(segs, colors=colors[c], linewidths=0.9))
+        d = _disp(centres[c][None])[0]
+        ax.text(d[0], d[1], d[2], f" {c}", fontsize=8, color=colors[c])
+    for name, jtype, p, q, point in joints:
+        a, b = _disp(centres[p][None])[0], _disp(centres[q][None])[0]
+        if point is None:
+            ax.plot(*np.stack([a, b]).T, "--", color="#555555", lw=1.2)
+            continue
+        j = _disp(point[None])[0]
+        ax.plot(*np.stack([a, j, b]).T, "-", color=COLOR_JOINT, lw=1.6)
+        ax.plot([j[0]], [j[1]], [j[2]], "o", color=COLOR_JOINT, ms=5)
+        ax.text(j[0], j[1], j[2], f" {name} ({jtype})", fontsize=7, color="#145214")
+    _equal_axes(ax, np.vstack(segs_all))
+    ax.set_ylabel("z (ref. forward)")
+    ax.view_init(elev=22.0, azim=-60.0)
+    ax.set_title("the rig at the reference instant", fontsize=9)
+    if over_time:
+        _rig_over_time(fig, colors, joints, paths, instants, at_instants, reference)
     fig.suptitle(f"Cameras and joints in the reference camera's frame ({unit}; -y up)", fontsize=10)
     return _png(fig, dpi)
 
 
-def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
+def _rig_over_time(
+    fig: Figure,
+    colors: dict[str, str],
+    joints: Sequence[tuple[str, str, str, str, FloatArray | None]],
+    paths: dict[str, FloatArray],
+    instants: FloatArray,
+    at_instants: dict[str, FloatArray],
+    reference: str,
+) -> None:
+    """The right panel of :func:`rig_of_many_figure`: the rig at ``instants``."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    ax = fig.add_subplot(1, 2, 2, projection="3d")
+    lo, hi = float(instants.min()), float(instants.max())
+    norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+    cmap = colormaps["viridis"]
+    at = {n: _disp(x) for n, x in at_instants.items()}
+    seen = [_disp(x[np.isfinite(x).all(axis=1)]) for x in paths.values()]
+    for name, x in paths.items():
+        pp = _disp(x)
+        color = colors.get(name, "#145214")  # a joint's point: dark green
+        ax.plot(pp[:, 0], pp[:, 1], pp[:, 2], ".", color=color, ms=2.0, alpha=0.5)
+    for k, t in enumerate(instants):
+        tint = cmap(norm(t))
+        for name, _, p, q, point in joints:
+            via = [] if point is None else [name]  # a rigid pair: no point between them
+            if any(b not in at for b in (p, q, *via)):
+                continue
+            xyz = np.stack([at[b][k] for b in (p, *via, q)])
+            if np.isfinite(xyz).all():
+                ax.plot(*xyz.T, "--" if point is None else "-", color=tint, lw=1.4)
+                if point is not None:
+                    ax.plot(*xyz[1:2].T, "o", color=tint, ms=3.5)
+        for c, color in colors.items():
+            x = at[c][k] if c in at else np.full(3, np.nan)
+            if np.isfinite(x).all():
+                ax.plot([x[0]], [x[1]], [x[2]], "o", color=color, ms=4.5, mec="black", mew=0.4)
+    _equal_axes(ax, np.vstack(seen))
+    ax.set_ylabel("z (ref. forward)")
+    ax.view_init(elev=22.0, azim=-60.0)
+    ax.set_title(
+        f"how the rig bends: every frame in {reference}'s frame at that instant\n(small dots: "
+        f"cameras and joints; links: the rig at {instants.size} instants, coloured by time)",
+        fontsize=9,
+    )
+    fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.55, pad=0.08,
+                 label="time (s) or frame")  # fmt: skip
+
+
+def angles_figure(series: Sequence[AngleSeries], dpi: int = 100) -> bytes:
+    """One panel per joint: its angles over time, the reference instant (their zero) and
+    the frames rejected as outliers marked.
+
+    Parameters
+    ----------
+    series : sequence of AngleSeries
+        At least one.
+    dpi : int
+    """
+    n = len(series)
+    height = 2.5 * n + 0.6
+    fig = Figure(figsize=(10.0, height))
+    fig.subplots_adjust(left=0.07, right=0.8, top=1 - 0.35 / height,
+                        bottom=0.5 / height + 0.02, hspace=0.5)  # fmt: skip
+    axes = fig.subplots(n, 1, squeeze=False)[:, 0]
+    for ax, s in zip(axes, series, strict=True):
+        v = np.asarray(s.values, dtype=float).reshape(s.x.size, -1)
+        for k, label in enumerate(s.labels):
+            ax.plot(s.x, v[:, k], "o-", color=f"C{k}", ms=2.5, lw=0.8, label=label)
+        if s.rejected.any():
+            xr = np.repeat(s.x[s.rejected], v.shape[1])
+            ax.plot(xr, v[s.rejected].reshape(-1), "X", color=COLOR_REJECTED, ms=7,
+                    label="rejected as outlier")  # fmt: skip
+        if s.zero is not None:
+            ax.axvline(s.zero, color="#555555", ls=":", lw=1.0, label="zero (reference instant)")
+        ax.axhline(0.0, color="#999999", lw=0.6)
+        ax.set_title(s.title, fontsize=9, loc="left")
+        ax.set_ylabel("deg")
+        ax.tick_params(labelsize=8)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("timestamp (s) or frame number")
+    return _png(fig, dpi)
+
+
+def residuals_figure(
+    series: Sequence[ResidualSeries], dpi: int = 100, scale_to_used: bool = False
+) -> bytes:
     """One panel per residual series: the residual per frame, rejected frames marked.
 
     Parameters
@@ -432,6 +572,10 @@ def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
     series : sequence of ResidualSeries
         At least one.
     dpi : int
+    scale_to_used : bool
+        Scale each panel to the frames used: a rejected frame far above them is drawn at
+        the panel's top edge with its value written beside it (a gross outlier would
+        otherwise flatten the others).
     """
     n = len(series)
     fig = Figure(figsize=(9.0, 2.3 * n + 0.6))
@@ -462,11 +606,27 @@ def residuals_figure(series: Sequence[ResidualSeries], dpi: int = 100) -> bytes:
         ax.set_title(s.title, fontsize=9, loc="left")
         ax.set_ylabel(s.unit)
         ax.set_ylim(bottom=0.0)
+        if scale_to_used and ok.any():
+            _clip_outliers(ax, s, 1.25 * float(np.nanmax(s.values[ok])))
         ax.tick_params(labelsize=8)
         ax.legend(fontsize=7, loc="upper right")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("timestamp (s) or frame number")
     return _png(fig, dpi)
+
+
+def _clip_outliers(ax: Any, s: ResidualSeries, top: float) -> None:
+    """Limit ``ax`` to ``top`` (when a rejected frame lies above it) and mark each frame
+    above at the top edge, its value beside it."""
+    over = s.rejected & (s.values > top)
+    if top <= 0.0 or not over.any():
+        return
+    ax.set_ylim(0.0, top)
+    ax.plot(s.x[over], np.full(int(over.sum()), top), "^", color=COLOR_REJECTED, ms=7,
+            clip_on=False, label="rejected, off the scale")  # fmt: skip
+    for x, v in zip(s.x[over], s.values[over], strict=True):
+        ax.annotate(f" {v:.3g}", (x, top), xytext=(3, -9), textcoords="offset points",
+                    fontsize=7, color=COLOR_REJECTED)  # fmt: skip
 
 
 #: Inches of figure height per bar of a per-view chart.
@@ -498,7 +658,7 @@ def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> 
         ax = fig.add_subplot(grid[k, 0])
         if cam.view_rms.size:
             y = np.arange(cam.view_rms.size)
-            ax.barh(y, cam.view_rms, color=COLOR_A if cam.camera == "a" else COLOR_B)
+            ax.barh(y, cam.view_rms, color=_color(cam.camera, cam.color))
             if cam.overall_rms is not None:
                 ax.axvline(cam.overall_rms, color="black", ls="--", lw=0.8)
             ax.set_yticks(y, cam.view_names, fontsize=6)
@@ -510,7 +670,7 @@ def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> 
             )
         overall = "" if cam.overall_rms is None else f" (dashed: RMS {cam.overall_rms:.3g} px)"
         ax.set_title(
-            f"camera {cam.camera.upper()}: intrinsics calibration, per view{overall}",
+            f"camera {camera_name(cam.camera)}: intrinsics calibration, per view{overall}",
             fontsize=9,
             loc="left",
         )
@@ -525,7 +685,9 @@ def reprojection_figure(cameras: Sequence[ReprojectionData], dpi: int = 100) -> 
         else:
             ax.text(0.5, 0.5, "no poses file", ha="center", va="center", transform=ax.transAxes)
         ax.set_title(
-            f"camera {cam.camera.upper()}: board poses (PnP), per image", fontsize=9, loc="left"
+            f"camera {camera_name(cam.camera)}: board poses (PnP), per image",
+            fontsize=9,
+            loc="left",
         )
         ax.set_ylabel("RMS (px)")
         ax.set_ylim(bottom=0.0)
@@ -553,11 +715,11 @@ def corner_errors_figure(cameras: Sequence[CornerErrorData], dpi: int = 100) -> 
                         top=1 - 0.45 / (3.4 * n + 0.3), hspace=0.55, wspace=0.3)  # fmt: skip
     axes = fig.subplots(n, 3, squeeze=False)
     for row, cam in zip(axes, cameras, strict=True):
-        color = COLOR_A if cam.camera == "a" else COLOR_B
+        color = _color(cam.camera, cam.color)
         e = np.asarray(cam.residuals, dtype=float).reshape(-1, 2)
         mag = np.hypot(e[:, 0], e[:, 1])
         rms = float(np.sqrt(np.mean(mag**2))) if mag.size else float("nan")
-        who = f"camera {cam.camera.upper()}"
+        who = f"camera {camera_name(cam.camera)}"
         ax = row[0]
         ax.scatter(e[:, 0], e[:, 1], s=3, color=color, alpha=0.4, linewidths=0)
         lim = max(float(np.abs(e).max(initial=0.0)) * 1.1, 1e-3)
@@ -659,7 +821,7 @@ def coverage_figure(cameras: Sequence[CoverageData], dpi: int = 100) -> bytes:
         ax.set_xlim(0, w)
         ax.set_ylim(h, 0)
         ax.set_title(
-            f"camera {cam.camera.upper()}: {pts.shape[0]} corners, {covered:.0f}% of cells",
+            f"camera {camera_name(cam.camera)}: {pts.shape[0]} corners, {covered:.0f}% of cells",
             fontsize=9,
         )
         ax.set_xlabel("u (px)", fontsize=8)

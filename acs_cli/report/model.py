@@ -14,6 +14,7 @@ import numpy as np
 
 from acs_cli.core.se3 import FloatArray
 from acs_cli.report.figures import (
+    AngleSeries,
     CameraView,
     CornerErrorData,
     CoverageData,
@@ -27,6 +28,7 @@ __all__ = [
     "Estimate",
     "FinalChoice",
     "ReportModel",
+    "RigOfManyView",
     "RigTrajectory",
     "SectionNotes",
     "display_unit",
@@ -149,18 +151,33 @@ class RigOfManyView:
     ----------
     unit : str
         Length unit (the reference camera's).
+    reference : str
+        The reference camera.
     T_ref_cam : dict of str to ndarray, shape (4, 4)
         Each camera's pose in the reference camera's frame at the reference instant.
     joints : list of (name, type, p, q, point (3,) or None)
         Each edge; ``point`` is the joint (ball centre or hinge point) in the reference frame.
     paths : dict of str to ndarray, shape (n, 3)
-        Each camera's and joint's path over time in the same frame (``trajectories/*.tum``).
+        Each camera's and joint's position (``trajectories/*.tum``) at each of the reference
+        camera's ``n`` instants, in the reference camera's frame at that instant (how the
+        rig bends about it; NaN where it has no pose).
+    instants : ndarray, shape (k,)
+        A few times (the reference instant among them) at which the figure draws the rig.
+    at_instants : dict of str to ndarray, shape (k, 3)
+        ``paths`` at ``instants``.
+    from_images : list of str
+        The cameras that ran from images here (their reprojection errors and coverage are
+        shown); the others were given as poses.
     """
 
     unit: str
+    reference: str
     T_ref_cam: dict[str, FloatArray]
     joints: list[tuple[str, str, str, str, FloatArray | None]]
     paths: dict[str, FloatArray] = field(default_factory=dict)
+    instants: FloatArray = field(default_factory=lambda: np.zeros(0))
+    at_instants: dict[str, FloatArray] = field(default_factory=dict)
+    from_images: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -184,8 +201,13 @@ class ReportModel:
     artifact_notes : list of str
         Artifacts that could not be read.
     trajectory : RigTrajectory or None
+    rig : RigOfManyView or None
+        A rig of many cameras (``rig.yaml``).
     residuals : list of ResidualSeries
-        One panel per joint-stage camera (or pair) and one for relpose.
+        One panel per joint-stage camera (or pair) and one for relpose; for a rig, one per
+        joint and residual kind (point, axis, rotation, translation).
+    angles : list of AngleSeries
+        A rig's ball and hinge joints' angles over time, one panel per joint.
     reprojection : list of ReprojectionData
     coverage : list of CoverageData
     estimates : list of Estimate
@@ -213,6 +235,7 @@ class ReportModel:
     trajectory: RigTrajectory | None = None
     rig: RigOfManyView | None = None
     residuals: list[ResidualSeries] = field(default_factory=list)
+    angles: list[AngleSeries] = field(default_factory=list)
     reprojection: list[ReprojectionData] = field(default_factory=list)
     coverage: list[CoverageData] = field(default_factory=list)
     estimates: list[Estimate] = field(default_factory=list)

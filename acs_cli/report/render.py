@@ -22,6 +22,7 @@ FIGURE_NAMES = {
     "rig": "rig_cameras.png",
     "reference": "rig_reference.png",
     "residuals": "joint_residuals.png",
+    "angles": "joint_angles.png",
     "reprojection": "reprojection.png",
     "corners": "corner_errors.png",
     "coverage": "coverage.png",
@@ -110,7 +111,7 @@ def _per_view_rows(model: ReportModel) -> list[list[str]]:
     """Every view's and posed image's RMS, worst first."""
     rows: list[tuple[float, list[str]]] = []
     for cam in model.reprojection:
-        C = cam.camera.upper()
+        C = F.camera_name(cam.camera)
         for name, rms in zip(cam.view_names, cam.view_rms, strict=False):
             rows.append((float(rms), [C, "intrinsics calibration", name, f"{rms:.4f}"]))
         for file, values in sorted(cam.poses.items()):
@@ -119,6 +120,45 @@ def _per_view_rows(model: ReportModel) -> list[list[str]]:
                 rows.append((float(rms), [C, file, name, f"{rms:.4f}"]))
     rows.sort(key=lambda r: -r[0])
     return [r for _, r in rows]
+
+
+def _rig(page: Page, model: ReportModel, pngs: dict[str, bytes], dpi: int) -> None:
+    """A rig of many cameras: its figure, and which cameras ran from images."""
+    rig = model.rig
+    assert rig is not None
+    pngs["rig"] = F.rig_of_many_figure(
+        rig.T_ref_cam, rig.joints, rig.paths, rig.instants, rig.at_instants, rig.reference,
+        rig.unit, dpi,
+    )  # fmt: skip
+    over_time = (
+        f"; right, how the rig bends over time: every camera's and joint's position at every "
+        f"frame of trajectories/ in {rig.reference}'s frame at that frame (dots; a camera "
+        f"rigidly mounted on {rig.reference} stays put, one beyond a ball joint moves on a "
+        f"sphere about it), and the rig at {rig.instants.size} of those frames (the "
+        "reference instant among them), its links coloured by time"
+        if rig.instants.size and rig.at_instants
+        else ""
+    )
+    page.figure(
+        pngs["rig"],
+        f"The rig of {len(rig.T_ref_cam)} cameras from rig.yaml: left, each camera's frustum "
+        "at the reference instant, each ball or hinge joint as a green link through its point, "
+        f"rigid pairs dashed{over_time}.",
+        "3-D view of the rig of many cameras",
+    )
+    ran = {c.rsplit("/", 1)[-1] for c in rig.from_images}  # a recording's camera: its body
+    given = [c for c in rig.T_ref_cam if c not in ran]
+    if not rig.from_images:
+        page.paragraph(
+            "Every camera's poses were given as a trajectory (none ran from images here): "
+            "there are no reprojection errors or image coverage to show."
+        )
+    elif given:
+        were = "was" if len(given) == 1 else "were"
+        page.paragraph(
+            f"{', '.join(given)} {were} given as poses (no images here): the reprojection "
+            "and coverage sections show the cameras that ran from images."
+        )
 
 
 def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) -> RenderedReport:
@@ -143,6 +183,15 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
         for n in model.notes_of(section):
             page.note(n)
 
+    def section(anchor: str, title: str, shown: object) -> bool:
+        """Open a section when it has something to show (then True) or a note saying why
+        not; a section that does not apply to the run (a rig's without images) is left out."""
+        if not shown and not model.notes_of(anchor):
+            return False
+        page.section(anchor, title)
+        notes(anchor)
+        return bool(shown)
+
     _verdict(page, model)
     _finals(page, model)
 
@@ -154,18 +203,9 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
     for n in model.artifact_notes:
         page.note(n)
 
-    page.section("trajectory", "The rig and its trajectory")
-    notes("trajectory")
+    section("trajectory", "The rig and its trajectory", model.rig or model.trajectory)
     if model.rig is not None:
-        rig = model.rig
-        pngs["rig"] = F.rig_of_many_figure(rig.T_ref_cam, rig.joints, rig.paths, rig.unit, dpi)
-        page.figure(
-            pngs["rig"],
-            f"The rig of {len(rig.T_ref_cam)} cameras from rig.yaml: each camera's frustum at "
-            "the reference instant, each ball or hinge joint as a green link through its point, "
-            "rigid pairs dashed; right, every camera's and joint's path from trajectories/.",
-            "3-D view of the rig of many cameras",
-        )
+        _rig(page, model, pngs, dpi)
     traj = model.trajectory
     if traj is not None:
         scale, shown = display_unit(traj.unit)
@@ -209,21 +249,47 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
                 f"{np.sqrt(np.mean(d**2)):.4g} {shown}, max {d.max():.4g} {shown} over {which}."
             )
 
-    page.section("residuals", "Joint-constraint residuals per frame")
-    notes("residuals")
-    if model.residuals:
-        pngs["residuals"] = F.residuals_figure(model.residuals, dpi)
+    if section("residuals", "Joint-constraint residuals per frame", model.residuals):
+        pngs["residuals"] = F.residuals_figure(model.residuals, dpi, model.rig is not None)
         n_rej = sum(int(s.rejected.sum()) for s in model.residuals)
+        rig_rows = (
+            " Each joint's panels are the rows of its constraint in the rig's solve "
+            "(joint_residuals.csv: from the poses, before any bundle adjustment): a ball's or "
+            "hinge's point as its two bodies carry it, a hinge's axis, a rigid pair's rotation "
+            "and translation; at the reference instant the solve corrects the poses onto the "
+            "joints, so the residual there is about zero."
+            if model.rig is not None
+            else ""
+        )
         page.figure(
             pngs["residuals"],
             f"Residual of the joint constraint per frame; frames the estimator rejected as "
-            f"outliers are red crosses ({n_rej} in all); dashed: RMS of the frames used.",
+            f"outliers are red crosses ({n_rej} in all); dashed: RMS of the frames used."
+            + rig_rows
+            + (
+                " Each panel is scaled to the frames used: a rejected frame far above them is "
+                "a red triangle at the top edge, its value beside it."
+                if model.rig is not None
+                else ""
+            ),
             "Joint-constraint residuals per frame",
         )
 
-    page.section("reprojection", "Reprojection errors")
-    notes("reprojection")
-    if model.reprojection:
+    if section("angles", "Joint angles per frame", model.angles):
+        pngs["angles"] = F.angles_figure(model.angles, dpi)
+        rigid = [] if model.rig is None else [j[0] for j in model.rig.joints if j[4] is None]
+        page.figure(
+            pngs["angles"],
+            "How each ball and hinge joint bent over time, its second body relative to its "
+            "first, zero at the reference instant (dotted), computed as acscal trajectory --rig "
+            "computes angles.csv, here from the run's trajectories/ (after a bundle adjustment, "
+            "its per-frame fit where it adjusted): a hinge's angle about its axis, a ball's "
+            "rotation vector; frames the joint rejected as outliers are red crosses."
+            + (f" Rigid joints ({', '.join(rigid)}) have no angle." if rigid else ""),
+            "Joint angles per frame",
+        )
+
+    if section("reprojection", "Reprojection errors", model.reprojection):
         pngs["reprojection"] = F.reprojection_figure(model.reprojection, dpi)
         page.figure(
             pngs["reprojection"],
@@ -240,9 +306,7 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
             collapsed=f"Table of the {len(rows)} views and posed images, worst first",
         )
 
-    page.section("corners", "Per-corner reprojection errors")
-    notes("corners")
-    if model.corner_errors:
+    if section("corners", "Per-corner reprojection errors", model.corner_errors):
         pngs["corners"] = F.corner_errors_figure(model.corner_errors, dpi)
         page.figure(
             pngs["corners"],
@@ -255,9 +319,7 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
             "Per-corner reprojection errors",
         )
 
-    page.section("coverage", "Image coverage of the detected corners")
-    notes("coverage")
-    if model.coverage:
+    if section("coverage", "Image coverage of the detected corners", model.coverage):
         pngs["coverage"] = F.coverage_figure(model.coverage, dpi=dpi)
         page.figure(
             pngs["coverage"],

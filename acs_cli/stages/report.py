@@ -10,6 +10,12 @@ every posed corner's reprojection error recomputed from the poses NPZs
 page, written with the same figures as PNG files in ``<name>_files/`` beside it. A section
 whose artifact is missing or unreadable is skipped with a note; a folder with no artifact at
 all is an :class:`InputError`.
+
+A rig run's folder (``rig.yaml``) is reported as a rig: its cameras and joints and how it
+bends over time (``trajectories/``), each joint's residual per frame
+(``joint_residuals.csv``), each ball and hinge joint's angles per frame, and each camera that
+ran from images (``cam_<name>/``) as a pair's cameras are; no section of the pair's stages,
+and none that does not apply.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from acs_cli.core.acs_trajectory import (
     overlap_residuals,
     recover_trajectory,
 )
+from acs_cli.core.angles import HingeAngles
 from acs_cli.core.quality import largest_std
 from acs_cli.errors import AcsError, InputError
 from acs_cli.io.atomic import (
@@ -44,7 +51,9 @@ from acs_cli.io.joint import BundleSection, FramesUsed, JointArtifact, JointSect
 from acs_cli.io.poses import PosesArtifact
 from acs_cli.io.relpose import RelposeArtifact
 from acs_cli.io.rig import RigArtifact
+from acs_cli.io.rig_residuals import RESIDUALS_FILE, read_joint_residuals
 from acs_cli.io.trajectory import Trajectory, read_trajectory
+from acs_cli.io.validate import TIME_TOL, listed_mask
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.report import figures as F
 from acs_cli.report import verdict as V
@@ -60,7 +69,7 @@ from acs_cli.report.model import (
 )
 from acs_cli.report.render import FIGURE_NAMES, render_report
 from acs_cli.stages.common import PairedTrajectories, pair_loaded
-from acs_cli.stages.trajectory import recover_from_relpose
+from acs_cli.stages.trajectory import recover_from_relpose, rig_angles
 
 __all__ = [
     "FIGURE_NAMES",
@@ -132,6 +141,10 @@ class _Found:
     the others and the warnings met on the way."""
 
     run_dir: Path
+    #: each camera's folder (``cam_a``, ``cam_b``; a rig's ``cam_<name>``), by camera
+    dirs: dict[str, Path] = field(default_factory=dict)
+    #: a rig's cameras' colours, as the rig's figure draws them (a pair's: none)
+    colors: dict[str, str] = field(default_factory=dict)
     intrinsics: dict[str, IntrinsicsArtifact] = field(default_factory=dict)
     poses: dict[str, list[Path]] = field(default_factory=dict)
     joint: JointArtifact | None = None
@@ -143,6 +156,11 @@ class _Found:
     #: Trajectory files read so far (each once, whole), by resolved path; an exception for
     #: one that could not be read.
     loaded: dict[Path, PosesArtifact | AcsError] = field(default_factory=dict)
+
+    @property
+    def cameras(self) -> list[str]:
+        """The cameras whose folders the report reads, in order."""
+        return list(self.dirs)
 
     def warn(self, source: str, text: str) -> None:
         if (source, text) not in self.warnings:
@@ -193,10 +211,28 @@ def _read_artifact(found: _Found, path: Path, cls: type[A]) -> A | None:
         return None
 
 
+def _camera_dirs(run_dir: Path, rig: RigArtifact | None) -> dict[str, Path]:
+    """Each camera's folder: a pair's ``cam_a``, ``cam_b``; a rig's ``cam_<name>`` (in a rig
+    of several recordings ``<recording>/cam_<name>``, the camera named ``recording/name``),
+    where ``acscal run`` writes a camera's intrinsics and poses when it ran from images."""
+    if rig is None:
+        return {c: run_dir / f"cam_{c}" for c in CAMERAS}
+    if rig.reference_recording is None:  # one recording: the folders at the top
+        return {c: run_dir / f"cam_{c}" for c in rig.cameras}
+    dirs = {f"{r}/{c}": run_dir / r / f"cam_{c}" for r in rig.recordings for c in rig.cameras}
+    return {label: d for label, d in dirs.items() if d.is_dir()}  # not every body in each
+
+
 def _gather(run_dir: Path) -> _Found:
     found = _Found(run_dir)
-    for cam in CAMERAS:
-        d = run_dir / f"cam_{cam}"
+    found.rig = rig = _read_artifact(found, run_dir / "rig.yaml", RigArtifact)
+    found.dirs = _camera_dirs(run_dir, rig)
+    if rig is not None:
+        # the rig's figure colours its posed cameras in order: C0, C1, ...
+        posed = sorted(rig.cameras, key=lambda c: rig.cameras[c].T_cam_ref is None)
+        color = {c: f"C{i % 10}" for i, c in enumerate(posed)}
+        found.colors = {label: color[label.rsplit("/", 1)[-1]] for label in found.dirs}
+    for cam, d in found.dirs.items():
         intr = _read_artifact(found, d / "intrinsics.yaml", IntrinsicsArtifact)
         if intr is not None:
             found.intrinsics[cam] = intr
@@ -207,12 +243,65 @@ def _gather(run_dir: Path) -> _Found:
                 found.poses[cam] = npzs
     found.joint = _read_artifact(found, run_dir / "joint.yaml", JointArtifact)
     found.relpose = _read_artifact(found, run_dir / "relpose.yaml", RelposeArtifact)
-    found.rig = _read_artifact(found, run_dir / "rig.yaml", RigArtifact)
     return found
 
 
-def _rig_view(found: _Found, rig: RigArtifact) -> RigOfManyView:
-    """The rig of many cameras: its cameras and joints, and their paths when written."""
+#: The folder of a rig run's trajectories (:data:`acs_cli.stages.rig.TRAJECTORY_DIR`).
+RIG_TRAJECTORIES = "trajectories"
+#: At most this many instants at which the report draws a rig over time (and the reference).
+RIG_INSTANTS = 6
+
+#: A path over time: times ``(n,)`` (sorted) and poses ``(n, 4, 4)``.
+TimedPoses = tuple[np.ndarray, np.ndarray]
+
+
+def _rig_paths(found: _Found, rig: RigArtifact) -> dict[str, TimedPoses]:
+    """Every camera's and joint's poses over time in the reference frame, from the run's
+    ``trajectories/`` (each file read once, in time order); a file that cannot be read is
+    noted."""
+    paths: dict[str, TimedPoses] = {}
+    folder = found.run_dir / RIG_TRAJECTORIES
+    for name in [*rig.cameras, *rig.joints]:
+        f = folder / f"{name}.tum"
+        if not f.is_file():
+            continue
+        try:
+            t = read_trajectory(f)
+        except AcsError as exc:
+            found.notes.append(f"{found.rel(f)} could not be read: {exc.one_line()}")
+            continue
+        order = np.argsort(t.timestamps, kind="stable")
+        paths[name] = (t.timestamps[order], t.T_world_cam[order])
+    return paths
+
+
+def _positions_at(path: TimedPoses, at: np.ndarray) -> np.ndarray:
+    """``(k, 3)``: the path's positions at the times ``at`` ``(k,)`` (within
+    :data:`~acs_cli.io.validate.TIME_TOL`), NaN where it has no pose."""
+    times, T = path
+    out = np.full((at.size, 3), np.nan)
+    if not times.size:
+        return out
+    i = np.minimum(np.searchsorted(times, at - TIME_TOL), times.size - 1)
+    ok = np.abs(times[i] - at) <= TIME_TOL
+    out[ok] = T[i[ok], :3, 3]
+    return out
+
+
+def _in_body(paths: dict[str, TimedPoses], body: str) -> dict[str, np.ndarray]:
+    """Every path's positions in ``body``'s frame at each of its instants, ``(n, 3)`` over
+    ``body``'s ``n`` times (NaN where a path has no pose): how the rig bends about it."""
+    times, T = paths[body]
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    return {
+        name: np.einsum("nji,nj->ni", R, _positions_at(path, times) - t)
+        for name, path in paths.items()
+    }
+
+
+def _rig_view(found: _Found, rig: RigArtifact, paths: dict[str, TimedPoses]) -> RigOfManyView:
+    """The rig of many cameras: its cameras and joints, their paths when written, a few
+    instants to draw it at, and which cameras ran from images."""
     T_ref_cam = {
         c: se3.invert_transforms(r.T_cam_ref)
         for c, r in rig.cameras.items()
@@ -225,16 +314,102 @@ def _rig_view(found: _Found, rig: RigArtifact) -> RigOfManyView:
             continue  # a body seen only in another recording: not drawn at that instant
         point = se3.transform_points(T_ref_cam[p], j.position_in[p]) if j.model.has_point else None
         joints.append((name, j.type, j.between[0], j.between[1], point))
-    paths: dict[str, np.ndarray] = {}
-    folder = found.run_dir / "trajectories"
-    for name in [*rig.cameras, *rig.joints]:
-        f = folder / f"{name}.tum"
-        if f.is_file():
-            try:
-                paths[name] = read_trajectory(f).T_world_cam[:, :3, 3]
-            except AcsError as exc:
-                found.notes.append(f"{found.rel(f)} could not be read: {exc}")
-    return RigOfManyView(rig.length_unit, T_ref_cam, joints, paths)
+    instants = np.zeros(0)
+    bent: dict[str, np.ndarray] = {}
+    at: dict[str, np.ndarray] = {}
+    ref = paths.get(rig.reference_camera)
+    if ref is not None and ref[0].size:
+        n = ref[0].size
+        idx = np.linspace(0, n - 1, min(n, RIG_INSTANTS)).round().astype(int)
+        idx = np.union1d(idx, [min(rig.reference_frame, n - 1)])
+        instants = ref[0][idx]
+        bent = _in_body(paths, rig.reference_camera)
+        at = {name: x[idx] for name, x in bent.items()}
+    return RigOfManyView(
+        rig.length_unit,
+        rig.reference_camera,
+        T_ref_cam,
+        joints,
+        bent,
+        instants,
+        at,
+        [c for c in found.cameras if c in found.intrinsics or c in found.poses],
+    )
+
+
+def _rig_residuals(
+    found: _Found, rig: RigArtifact
+) -> tuple[list[F.ResidualSeries], dict[str, list[float]]]:
+    """Each joint's residual per frame from ``joint_residuals.csv``: one series per joint,
+    residual kind (its point, axis, rotation or translation rows) and recording; and the
+    times of the frames each joint rejected.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read.
+    """
+    got = read_joint_residuals(found.run_dir / RESIDUALS_FILE)
+    several = len({r.recording for r in got}) > 1
+    scale, shown = display_unit(rig.length_unit)
+    series: list[F.ResidualSeries] = []
+    rejected: dict[str, list[float]] = {}
+    for r in got:
+        j = rig.joints.get(r.joint)
+        if j is None:
+            continue  # a joint rig.yaml does not have: the file is older than it
+        p, q = j.between
+        rejected.setdefault(r.joint, []).extend(r.times[~r.used].tolist())
+        what = {
+            "pos": (f"the joint's point as {p} and as {q} carry it, |G_{p} o_{p} - G_{q} o_{q}|",
+                    scale, shown),
+            "rot": (f"the axis as {p} and as {q} carry it (rotation off the axis)"
+                    if j.model.has_axis else
+                    f"rotation, |log(R_{p}^T R_{q} R_{q}_{p})|", 1.0, "deg"),
+            "trans": ("translation (at the midpoint between the two bodies)", scale, shown),
+        }  # fmt: skip
+        where = f", recording {r.recording}" if several else ""
+        for kind in sorted(r.values, key=lambda k: k == "rot"):  # lengths first
+            text, factor, unit = what[kind]
+            series.append(
+                F.ResidualSeries(
+                    f"{r.joint} ({j.type}, {p}-{q}){where}: {text}",
+                    r.times,
+                    r.values[kind] * factor,
+                    ~r.used,
+                    unit,
+                )
+            )
+    return series, rejected
+
+
+def _rig_angles(
+    rig: RigArtifact, paths: dict[str, TimedPoses], rejected: dict[str, list[float]]
+) -> dict[str, F.AngleSeries]:
+    """Each ball and hinge joint's angles over time, by joint (as ``acscal trajectory --rig``
+    computes them, :func:`~acs_cli.stages.trajectory.rig_angles`, here from the run's
+    trajectories), the frames it rejected marked."""
+    out: dict[str, F.AngleSeries] = {}
+    labels: tuple[str, ...]
+    cams = {c: paths[c] for c in rig.cameras if c in paths}
+    for s in rig_angles(rig, cams):
+        j = rig.joints[s.joint]
+        p, q = j.between
+        a = s.angles
+        if isinstance(a, HingeAngles):
+            lo, hi = float(a.angle_deg.min()), float(a.angle_deg.max())
+            title = (f"{s.joint} (hinge, {p}-{q}): {q} turning about the axis in {p} "
+                     f"(right-hand rule), {lo:.1f} to {hi:.1f} deg")  # fmt: skip
+            values, labels = a.angle_deg[:, None], ("angle",)
+        else:
+            title = (f"{s.joint} (ball, {p}-{q}): {q}'s rotation relative to {p}, as a "
+                     f"rotation vector in {p}'s frame")  # fmt: skip
+            values, labels = a.rotvec_deg, ("x", "y", "z")
+        zero = None if s.zero is None else float(s.times[s.zero])
+        out[s.joint] = F.AngleSeries(
+            title, s.times, values, labels, listed_mask(s.times, rejected.get(s.joint)), zero
+        )
+    return out
 
 
 def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
@@ -458,7 +633,7 @@ def _joint_series(found: _Found, joint: JointArtifact) -> list[F.ResidualSeries]
 
 def _reprojection(found: _Found) -> list[F.ReprojectionData]:
     data = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         if cam not in found.intrinsics and cam not in found.poses:
             continue
         names: list[str] = []
@@ -472,7 +647,9 @@ def _reprojection(found: _Found) -> list[F.ReprojectionData]:
         arts = [(p.name, art) for p, art in _poses_of(found, cam) if art.reprojection_rms.size]
         poses = {k: art.reprojection_rms for k, art in arts}
         images = {k: list(art.trajectory.names) for k, art in arts if art.trajectory.names}
-        data.append(F.ReprojectionData(cam, names, rms, overall, poses, images))
+        data.append(
+            F.ReprojectionData(cam, names, rms, overall, poses, images, found.colors.get(cam))
+        )
     return data
 
 
@@ -480,7 +657,7 @@ def _corner_errors(found: _Found) -> list[F.CornerErrorData]:
     """Every posed corner's reprojection error per camera, recomputed from its poses NPZs
     (corners, board points, board poses) and the camera's ``intrinsics.yaml``."""
     data = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         intr = found.intrinsics.get(cam)
         if intr is None:
             continue
@@ -501,7 +678,11 @@ def _corner_errors(found: _Found) -> list[F.CornerErrorData]:
         if observed:
             data.append(
                 F.CornerErrorData(
-                    cam, np.vstack(observed), np.vstack(residual), intr.principal_point
+                    cam,
+                    np.vstack(observed),
+                    np.vstack(residual),
+                    intr.principal_point,
+                    found.colors.get(cam),
                 )
             )
     return data
@@ -509,7 +690,7 @@ def _corner_errors(found: _Found) -> list[F.CornerErrorData]:
 
 def _coverage(found: _Found) -> list[F.CoverageData]:
     data = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         chunks = [
             art.corners.reshape(-1, 2)
             for _, art in _poses_of(found, cam)
@@ -556,14 +737,14 @@ def _vec_rows(
 def _estimates(found: _Found) -> list[Estimate]:
     """Every estimated quantity with its std and unit."""
     rows: list[Estimate] = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         intr = found.intrinsics.get(cam)
         if intr is None:
             continue
         src = found.rel(intr.source)
         K = intr.camera_matrix
         std: dict[str, Any] = intr.std or {}
-        C = cam.upper()
+        C = F.camera_name(cam)
         for key, val in (("fx", K[0, 0]), ("fy", K[1, 1]), ("cx", K[0, 2]), ("cy", K[1, 2])):
             rows.append(_intrinsic(f"camera {C} {key}", float(val), std.get(key), "px", src))
         dstd = std.get("distortion") or []
@@ -645,7 +826,7 @@ def _estimates(found: _Found) -> list[Estimate]:
 
 
 def _collect_warnings(found: _Found) -> None:
-    for cam in CAMERAS:
+    for cam in found.cameras:
         intr = found.intrinsics.get(cam)
         if intr is not None:
             src = found.rel(intr.source)
@@ -697,7 +878,7 @@ def _coverage_fractions(found: _Found, coverage: Sequence[F.CoverageData]) -> di
         if V.classify("coverage", frac) != "pass":
             found.warn(
                 "report",
-                f"camera {c.camera.upper()}: the detected corners cover "
+                f"camera {F.camera_name(c.camera)}: the detected corners cover "
                 f"{V.THRESHOLDS['coverage'].show(frac)} of the image cells (under half): the "
                 "distortion outside them is extrapolated; add views with the board near the "
                 "image's borders and corners",
@@ -731,7 +912,7 @@ def _bundle_verdicts(
     """One verdict (its reprojection RMS) per camera an artifact bundle-adjusted."""
     return [
         V.StageVerdict(
-            f"bundle adjustment ({file}), camera {cam.upper()}",
+            f"bundle adjustment ({file}), camera {F.camera_name(cam)}",
             src,
             V.reprojection_checks(sec.rms_px),
         )
@@ -755,7 +936,7 @@ def _joint_std_checks(joint: JointSection) -> list[V.Check]:
 def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]:
     """Each stage's verdict, in the run's order (call after the warnings are collected)."""
     out: list[V.StageVerdict] = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         intr = found.intrinsics.get(cam)
         if intr is not None:
             src = found.rel(intr.source)
@@ -763,10 +944,12 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
             checks += V.artifact_verdict_check(_level(intr.verdict))
             out.append(
                 V.StageVerdict(
-                    f"intrinsics, camera {cam.upper()}", src, [*checks, _warning_check(found, src)]
+                    f"intrinsics, camera {F.camera_name(cam)}",
+                    src,
+                    [*checks, _warning_check(found, src)],
                 )
             )
-    for cam in CAMERAS:
+    for cam in found.cameras:
         arts = _poses_of(found, cam)
         if not arts:
             continue
@@ -778,7 +961,7 @@ def _verdicts(found: _Found, coverage: dict[str, float]) -> list[V.StageVerdict]
         )
         out.append(
             V.StageVerdict(
-                f"poses, camera {cam.upper()}",
+                f"poses, camera {F.camera_name(cam)}",
                 ", ".join(srcs),
                 [*checks, _warning_check(found, *srcs)],
             )
@@ -855,15 +1038,21 @@ def _finals(found: _Found) -> tuple[list[FinalChoice], list[str]]:
     if found.rig is not None:
         rig = found.rig
         bundles.append((found.rel(rig.source), "bundle_adjustment", rig.bundle_adjustment))
-    for cam in CAMERAS:
-        C = cam.upper()
+    bundled: set[str] = set()
+    for cam in found.cameras:
+        C = F.camera_name(cam)
+        body = cam.rsplit("/", 1)[-1]  # a rig's bundle is per body, across its recordings
         for src, key, secs in bundles:
-            sec = secs.get(cam)
+            sec = secs.get(body)
+            if sec is not None and body in bundled:  # listed with another recording's label
+                adjusted.add(cam)
+                break
             if sec is not None:
+                bundled.add(body)
                 finals.append(
                     FinalChoice(
                         f"intrinsics of camera {C}",
-                        f"{src}: {key}.{cam}",
+                        f"{src}: {key}.{body}",
                         f"bundle-adjusted from {sec.intrinsics_file} on {sec.frames} frames: "
                         + _intrinsics_text(sec.camera_matrix, sec.rms_px),
                     )
@@ -902,7 +1091,7 @@ def _finals(found: _Found) -> tuple[list[FinalChoice], list[str]]:
             FinalChoice("rig (camera poses and joints)", found.rel(found.rig.source), how)
         )
     exported = []
-    for cam in CAMERAS:
+    for cam in found.cameras:
         intr = found.intrinsics.get(cam)
         if intr is None:
             continue
@@ -921,7 +1110,7 @@ def _finals(found: _Found) -> tuple[list[FinalChoice], list[str]]:
 def _artifact_rows(found: _Found) -> list[ArtifactRow]:
     rows = []
     items: list[IntrinsicsArtifact | JointArtifact | RelposeArtifact] = [
-        found.intrinsics[c] for c in CAMERAS if c in found.intrinsics
+        found.intrinsics[c] for c in found.cameras if c in found.intrinsics
     ]
     items += [a for a in (found.joint, found.relpose) if a is not None]
     if found.rig is not None:
@@ -940,7 +1129,7 @@ def _artifact_rows(found: _Found) -> list[ArtifactRow]:
                 str(h.get("method", "")),
             )
         )
-    for cam in CAMERAS:
+    for cam in found.cameras:
         for p in found.poses.get(cam, []):
             try:
                 got = found.load(p)
@@ -1003,12 +1192,11 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     model.artifact_notes = list(found.notes)
     model.notes = list(found.notes)
 
-    if found.rig is not None:
-        model.rig = _rig_view(found, found.rig)
+    rig = found.rig  # a rig's report shows the rig: no skip notes of the pair's stages
     try:
         model.trajectory = _trajectory(found)
     except AcsError as exc:
-        if found.rig is None:
+        if rig is None:
             model.skip("trajectory", f"Trajectory skipped: {exc.one_line()}")
 
     if found.joint is not None:
@@ -1016,7 +1204,7 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
             model.residuals += _joint_series(found, found.joint)
         except AcsError as exc:
             model.skip("residuals", f"joint.yaml residuals skipped: {exc.one_line()}")
-    else:
+    elif rig is None:
         model.skip("residuals", "No joint.yaml: no residuals of the joint stage.")
     traj = model.trajectory
     if traj is not None and found.relpose is not None:
@@ -1031,15 +1219,17 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
                 shown,
             )
         )
-    elif found.relpose is None:
+    elif found.relpose is None and rig is None:
         model.skip("residuals", "No relpose.yaml: no residuals of the relative-pose stage.")
+    if rig is not None:
+        _rig_sections(found, rig, model)
 
     model.reprojection = _reprojection(found)
-    if not model.reprojection and not found.intrinsics and not found.poses:
+    if not model.reprojection and not found.intrinsics and not found.poses and rig is None:
         model.skip("reprojection", "No intrinsics.yaml and no poses: no reprojection errors.")
 
     model.corner_errors = _corner_errors(found)
-    if not model.corner_errors:
+    if not model.corner_errors and rig is None:
         model.skip(
             "corners",
             "No per-corner errors: they need a camera's intrinsics.yaml and poses with corners.",
@@ -1047,7 +1237,7 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
 
     model.coverage = _coverage(found)
     coverage = _coverage_fractions(found, model.coverage)
-    if not model.coverage:
+    if not model.coverage and rig is None:
         model.skip(
             "coverage",
             "No poses with corners (cam_<x>/*.npz from acscal poses): no coverage figure.",
@@ -1067,6 +1257,41 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     model.warnings = [f"{src}: {text}" for src, text in found.warnings]
     model.notes += [n for n in found.notes if n not in model.notes]
     return model
+
+
+def _rig_sections(found: _Found, rig: RigArtifact, model: ReportModel) -> None:
+    """A rig's view over time, each joint's residual per frame and its angles."""
+    paths = _rig_paths(found, rig)
+    model.rig = _rig_view(found, rig, paths)
+    rejected: dict[str, list[float]] = {}
+    if (found.run_dir / RESIDUALS_FILE).is_file():
+        try:
+            series, rejected = _rig_residuals(found, rig)
+            model.residuals += series
+        except AcsError as exc:
+            model.skip("residuals", f"{RESIDUALS_FILE} could not be read: {exc.one_line()}")
+    else:
+        model.skip(
+            "residuals",
+            f"No {RESIDUALS_FILE} beside rig.yaml (a rig run of an earlier acscal): no "
+            "residuals per frame; run acscal run again to write it.",
+        )
+    angles = _rig_angles(rig, paths, rejected)
+    model.angles = list(angles.values())
+    missing = [n for n, j in rig.joints.items() if j.model.has_point and n not in angles]
+    if missing and not paths:
+        model.skip(
+            "angles",
+            f"No {RIG_TRAJECTORIES}/ beside rig.yaml: no joint angles, and the rig is drawn "
+            "at the reference instant only.",
+        )
+    elif missing:
+        model.skip(
+            "angles",
+            f"No angles of {', '.join(missing)}: {RIG_TRAJECTORIES}/ has no path of both "
+            "bodies of each (it holds the reference recording's instants; a body seen only "
+            "in another recording has none).",
+        )
 
 
 def _check_html_output(output: Path) -> None:
@@ -1126,7 +1351,7 @@ def run_report(run_dir: Path, output: Path, config: ReportConfig | None = None) 
     _check_html_output(output)
     model = build_report(run_dir, cfg.extra_warnings)
     inputs = [run_dir / f"cam_{c}" / "intrinsics.yaml" for c in CAMERAS]
-    inputs += [run_dir / "joint.yaml", run_dir / "relpose.yaml"]
+    inputs += [run_dir / n for n in ("joint.yaml", "relpose.yaml", "rig.yaml", RESIDUALS_FILE)]
     check_distinct_output(output, [p for p in inputs if p.is_file()])
     rendered = render_report(model, cfg.dpi, cfg.max_frustums)
 

@@ -87,6 +87,7 @@ from acs_cli.io.rig import (
     RigRecordingResult,
     RigWorldResult,
 )
+from acs_cli.io.rig_residuals import RESIDUALS_FILE, JointResiduals, write_joint_residuals
 from acs_cli.io.trajectory import Trajectory, write_tum
 from acs_cli.io.verdict import VerdictSection
 from acs_cli.stages.bundle import (
@@ -671,6 +672,7 @@ def run_rig(
     art = dataclasses.replace(art, header=header)
     art.save(out)
     write_rig_trajectories(est, tracks, slots, out.parent / TRAJECTORY_DIR)
+    write_joint_residuals(out.parent / RESIDUALS_FILE, joint_residuals(est, slots))
     return RigRun(est, art, out, warnings)
 
 
@@ -1306,6 +1308,30 @@ def trajectories_from_rig(
         J = T.copy()
         J[:, :3, 3] = se3.transform_points(T, j.position_in[p])
         out[name] = (times, J)
+    return out
+
+
+def joint_residuals(est: RigEstimate, times: np.ndarray) -> list[JointResiduals]:
+    """Every joint's residual per frame, one series per joint and recording: the norms of
+    its residual rows (:attr:`EdgeEstimate.frame_residuals
+    <acs_cli.core.rig_solve.EdgeEstimate.frame_residuals>`, the pose-based solve's, kept
+    through a bundle adjustment), rotations in degrees, at ``times`` ``(n,)`` (the rig's
+    timeline) of the edge's frames, each marked used or rejected."""
+    recs = est.recordings or Recordings.single(times.size)
+    out: list[JointResiduals] = []
+    for name, e in est.edges.items():
+        if not e.frames.size:
+            continue
+        used = np.isin(e.frames, e.inliers)
+        norms = {k: np.linalg.norm(v, axis=1) for k, v in e.frame_residuals.items()}
+        if "rot" in norms:
+            norms["rot"] = np.degrees(norms["rot"])
+        of = recs.of_frame[e.frames]
+        for i, rname in enumerate(recs.names):
+            sel = of == i
+            if sel.any():
+                vals = {k: v[sel] for k, v in norms.items()}
+                out.append(JointResiduals(name, rname, times[e.frames[sel]], used[sel], vals))
     return out
 
 

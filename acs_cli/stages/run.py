@@ -561,6 +561,7 @@ def _sfm_stage(
 def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
     """The stages of a rig run: intrinsics and poses of cameras with images, then the rig."""
     from acs_cli.core.joints import joint_model
+    from acs_cli.io.rig_residuals import RESIDUALS_FILE
     from acs_cli.stages.rig import RIG_FILE, TRAJECTORY_DIR, label, run_rig
 
     stages: list[_Stage] = []
@@ -612,7 +613,7 @@ def _plan_rig(config: RigRunConfig) -> tuple[list[_Stage], dict[str, Path]]:
                 ],
                 "accept_weak": config.accept_weak,
             },
-            [rig_out, *traj_files],
+            [rig_out, *traj_files, out / RESIDUALS_FILE],
             do_rig,
             {role[n]: fmt for n, (_, fmt) in files.items()},
         )

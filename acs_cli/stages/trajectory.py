@@ -317,7 +317,7 @@ def rig_angles(
             angles = HingeAngles(h.angle_deg, std, h.wobble_deg)
         else:
             angles = ball_angles(D, float("nan"), k, euler)
-        series.append(JointAngleSeries(name, common, angles))
+        series.append(JointAngleSeries(name, common, angles, k))
     return series
 
 

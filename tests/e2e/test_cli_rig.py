@@ -58,6 +58,13 @@ def test_run_calibrates_the_rig_beside_its_truth(recording: Path) -> None:
     html = (recording / "out" / "report.html").read_text(encoding="utf-8")
     assert "rig of 5 cameras" in html and "j23 axis in cam2" in html
     assert (recording / "out" / "report_files" / "rig_cameras.png").stat().st_size > 10_000
+    # about the rig (issue 22, item 5): each joint's residual and angles per frame, no
+    # section of the pair's stages or of images
+    assert {p.name for p in (recording / "out" / "report_files").iterdir()} == {
+        "rig_cameras.png", "joint_residuals.png", "joint_angles.png"
+    }  # fmt: skip
+    assert (recording / "out" / "joint_residuals.csv").is_file()
+    assert "Sections skipped" not in html and "No relpose.yaml" not in html
     # unchanged inputs: the stage is skipped
     again = acscal("run", recording / "config.yaml")
     assert again.returncode == 0 and "rig: skipped" in again.stdout

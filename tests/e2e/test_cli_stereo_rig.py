@@ -76,6 +76,15 @@ def test_a_rigid_pair_seeing_one_board_is_stereo_calibration(stereo: Path) -> No
     # refined on both cameras' corners, with one board for both (no world between them)
     assert set(rig.bundle_adjustment) == {"left", "right"}
     assert all(b.rms_px < 0.25 for b in rig.bundle_adjustment.values())
+    # the run's report (issue 22, item 5): each camera's reprojection errors, corners and
+    # coverage as a pair's, the rigid joint's residual per frame; no angle, no skip notes
+    figures = {p.name for p in (stereo / "out" / "report_files").iterdir()}
+    assert figures == {"rig_cameras.png", "joint_residuals.png", "reprojection.png",
+                       "corner_errors.png", "coverage.png"}  # fmt: skip
+    html = (stereo / "out" / "report.html").read_text(encoding="utf-8")
+    for stage in ("intrinsics, camera left", "poses, camera right", "camera left fx"):
+        assert stage in html
+    assert "Sections skipped" not in html and "No joint.yaml" not in html
 
 
 @needs_data
