@@ -369,6 +369,20 @@ def test_markerless_cameras_plan_an_sfm_stage(tmp_path: Path) -> None:
         parse_rig_config(__import__("yaml").safe_load(board), tmp_path / "rig.yaml")
 
 
+def _hinge_rig_config(tmp_path: Path, rng: np.random.Generator) -> str:
+    """A three-camera rig's recording written to ``tmp_path`` (ball j01, hinge h12) and its
+    config, with ``%s`` where the hinge's own keys go."""
+    rec = rig_recording(rng, 40, joints=JOINTS, sigma_rot_deg=0.3, sigma_trans=0.01)
+    for c, T in rec.T_wc_c.items():
+        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
+    return (
+        "schema_version: 2\noutput: out\ncameras:\n"
+        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
+        "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
+        "  h12: {between: [cam1, cam2], type: hinge%s}\n"
+    )
+
+
 def test_a_hinge_axis_points_the_way_the_config_says(
     tmp_path: Path, rng: np.random.Generator
 ) -> None:
@@ -376,15 +390,7 @@ def test_a_hinge_axis_points_the_way_the_config_says(
     in one of its bodies, or towards a named body); the angle range turns with it."""
     import yaml
 
-    rec = rig_recording(rng, 40, joints=JOINTS, sigma_rot_deg=0.3, sigma_trans=0.01)
-    for c, T in rec.T_wc_c.items():
-        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
-    base = (
-        "schema_version: 2\noutput: out\ncameras:\n"
-        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
-        "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
-        "  h12: {between: [cam1, cam2], type: hinge%s}\n"
-    )
+    base = _hinge_rig_config(tmp_path, rng)
 
     def solve(axis: str, name: str) -> tuple[RigArtifact, list[str]]:
         text = base % axis
@@ -454,15 +460,7 @@ def test_a_hinge_point_is_reported_where_the_config_says(
     from acs_cli.stages.export import run_rig_export
     from acs_cli.stages.rig import trajectories_from_rig
 
-    rec = rig_recording(rng, 40, joints=JOINTS, sigma_rot_deg=0.3, sigma_trans=0.01)
-    for c, T in rec.T_wc_c.items():
-        write_tum(tmp_path / f"{c}.tum", rec.timestamps, T)
-    base = (
-        "schema_version: 2\noutput: out\ncameras:\n"
-        "  cam0: {poses: cam0.tum}\n  cam1: {poses: cam1.tum}\n  cam2: {poses: cam2.tum}\n"
-        "joints:\n  j01: {between: [cam0, cam1], type: ball}\n"
-        "  h12: {between: [cam1, cam2], type: hinge%s}\n"
-    )
+    base = _hinge_rig_config(tmp_path, rng)
 
     def solve(extra: str, name: str) -> tuple[RigRun, Path]:
         text = base % extra
