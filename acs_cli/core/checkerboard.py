@@ -158,11 +158,11 @@ def smooth_grid(
     """The board's grid as a smooth map of its corners, fitted so that a few wrong corners
     do not move it.
 
-    The map is a homography from the grid's indices to the image (least median of
-    squares, ``cv2.findHomography`` with ``LMEDS``: perspective) plus a cubic polynomial of
-    the indices (lens distortion, which is smooth over a board), fitted by least squares
-    reweighted five times, corners off by more than three robust standard deviations (and
-    0.05 px) given no weight.
+    The map is a homography from the grid's indices to the image (``cv2.findHomography``
+    with RANSAC: perspective) plus a cubic polynomial of the indices (lens distortion, which
+    is smooth over a board), fitted by least squares on the corners within three robust
+    standard deviations (and 0.05 px) of the last fit, until they no longer change (at most
+    five fits).
 
     Parameters
     ----------
@@ -185,7 +185,10 @@ def smooth_grid(
         return None
     jj, ii = np.meshgrid(np.arange(rows, dtype=float), np.arange(cols, dtype=float), indexing="ij")
     obj = np.column_stack([ii.ravel(), jj.ravel()])
-    H, _ = cv2.findHomography(obj, c, cv2.LMEDS)
+    # RANSAC within a quarter of the typical spacing: the homography only has to hold the
+    # board's bulk (the cubic takes up the distortion); LMEDS costs 4x as much
+    typical = float(np.median(np.linalg.norm(np.diff(c.reshape(rows, cols, 2), axis=1), axis=2)))
+    H, _ = cv2.findHomography(obj, c, cv2.RANSAC, max(RESEED_FRACTION * typical, 1.0))
     if H is None:
         return None
     base = np.asarray(cv2.perspectiveTransform(obj[:, None, :], H), float).reshape(-1, 2)
@@ -198,12 +201,15 @@ def smooth_grid(
     r = c - base
     fit = np.zeros_like(r)
     if c.shape[0] >= 3 * A.shape[1]:
-        w = np.ones(c.shape[0])
+        w = np.ones(c.shape[0], dtype=bool)
         for _ in range(5):
-            coef = np.linalg.lstsq(A * w[:, None], r * w[:, None], rcond=None)[0]
+            coef = np.linalg.lstsq(A[w], r[w], rcond=None)[0]
             fit = A @ coef
             e = np.linalg.norm(r - fit, axis=1)
-            w = (e <= 3.0 * 1.4826 * float(np.median(e)) + 0.05).astype(float)
+            kept = e <= 3.0 * 1.4826 * float(np.median(e)) + 0.05
+            if np.array_equal(kept, w):
+                break  # the same corners again: the same fit
+            w = kept
     grid = base + fit
     g = grid.reshape(rows, cols, 2)
     step_x = np.linalg.norm(np.gradient(g, axis=1), axis=2)
@@ -211,9 +217,22 @@ def smooth_grid(
     return grid, np.minimum(step_x, step_y).ravel()
 
 
+def _off_grid(
+    corners: NDArray[np.float64], smooth: tuple[NDArray[np.float64], NDArray[np.float64]]
+) -> NDArray[np.bool_]:
+    """The corners further than :data:`RESEED_FRACTION` of the local spacing from the
+    smooth grid ``(grid, spacing)`` of :func:`smooth_grid`."""
+    grid, step = smooth
+    return np.asarray(np.linalg.norm(corners - grid, axis=1) > RESEED_FRACTION * step)
+
+
 def reseed_outliers(
     corners: NDArray[np.floating], cols: int, rows: int
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.bool_],
+    tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+]:
     """Move corners far off the board's smooth grid onto it (:func:`smooth_grid`).
 
     A corner further than :data:`RESEED_FRACTION` of the local spacing from the grid is
@@ -226,15 +245,15 @@ def reseed_outliers(
     -------
     corners : ndarray, shape (cols * rows, 2)
     moved : ndarray of bool, shape (cols * rows,)
+    smooth : (grid, spacing) of :func:`smooth_grid`, or None where it has none
     """
     c = np.asarray(corners, dtype=float).reshape(-1, 2).copy()
     smooth = smooth_grid(c, cols, rows)
     if smooth is None:
-        return c, np.zeros(c.shape[0], dtype=bool)
-    grid, step = smooth
-    moved = np.linalg.norm(c - grid, axis=1) > RESEED_FRACTION * step
-    c[moved] = grid[moved]
-    return c, moved
+        return c, np.zeros(c.shape[0], dtype=bool), None
+    moved = _off_grid(c, smooth)
+    c[moved] = smooth[0][moved]
+    return c, moved, smooth
 
 
 def normalise_order(corners: NDArray[np.floating], cols: int, rows: int) -> NDArray[np.float64]:
@@ -763,7 +782,7 @@ def detect_checkerboard(
     coarse, level = seen
     scale = float(2**level)
     c = (coarse.reshape(-1, 2).astype(float) + 0.5) * scale - 0.5
-    c = reseed_outliers(c, cols, rows)[0]
+    c, _, smooth = reseed_outliers(c, cols, rows)
     spacing = corner_spacing_px(c, cols, rows)
     if not np.isfinite(spacing) or spacing < 4.0:
         return None
@@ -792,6 +811,8 @@ def detect_checkerboard(
             start[far] = _subpix(roi, coarse_local[far], windows, _SUBPIX_COARSE_CRITERIA)
             out[far] = _fit(roi, start, cols, rows, radius, MAX_FIT_SHIFT)[0][far]
     out += offset
-    if not np.all(np.isfinite(out)) or np.any(reseed_outliers(out, cols, rows)[1]):
+    if not np.all(np.isfinite(out)):
+        return None
+    if smooth is not None and np.any(_off_grid(out, smooth)):
         return None  # a corner the refinement left far off the board's grid: not trusted
     return normalise_order(out, cols, rows)

@@ -16,8 +16,6 @@ Cells that do not apply to a joint's type are empty.
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +24,7 @@ import numpy as np
 from acs_cli.core.angles import BallAngles, HingeAngles
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import atomic_path
+from acs_cli.io.csv_table import read_csv_table, write_csv_table
 
 __all__ = ["ANGLE_COLUMNS", "JointAngleSeries", "read_angles_csv", "write_angles_csv"]
 
@@ -67,9 +65,7 @@ def _num(x: float) -> str:
 
 def write_angles_csv(path: str | Path, series: list[JointAngleSeries]) -> None:
     """Write ``angles.csv`` atomically (module doc)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(ANGLE_COLUMNS)
+    rows: list[list[str]] = []
     for s in series:
         a = s.angles
         for i, t in enumerate(np.asarray(s.times, dtype=float)):
@@ -88,9 +84,8 @@ def write_angles_csv(path: str | Path, series: list[JointAngleSeries]) -> None:
                 for k in range(3):
                     row[f"euler_{k + 1}_deg"] = _num(a.euler_deg[i, k])
                     row[f"euler_{k + 1}_std_deg"] = _num(a.euler_std_deg[i, k])
-            w.writerow([row[c] for c in ANGLE_COLUMNS])
-    with atomic_path(path) as tmp:
-        tmp.write_text(buf.getvalue(), encoding="utf-8")
+            rows.append([row[c] for c in ANGLE_COLUMNS])
+    write_csv_table(path, ANGLE_COLUMNS, rows)
 
 
 def read_angles_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
@@ -103,16 +98,8 @@ def read_angles_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
         Not an ``angles.csv``: another header, or a row of another length.
     """
     p = Path(path)
-    try:
-        rows = list(csv.reader(p.read_text(encoding="utf-8").splitlines()))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read ({exc})", path=p) from exc
-    if not rows or tuple(rows[0]) != ANGLE_COLUMNS:
-        raise InputError(f"not an angles.csv: its header is not {','.join(ANGLE_COLUMNS)}", path=p)
     out: dict[str, dict[str, list[str]]] = {}
-    for n, row in enumerate(rows[1:], start=2):
-        if len(row) != len(ANGLE_COLUMNS):
-            raise InputError(f"{len(row)} cells, expected {len(ANGLE_COLUMNS)}", path=p, line=n)
+    for row in read_csv_table(p, ANGLE_COLUMNS, "angles.csv"):
         cols = out.setdefault(row[1], {c: [] for c in ANGLE_COLUMNS})
         for c, v in zip(ANGLE_COLUMNS, row, strict=True):
             cols[c].append(v)

@@ -23,8 +23,6 @@ Cells that do not apply to a joint's type are empty (:attr:`JointModel.residual_
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,7 +30,7 @@ import numpy as np
 
 from acs_cli.core.se3 import FloatArray
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import atomic_path
+from acs_cli.io.csv_table import read_csv_table, write_csv_table
 
 __all__ = [
     "KIND_COLUMNS",
@@ -87,9 +85,7 @@ def write_joint_residuals(path: str | Path, series: list[JointResiduals]) -> Non
     ValueError
         A residual kind without a column (a joint type this file does not know).
     """
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(RESIDUAL_COLUMNS)
+    rows: list[list[str]] = []
     for s in series:
         unknown = set(s.values) - set(KIND_COLUMNS)
         if unknown:
@@ -98,9 +94,8 @@ def write_joint_residuals(path: str | Path, series: list[JointResiduals]) -> Non
         for i, t in enumerate(np.asarray(s.times, dtype=float)):
             row = [repr(float(t)), s.recording, s.joint, "1" if s.used[i] else "0"]
             row += [_num(cols[c][i]) if c in cols else "" for c in RESIDUAL_COLUMNS[4:]]
-            w.writerow(row)
-    with atomic_path(path) as tmp:
-        tmp.write_text(buf.getvalue(), encoding="utf-8")
+            rows.append(row)
+    write_csv_table(path, RESIDUAL_COLUMNS, rows)
 
 
 def read_joint_residuals(path: str | Path) -> list[JointResiduals]:
@@ -114,18 +109,8 @@ def read_joint_residuals(path: str | Path) -> list[JointResiduals]:
         is not a number.
     """
     p = Path(path)
-    try:
-        rows = list(csv.reader(p.read_text(encoding="utf-8").splitlines()))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read ({exc})", path=p) from exc
-    if not rows or tuple(rows[0]) != RESIDUAL_COLUMNS:
-        raise InputError(
-            f"not a {RESIDUALS_FILE}: its header is not {','.join(RESIDUAL_COLUMNS)}", path=p
-        )
     groups: dict[tuple[str, str], list[list[str]]] = {}
-    for n, row in enumerate(rows[1:], start=2):
-        if len(row) != len(RESIDUAL_COLUMNS):
-            raise InputError(f"{len(row)} cells, expected {len(RESIDUAL_COLUMNS)}", path=p, line=n)
+    for n, row in enumerate(read_csv_table(p, RESIDUAL_COLUMNS, RESIDUALS_FILE), start=2):
         if row[3] not in ("0", "1"):
             raise InputError(f"column used: {row[3]!r} is not 0 or 1", path=p, line=n)
         groups.setdefault((row[2], row[1]), []).append(row)

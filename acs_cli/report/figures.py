@@ -8,7 +8,7 @@ Every function takes arrays and returns the PNG's bytes. 3-D views show camera f
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,6 +53,12 @@ def camera_name(camera: str) -> str:
     """How a camera is named in the report: a pair's ``a`` and ``b`` as ``A`` and ``B``, a
     rig's cameras by their names (``camera {camera_name(c)}``)."""
     return camera.upper() if camera in ("a", "b") else camera
+
+
+def camera_colors(cameras: Iterable[str]) -> dict[str, str]:
+    """The colour of each camera of a rig, in the rig figure's order (matplotlib's cycle
+    ``C0``, ``C1``, ...): the other figures draw a rig's cameras in the same colours."""
+    return {c: f"C{i % 10}" for i, c in enumerate(cameras)}
 
 
 def _color(camera: str, color: str | None) -> str:
@@ -443,7 +449,7 @@ def rig_of_many_figure(
     pts = np.vstack([*centres.values(), *[j[4] for j in joints if j[4] is not None]])
     extent = float(np.ptp(pts, axis=0).max()) if pts.shape[0] > 1 else 1.0
     size = max(0.08 * extent, 1e-3)
-    colors = {c: f"C{i % 10}" for i, c in enumerate(T_ref_cam)}
+    colors = camera_colors(T_ref_cam)
     over_time = instants.size > 0 and bool(at_instants)
     fig = Figure(figsize=(11.0, 5.6) if over_time else (6.4, 5.6))
     fig.subplots_adjust(left=0.02, right=0.94 if over_time else 0.98, bottom=0.06, top=0.9,

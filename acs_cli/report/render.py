@@ -12,7 +12,7 @@ import numpy as np
 from acs_cli.report import figures as F
 from acs_cli.report import verdict as V
 from acs_cli.report.html import Page
-from acs_cli.report.model import Estimate, ReportModel, display_unit
+from acs_cli.report.model import Estimate, ReportModel, RigOfManyView, display_unit
 
 __all__ = ["FIGURE_NAMES", "RenderedReport", "format_number", "render_report"]
 
@@ -122,10 +122,8 @@ def _per_view_rows(model: ReportModel) -> list[list[str]]:
     return [r for _, r in rows]
 
 
-def _rig(page: Page, model: ReportModel, pngs: dict[str, bytes], dpi: int) -> None:
+def _rig(page: Page, rig: RigOfManyView, pngs: dict[str, bytes], dpi: int) -> None:
     """A rig of many cameras: its figure, and which cameras ran from images."""
-    rig = model.rig
-    assert rig is not None
     pngs["rig"] = F.rig_of_many_figure(
         rig.T_ref_cam, rig.joints, rig.paths, rig.instants, rig.at_instants, rig.reference,
         rig.unit, dpi,
@@ -205,7 +203,7 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
 
     section("trajectory", "The rig and its trajectory", model.rig or model.trajectory)
     if model.rig is not None:
-        _rig(page, model, pngs, dpi)
+        _rig(page, model.rig, pngs, dpi)
     traj = model.trajectory
     if traj is not None:
         scale, shown = display_unit(traj.unit)

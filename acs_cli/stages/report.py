@@ -228,9 +228,9 @@ def _gather(run_dir: Path) -> _Found:
     found.rig = rig = _read_artifact(found, run_dir / "rig.yaml", RigArtifact)
     found.dirs = _camera_dirs(run_dir, rig)
     if rig is not None:
-        # the rig's figure colours its posed cameras in order: C0, C1, ...
+        # the rig's figure colours the cameras posed at the reference instant, in order
         posed = sorted(rig.cameras, key=lambda c: rig.cameras[c].T_cam_ref is None)
-        color = {c: f"C{i % 10}" for i, c in enumerate(posed)}
+        color = F.camera_colors(posed)
         found.colors = {label: color[label.rsplit("/", 1)[-1]] for label in found.dirs}
     for cam, d in found.dirs.items():
         intr = _read_artifact(found, d / "intrinsics.yaml", IntrinsicsArtifact)
@@ -1192,20 +1192,22 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     model.artifact_notes = list(found.notes)
     model.notes = list(found.notes)
 
-    rig = found.rig  # a rig's report shows the rig: no skip notes of the pair's stages
+    rig = found.rig
+    # why a section of the two-camera path is empty; a rig's report leaves those sections
+    # out (a rig has its own, :func:`_rig_sections`)
+    pair_skip = model.skip if rig is None else _no_note
     try:
         model.trajectory = _trajectory(found)
     except AcsError as exc:
-        if rig is None:
-            model.skip("trajectory", f"Trajectory skipped: {exc.one_line()}")
+        pair_skip("trajectory", f"Trajectory skipped: {exc.one_line()}")
 
     if found.joint is not None:
         try:
             model.residuals += _joint_series(found, found.joint)
         except AcsError as exc:
             model.skip("residuals", f"joint.yaml residuals skipped: {exc.one_line()}")
-    elif rig is None:
-        model.skip("residuals", "No joint.yaml: no residuals of the joint stage.")
+    else:
+        pair_skip("residuals", "No joint.yaml: no residuals of the joint stage.")
     traj = model.trajectory
     if traj is not None and found.relpose is not None:
         scale, shown = display_unit(traj.unit)
@@ -1219,33 +1221,33 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
                 shown,
             )
         )
-    elif found.relpose is None and rig is None:
-        model.skip("residuals", "No relpose.yaml: no residuals of the relative-pose stage.")
+    elif found.relpose is None:
+        pair_skip("residuals", "No relpose.yaml: no residuals of the relative-pose stage.")
     if rig is not None:
         _rig_sections(found, rig, model)
 
     model.reprojection = _reprojection(found)
-    if not model.reprojection and not found.intrinsics and not found.poses and rig is None:
-        model.skip("reprojection", "No intrinsics.yaml and no poses: no reprojection errors.")
+    if not model.reprojection and not found.intrinsics and not found.poses:
+        pair_skip("reprojection", "No intrinsics.yaml and no poses: no reprojection errors.")
 
     model.corner_errors = _corner_errors(found)
-    if not model.corner_errors and rig is None:
-        model.skip(
+    if not model.corner_errors:
+        pair_skip(
             "corners",
             "No per-corner errors: they need a camera's intrinsics.yaml and poses with corners.",
         )
 
     model.coverage = _coverage(found)
     coverage = _coverage_fractions(found, model.coverage)
-    if not model.coverage and rig is None:
-        model.skip(
+    if not model.coverage:
+        pair_skip(
             "coverage",
             "No poses with corners (cam_<x>/*.npz from acscal poses): no coverage figure.",
         )
 
     model.estimates = _estimates(found)
-    if found.rig is not None:
-        model.estimates += _rig_estimates(found, found.rig)
+    if rig is not None:
+        model.estimates += _rig_estimates(found, rig)
     if not model.estimates:
         model.skip("estimates", "No estimates: no intrinsics, joint or relpose artifact.")
 
@@ -1257,6 +1259,10 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     model.warnings = [f"{src}: {text}" for src, text in found.warnings]
     model.notes += [n for n in found.notes if n not in model.notes]
     return model
+
+
+def _no_note(section: str, text: str) -> None:
+    """A section note nobody shows (see ``pair_skip`` in :func:`_model`)."""
 
 
 def _rig_sections(found: _Found, rig: RigArtifact, model: ReportModel) -> None:

@@ -158,7 +158,7 @@ def test_smooth_grid_follows_perspective_and_distortion() -> None:
     assert got is not None
     grid, step = got
     assert np.max(np.linalg.norm(grid - truth, axis=1) / step) < 0.05
-    moved_to, moved = reseed_outliers(truth, 24, 17)
+    moved_to, moved, _ = reseed_outliers(truth, 24, 17)
     assert not np.any(moved) and np.array_equal(moved_to, truth)
 
 
@@ -175,7 +175,7 @@ def test_reseed_outliers_puts_a_wrong_border_column_back(rng: np.random.Generato
     start[wrong] += rng.uniform(10, 14, wrong.size)[:, None] * np.column_stack(
         [np.cos(ang), np.sin(ang)]
     )
-    got, moved = reseed_outliers(start, 24, 17)
+    got, moved, _ = reseed_outliers(start, 24, 17)
     assert set(np.flatnonzero(moved)) == set(wrong)
     assert np.max(np.linalg.norm(got[wrong] - truth[wrong], axis=1)) < 0.5
     assert np.array_equal(got[~moved], start[~moved])
