@@ -748,10 +748,23 @@ def _fit(
     return out, far
 
 
+def _full_search(
+    gray: NDArray[np.uint8], cols: int, rows: int
+) -> tuple[NDArray[np.float32], int] | None:
+    """``findChessboardCorners`` on the full-resolution image without any quick check: the
+    coarse corners (shape (cols * rows, 1, 2)) and level 0, or None."""
+    found, coarse = cv2.findChessboardCorners(gray, (cols, rows), flags=_COARSE_FLAGS)
+    if not found or coarse is None or coarse.shape[0] != cols * rows:
+        return None
+    return np.asarray(coarse, np.float32), 0
+
+
 def detect_checkerboard(
     image: NDArray[np.generic],
     cols: int,
     rows: int,
+    *,
+    full_search: bool = False,
 ) -> NDArray[np.float64] | None:
     """Find a checkerboard's inner corners with sub-pixel accuracy.
 
@@ -761,6 +774,12 @@ def detect_checkerboard(
         The image (grey or BGR; any numeric dtype, rescaled to 8 bits).
     cols, rows : int
         Inner corners along the board's x axis (per row) and y axis (>= 2 each).
+    full_search : bool
+        When the quick checks see no board, search the full-resolution image anyway. OpenCV's
+        quick check misses boards whose squares are under about 16 px; the search finds
+        them, at several hundred milliseconds on a large frame without a board (the
+        stages run it on the frames that failed when the boards found are that small,
+        :func:`acs_cli.stages.intrinsics.detect_folder`).
 
     Returns
     -------
@@ -777,6 +796,8 @@ def detect_checkerboard(
         raise ValueError(f"a board needs at least 2x2 inner corners, got {cols}x{rows}")
     gray = _to_gray(image)
     seen = _coarse_search(gray, cols, rows)
+    if seen is None and full_search:
+        seen = _full_search(gray, cols, rows)
     if seen is None:
         return None
     coarse, level = seen

@@ -7,6 +7,7 @@ folder, in parallel, reusing and incrementally updating a detections cache;
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from acs_cli.core.checkerboard import DETECTOR_VERSION, detect_checkerboard
+from acs_cli.core.checkerboard import DETECTOR_VERSION, corner_spacing_px, detect_checkerboard
 from acs_cli.core.intrinsics import (
     DISTORTION_NAMES,
     MIN_VIEWS,
@@ -178,6 +179,8 @@ class FolderDetections:
         A video's selection counts and damage, as warnings.
     frames : dict, optional
         A video's counts for artifacts: ``decoded``, ``kept``, ``selection``.
+    keys : list of str
+        Each image's key in the detections cache (same order).
     """
 
     images: Sequence[ImageRef]
@@ -188,6 +191,7 @@ class FolderDetections:
     times_ns: list[int] | None = None
     notes: list[str] = field(default_factory=list)
     frames: dict[str, Any] | None = None
+    keys: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -522,6 +526,15 @@ def detect_folder(
     topic : str, optional
         With a ROS bag (``folder``; see :mod:`acs_cli.io.bag`): its image topic.
 
+    Boards whose squares are small in pixels escape OpenCV's quick check, which the detector
+    relies on to fail fast on frames without a board. When the boards found have squares
+    under :data:`FULL_SEARCH_SPACING_PX` (their smallest corner spacing, median over the
+    boards), or no board is found, the frames that failed are searched again at full
+    resolution (``detect_checkerboard(..., full_search=True)``, several hundred
+    milliseconds a large frame): with no board found, first :data:`FULL_SEARCH_PROBE` of
+    them spread over the input, the rest only if one of those shows a board. What it finds
+    goes into the cache as the frame's detection.
+
     Returns
     -------
     FolderDetections
@@ -532,6 +545,27 @@ def detect_folder(
         No images, a corrupt image, or images of different sizes; a file that is not a
         video, or a video of which no frame decodes.
     """
+    fd = _detect_each(
+        folder, cols, rows, cache, extra_caches, workers, progress, target, selection, topic
+    )
+    if target is not None:
+        return fd
+    return _full_search_pass(fd, cols, rows, workers)
+
+
+def _detect_each(
+    folder: Path,
+    cols: int,
+    rows: int,
+    cache: Path,
+    extra_caches: Sequence[Path],
+    workers: int | None,
+    progress: Progress | None,
+    target: MarkerTarget | None,
+    selection: FrameSelection,
+    topic: str | None,
+) -> FolderDetections:
+    """:func:`detect_folder`'s first pass: every image once, through the cache."""
     selection.check()
     if is_bag_path(folder) or topic is not None:
         if not is_bag_path(folder):
@@ -621,7 +655,82 @@ def detect_folder(
             write_detections(cache, store)
 
     dets = [found[i] for i in range(len(images))]
-    return FolderDetections(images, dets, _common_size(images, dets), cached, cache)
+    return FolderDetections(images, dets, _common_size(images, dets), cached, cache, keys=keys)
+
+
+#: Boards whose smallest corner spacing (median over the boards found, pixels) is under
+#: this may have siblings the quick check missed: :func:`detect_folder` searches the frames
+#: that failed at full resolution.
+FULL_SEARCH_SPACING_PX = 20.0
+#: With no board found at all, the full search tries this many failed frames (spread over
+#: the input) before the rest.
+FULL_SEARCH_PROBE = 8
+#: Frames of a full search read (decoded) at a time: memory stays bounded.
+FULL_SEARCH_CHUNK = 16
+
+
+def _detect_full(gray: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
+    """Worker: ``detect_checkerboard`` with the full-resolution search."""
+    return detect_checkerboard(gray, cols, rows, full_search=True)
+
+
+def _full_search(
+    fd: FolderDetections, todo: Sequence[int], cols: int, rows: int, workers: int | None
+) -> dict[int, Detection]:
+    """The images ``todo`` of ``fd`` read again (a chunk at a time) and searched at full
+    resolution; their new detections by index."""
+    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+    n_workers = min(n_workers, len(todo))
+    out: dict[int, Detection] = {}
+    pool = (
+        ProcessPoolExecutor(n_workers, initializer=_exit_with_parent, initargs=(os.getpid(),))
+        if n_workers > 1
+        else None
+    )
+    try:
+        for start in range(0, len(todo), FULL_SEARCH_CHUNK):
+            chunk = list(todo[start : start + FULL_SEARCH_CHUNK])
+            greys = read_images([fd.images[i] for i in chunk])
+            args = (greys, [cols] * len(chunk), [rows] * len(chunk))
+            got = pool.map(_detect_full, *args) if pool is not None else map(_detect_full, *args)
+            for i, corners in zip(chunk, got, strict=True):
+                old = fd.detections[i]
+                out[i] = Detection(old.name, corners is not None, old.image_size, corners)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    return out
+
+
+def _full_search_pass(
+    fd: FolderDetections, cols: int, rows: int, workers: int | None
+) -> FolderDetections:
+    """:func:`detect_folder`'s second pass (its docstring): the failed frames searched at
+    full resolution when the boards found are small, or none is; the cache updated."""
+    failed = [i for i, d in enumerate(fd.detections) if not d.found]
+    spacings = [
+        corner_spacing_px(d.corners, cols, rows)
+        for d in fd.detections
+        if d.found and d.corners is not None
+    ]
+    if not failed or (spacings and float(np.median(spacings)) >= FULL_SEARCH_SPACING_PX):
+        return fd
+    first = failed
+    if not spacings:  # nothing found: a few probes before the whole input
+        picks = np.unique(np.round(np.linspace(0, len(failed) - 1, FULL_SEARCH_PROBE)))
+        first = [failed[int(k)] for k in picks]
+    got = _full_search(fd, first, cols, rows, workers)
+    if not any(d.found for d in got.values()):
+        return fd
+    rest = [i for i in failed if i not in got]
+    if rest:
+        got.update(_full_search(fd, rest, cols, rows, workers))
+    dets = [got.get(i, d) for i, d in enumerate(fd.detections)]
+    if fd.keys:
+        store = read_detections(fd.cache)
+        store.update({fd.keys[i]: d for i, d in got.items()})
+        write_detections(fd.cache, store)
+    return dataclasses.replace(fd, detections=dets)
 
 
 def _common_size(images: Sequence[ImageRef], dets: Sequence[Detection]) -> tuple[int, int]:
@@ -676,9 +785,12 @@ def _detect_video(
     last_save = time.monotonic()
     total = 0
 
+    keys: dict[int, str] = {}
+
     def record(i: int, key: str, det: Detection, from_cache: bool) -> None:
         nonlocal dirty, last_save, cached
         found[i] = det
+        keys[i] = key
         cached += from_cache
         if store.get(key) is not det:
             store[key] = det
@@ -777,6 +889,7 @@ def _detect_video(
         times_ns=[r.time_ns for r in refs],
         notes=notes,
         frames=frames_info,
+        keys=[keys[i] for i in range(len(refs))],
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -200,3 +201,73 @@ def test_detect_folder_errors(tmp_path: Path) -> None:
     (folder / "c.png").write_bytes(b"\x89PNG\r\n\x1a\nbroken")
     with pytest.raises(InputError, match=r"c\.png"):
         detect_folder(folder, 9, 6, tmp_path / "c.npz", workers=1)
+
+
+def small_board_image(shift: int = 0) -> np.ndarray:
+    """A 24x17 board of 12 px squares on a 1280x960 image: squares too small for OpenCV's
+    quick board check."""
+    img = np.full((960, 1280), 255, np.uint8)
+    x0, y0, square = 300 + shift, 250, 12
+    for j in range(18):
+        for i in range(25):
+            if (i + j) % 2 == 0:
+                y, x = y0 + j * square, x0 + i * square
+                img[y : y + square, x : x + square] = 0
+    return cv2.GaussianBlur(img, (0, 0), 1.0)
+
+
+def test_detect_folder_searches_the_failed_frames_again_when_boards_are_small(
+    tmp_path: Path,
+) -> None:
+    """Issue 21, item 6: boards of squares under about 16 px escape the quick check (the
+    detector alone finds none here); the folder's failed frames are searched at full
+    resolution, and what that finds is cached as the frames' detections."""
+    from acs_cli.core.checkerboard import detect_checkerboard
+
+    assert detect_checkerboard(small_board_image(), 24, 17) is None
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(folder / f"img{i}.png"), small_board_image(shift=7 * i))
+    cv2.imwrite(str(folder / "img3.png"), np.full((960, 1280), 90, np.uint8))
+    cache = tmp_path / "out.detections.npz"
+    first = detect_folder(folder, 24, 17, cache, workers=1)
+    assert [d.found for d in first.detections] == [True, True, True, False]
+    c = first.detections[1].corners
+    assert c is not None and abs(c[0, 0] - (300 + 7 + 12 - 0.5)) < 0.1  # the first corner
+    second = detect_folder(folder, 24, 17, cache, workers=1)
+    assert second.cached == 4
+    assert [d.found for d in second.detections] == [True, True, True, False]
+
+
+def test_the_full_search_runs_only_for_small_boards_or_none(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Boards of ordinary squares: a failed frame is not searched again (it would cost
+    hundreds of milliseconds a frame); no board anywhere: a few frames spread over the input
+    are, and the rest only when one of them shows a board."""
+    import acs_cli.stages.intrinsics as stage
+
+    calls: list[list[int]] = []
+    real = stage._full_search
+
+    def spy(fd: Any, todo: Any, cols: int, rows: int, workers: Any) -> Any:
+        calls.append(list(todo))
+        return real(fd, todo, cols, rows, workers)
+
+    monkeypatch.setattr(stage, "_full_search", spy)
+    big = tmp_path / "big"
+    big.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(big / f"img{i}.png"), board_image(shift=10 * i))
+    cv2.imwrite(str(big / "img3.png"), np.full((480, 640), 90, np.uint8))
+    detect_folder(big, 9, 6, tmp_path / "big.npz", workers=1)
+    assert calls == []
+    blank = tmp_path / "blank"
+    blank.mkdir()
+    for i in range(12):
+        cv2.imwrite(str(blank / f"img{i:02d}.png"), np.full((480, 640), 40 + 10 * i, np.uint8))
+    got = detect_folder(blank, 9, 6, tmp_path / "blank.npz", workers=1)
+    assert not any(d.found for d in got.detections)
+    assert len(calls) == 1 and len(calls[0]) == stage.FULL_SEARCH_PROBE
+    assert calls[0][0] == 0 and calls[0][-1] == 11
