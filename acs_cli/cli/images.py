@@ -276,7 +276,7 @@ def intrinsics(
 
         acscal intrinsics board.mp4 --board 9x6 --max-frames 60 -o cam_a/intrinsics.yaml
     """
-    from acs_cli.stages.export import parse_list_option
+    from acs_cli.cli.options import parse_list_option
     from acs_cli.stages.intrinsics import EXPORTS, IntrinsicsConfig, run_intrinsics
 
     cols, rows, sq, tgt = parse_target_option(target, board, square)

@@ -455,7 +455,8 @@ def export(
         acscal export out/rig.yaml --format handeye --camera-name flange=tool0 \\
             --camera-name cam=camera_color_optical_frame -o handeye.yaml
     """
-    from acs_cli.stages.export import parse_named_option, run_export
+    from acs_cli.cli.options import parse_named_option
+    from acs_cli.stages.export import run_export
 
     given = parse_named_option(intrinsics or [], "--intrinsics", "intrinsics.yaml")
     info = run_export(

@@ -20,11 +20,12 @@ import yaml
 from cli_runner import acscal
 from export_consumers import read_kalibr_camchain, read_ros_camera_info
 
+from acs_cli.cli.options import parse_list_option
 from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.artifacts import make_header, write_yaml_artifact
 from acs_cli.io.trajectory import write_tum
-from acs_cli.stages.export import parse_list_option, run_export
+from acs_cli.stages.export import run_export
 from acs_cli.stages.joint import JointConfig, run_joint
 from acs_cli.stages.relpose import RelposeConfig, run_relpose
 from sample_data_gen import acs_sim
