@@ -26,12 +26,13 @@ camera keeps its trajectory's world, which ``rig.yaml``'s ``T_ref_world`` maps. 
 A sanity column checks the outputs against the truth: the RMS position error of each camera's
 mapped trajectory (the reference camera's frame at frame 0, metres), the worst camera's. With
 ``--compare-tree DIR`` the longest recording is also mapped by another source tree's
-``acs_cli`` (e.g. the main branch's, before a change): its times, and whether its outputs are
-byte for byte the same.
+``acs_cli`` (e.g. the main branch's, before a change) and by this one, the two interleaved
+round by round (a load on the machine falls on both alike): their times, and whether their
+outputs are byte for byte the same.
 
-    .venv/bin/python benchmarks/bench_trajectory_scale.py                 # ~2 min here
+    .venv/bin/python benchmarks/bench_trajectory_scale.py                 # ~1.5 min here
     .venv/bin/python benchmarks/bench_trajectory_scale.py --frames 1000 10000 --repeat 1
-    .venv/bin/python benchmarks/bench_trajectory_scale.py --compare-tree /work/main
+    .venv/bin/python benchmarks/bench_trajectory_scale.py --compare-tree /work/main  # ~2.5 min
 
 Work files go under ``--work`` (default ``/tmp/acscal_bench_traj``), never into the repository.
 Markdown tables on stdout, progress on stderr.
@@ -240,25 +241,25 @@ def compare(
     """This tree's and ``tree``'s ``acscal trajectory --rig`` on ``n`` frames, interleaved
     round by round (a load on the machine falls on both alike), and whether their outputs
     are byte for byte the same."""
-    trees = {"this tree": HERE, "other": tree}
+    trees = {"this": HERE, "other": tree}
     times: dict[str, list[float]] = {k: [] for k in trees}
     peaks: dict[str, list[float]] = {k: [] for k in trees}
-    for k in range(rounds):
-        for label, root in trees.items():
-            out = work / f"traj_{n}_cmp_{'this' if root == HERE else 'other'}"
+    for r in range(rounds):
+        for k, root in trees.items():
+            out = work / f"traj_{n}_cmp_{k}"
             cmd = acscal_argv(*trajectory_args(rig_file, work / f"rec_{n}", cams, out))
-            s, mb = run_child(cmd, root, work / f"compare_{label.replace(' ', '_')}_{k}.log")
-            times[label].append(s)
-            peaks[label].append(mb)
-            log(f"  {root}, {n} frames, round {k + 1}: {s:.2f} s, {mb:.0f} MiB")
+            s, mb = run_child(cmd, root, work / f"compare_{k}_{r}.log")
+            times[k].append(s)
+            peaks[k].append(mb)
+            log(f"  {root}, {n} frames, round {r + 1}: {s:.2f} s, {mb:.0f} MiB")
     same = same_outputs(work / f"traj_{n}_cmp_this", work / f"traj_{n}_cmp_other")
     rows = [
-        [f"`{root}`" + (" (this)" if root == HERE else ""), f"{n:,}", f"{min(times[k]):.2f}",
+        [f"`{root}`" + (" (this)" if k == "this" else ""), f"{n:,}", f"{min(times[k]):.2f}",
          f"{statistics.median(times[k]):.2f}", f"{max(peaks[k]):.0f}"]
         for k, root in trees.items()
     ]  # fmt: skip
-    head = ["tree", "frames", "best s", "median s", "peak RSS MiB"]
     verdict = "byte for byte the same" if same else "**not the same**"
+    head = ["tree", "frames", "best s", "median s", "peak RSS MiB"]
     return f"Against another tree, {rounds} interleaved rounds; outputs {verdict}:\n\n" + table(
         head, rows
     )
