@@ -233,7 +233,8 @@ def ball_angles(
 
     Stds: ``D[i]``'s noise is ``2 sigma`` per axis (module doc), a right perturbation; each
     Euler angle's std is its derivative along the three axes (central differences) times
-    that. ``sigma_rot_deg`` is each body's rotation noise per axis.
+    that. ``sigma_rot_deg`` is each body's rotation noise per axis; NaN when it is not known:
+    every std is then NaN, but 0 at the reference.
 
     Raises
     ------
@@ -246,19 +247,23 @@ def ball_angles(
     rv = se3.rotvec_from_matrix(D)
     rv_std = np.full((n, 3), np.degrees(s))
     e = _euler(D, sequence)
-    # central differences of the angles along each body axis of D (right perturbations)
-    h = 1e-6
-    J = np.empty((n, 3, 3))
-    for a in range(3):
-        step = np.zeros(3)
-        step[a] = h
-        plus = _euler(D @ se3.matrix_from_rotvec(step), sequence)
-        minus = _euler(D @ se3.matrix_from_rotvec(-step), sequence)
-        d = plus - minus
-        d = (d + np.pi) % (2.0 * np.pi) - np.pi  # across the +-180 deg seam
-        J[:, :, a] = d / (2.0 * h)
-    e_std = s * np.sqrt(np.sum(J**2, axis=2))
-    e_std[~np.all(np.isfinite(J), axis=(1, 2)) | (np.max(np.abs(J), axis=(1, 2)) > 1e3)] = np.nan
+    if np.isnan(s):  # no noise level (rig.yaml records none): no std, and no derivatives
+        e_std = np.full((n, 3), np.nan)
+    else:
+        # central differences of the angles along each body axis of D (right perturbations)
+        h = 1e-6
+        J = np.empty((n, 3, 3))
+        for a in range(3):
+            step = np.zeros(3)
+            step[a] = h
+            plus = _euler(D @ se3.matrix_from_rotvec(step), sequence)
+            minus = _euler(D @ se3.matrix_from_rotvec(-step), sequence)
+            d = plus - minus
+            d = (d + np.pi) % (2.0 * np.pi) - np.pi  # across the +-180 deg seam
+            J[:, :, a] = d / (2.0 * h)
+        e_std = s * np.sqrt(np.sum(J**2, axis=2))
+        bad = ~np.all(np.isfinite(J), axis=(1, 2)) | (np.max(np.abs(J), axis=(1, 2)) > 1e3)
+        e_std[bad] = np.nan
     rv_std[reference] = 0.0
     e_std[reference] = 0.0
     return BallAngles(np.degrees(rv), rv_std, sequence, np.degrees(e), np.degrees(e_std))

@@ -16,7 +16,9 @@ Cells that do not apply to a joint's type are empty.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from itertools import chain, repeat
 from pathlib import Path
 
 import numpy as np
@@ -59,33 +61,44 @@ class JointAngleSeries:
     zero: int | None = None
 
 
-def _num(x: float) -> str:
-    return "" if not np.isfinite(x) else f"{float(x):.6f}"
+def _nums(x: FloatArray) -> list[str]:
+    """Each value with 6 decimals, an empty cell where it is not finite."""
+    v = np.asarray(x, dtype=float).reshape(-1)
+    finite = np.isfinite(v)
+    if not finite.any():
+        return [""] * v.size
+    cells = (("%.6f\n" * v.size) % tuple(v.tolist())).split("\n")[:-1]  # one %-format
+    for i in np.flatnonzero(~finite).tolist():
+        cells[i] = ""
+    return cells
 
 
 def write_angles_csv(path: str | Path, series: list[JointAngleSeries]) -> None:
     """Write ``angles.csv`` atomically (module doc)."""
-    rows: list[list[str]] = []
+    blocks: list[Iterable[Sequence[str]]] = []
     for s in series:
         a = s.angles
-        for i, t in enumerate(np.asarray(s.times, dtype=float)):
-            row = dict.fromkeys(ANGLE_COLUMNS, "")
-            row["time"] = repr(float(t))
-            row["joint"] = s.joint
-            if isinstance(a, HingeAngles):
-                row["angle_deg"] = _num(a.angle_deg[i])
-                row["angle_std_deg"] = _num(a.angle_std_deg[i])
-                row["wobble_deg"] = _num(a.wobble_deg[i])
-            else:
-                for k, c in enumerate("xyz"):
-                    row[f"rotvec_{c}_deg"] = _num(a.rotvec_deg[i, k])
-                row["rotvec_std_deg"] = _num(a.rotvec_std_deg[i, 0])
-                row["euler_sequence"] = a.sequence
-                for k in range(3):
-                    row[f"euler_{k + 1}_deg"] = _num(a.euler_deg[i, k])
-                    row[f"euler_{k + 1}_std_deg"] = _num(a.euler_std_deg[i, k])
-            rows.append([row[c] for c in ANGLE_COLUMNS])
-    write_csv_table(path, ANGLE_COLUMNS, rows)
+        times = np.asarray(s.times, dtype=float).reshape(-1)
+        n = times.size
+        # the table a column at a time (a loop per row and cell costs several times more on
+        # a long recording)
+        cols: dict[str, Iterable[str]] = {c: repeat("", n) for c in ANGLE_COLUMNS}
+        cols["time"] = list(map(repr, times.tolist()))
+        cols["joint"] = repeat(s.joint, n)
+        if isinstance(a, HingeAngles):
+            cols["angle_deg"] = _nums(a.angle_deg[:n])
+            cols["angle_std_deg"] = _nums(a.angle_std_deg[:n])
+            cols["wobble_deg"] = _nums(a.wobble_deg[:n])
+        else:
+            for k, c in enumerate("xyz"):
+                cols[f"rotvec_{c}_deg"] = _nums(a.rotvec_deg[:n, k])
+            cols["rotvec_std_deg"] = _nums(a.rotvec_std_deg[:n, 0])
+            cols["euler_sequence"] = repeat(a.sequence, n)
+            for k in range(3):
+                cols[f"euler_{k + 1}_deg"] = _nums(a.euler_deg[:n, k])
+                cols[f"euler_{k + 1}_std_deg"] = _nums(a.euler_std_deg[:n, k])
+        blocks.append(zip(*(cols[c] for c in ANGLE_COLUMNS), strict=True))
+    write_csv_table(path, ANGLE_COLUMNS, chain.from_iterable(blocks))
 
 
 def read_angles_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import re
 import tempfile
 from pathlib import Path
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from hypothesis_profiles import examples
 from scipy.spatial.transform import Rotation
 
+import acs_cli.io.trajectory as trajectory_io
 from acs_cli.core import se3
 from acs_cli.errors import InputError
 from acs_cli.io.poses import PosesArtifact
@@ -138,6 +140,92 @@ def test_write_tum_rejects_bad_input(tmp_path: Path) -> None:
     with pytest.raises(InputError):
         write_tum(tmp_path / "x.txt", [0.0], bad)
     assert not (tmp_path / "x.txt").exists()
+
+
+def _tum_rows(t: np.ndarray, T: np.ndarray, stamps: list[str] | None = None) -> str:
+    """The TUM rows as numpy's savetxt formats them (write_tum's former writer), a row at a
+    time: ``%.9f`` (or the given stamps), then ``%.15g`` x 7."""
+    q = se3.quat_xyzw_from_matrix(T[:, :3, :3])
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack([T[:, :3, 3], q]), fmt=["%.15g"] * 7)
+    rows = buf.getvalue().splitlines(keepends=True)
+    stamps = [f"{v:.9f}" for v in t] if stamps is None else stamps
+    return "".join(f"{a} {b}" for a, b in zip(stamps, rows, strict=True))
+
+
+def test_write_tum_rows_are_savetxt_rows(
+    tmp_path: Path, rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rows formatted a block at a time are numpy's savetxt rows, digit for digit, across
+    the blocks' seams, with times from seconds or from nanoseconds, under a note."""
+    monkeypatch.setattr(trajectory_io, "_TUM_BLOCK", 3)
+    n = 8
+    T = random_poses(rng, n)
+    T[0, :3, :3] = np.eye(3)  # qx = -0.0 or 0
+    T[1, :3, 3] = [-0.0, 1e-300, 123456789012345.7]  # signed zero, exponents, 15 digits
+    T[2, :3, 3] = [1e16, -2.5e-5, 1.0 / 3.0]
+    t = 1.7e9 + np.cumsum(rng.uniform(0.01, 0.1, n))
+    path = tmp_path / "a.tum"
+    write_tum(path, t, T)
+    assert path.read_text() == "# timestamp tx ty tz qx qy qz qw\n" + _tum_rows(t, T)
+    ns = np.array([-1_500_000_000, 0, 7, 10**9, 1_700_000_000_123_456_789, *range(11, 14)])
+    stamps = ["-1.500000000", "0.000000000", "0.000000007", "1.000000000"]
+    stamps += ["1700000000.123456789", "0.000000011", "0.000000012", "0.000000013"]
+    write_tum(path, ns / 1e9, T, timestamps_ns=ns, note="times are frame numbers")
+    expected = "# timestamp tx ty tz qx qy qz qw\n# times are frame numbers\n"
+    assert path.read_text() == expected + _tum_rows(t, T, stamps)
+
+
+@pytest.mark.parametrize(
+    ("stamp", "expected"),
+    [
+        ("1_0", 10.0),  # float reads it, numpy's text reader does not: read as float reads it
+        ("\u0661\u0662", 12.0),  # Arabic-Indic digits, as float reads them
+    ],
+)
+def test_tum_tokens_only_float_reads(tmp_path: Path, stamp: str, expected: float) -> None:
+    path = tmp_path / "a.tum"
+    path.write_text(f"{stamp} 1 2 3 0 0 0 1\n99 1 2 3 0 0 0 1\n", encoding="utf-8")
+    traj = read_trajectory(path)
+    assert traj.timestamps[0] == expected and traj.timestamps[1] == 99.0
+    assert traj.T_world_cam[1, 0, 3] == 1.0
+
+
+def test_tum_carriage_return_inside_a_line(tmp_path: Path) -> None:
+    """A bare \\r splits numpy's text reader's rows but not str.split's tokens: one pose."""
+    path = tmp_path / "a.tum"
+    path.write_bytes(b"1 0 0\r0 0 0 0 1\n")
+    assert len(read_trajectory(path, "tum")) == 1
+
+
+def _nanoseconds_one_by_one(tokens: list[str]) -> np.ndarray | None:
+    """The nanoseconds of plain decimal seconds, a token at a time (the former reader)."""
+    if not all(re.match(r"^\d+(?:\.\d{0,9})?$", tok) for tok in tokens):
+        return None
+    out = []
+    for tok in tokens:
+        whole, _, frac = tok.partition(".")
+        out.append(int(whole) * 10**9 + int((frac + "000000000")[:9]))
+    return None if max(out) >= 2**63 else np.array(out, dtype=np.int64)
+
+
+@pytest.mark.parametrize(
+    "tokens",
+    [
+        ["0.000000000", "0.033333333", "1700000000.123456789"],  # as write_tum writes them
+        ["1", "1.5", "2.", "3.123456789", "12.25"],  # 0 to 9 decimals
+        ["1.0", "1.5e9"],  # not plain
+        ["1.1234567891"],  # 10 decimals
+        ["9223372036.854775807", "9223372036.854775808"],  # past int64
+        ["9300000000.000000000"],
+    ],
+)
+def test_exact_nanoseconds(tokens: list[str]) -> None:
+    got = trajectory_io._exact_nanoseconds(tokens)
+    want = _nanoseconds_one_by_one(tokens)
+    assert (got is None) == (want is None)
+    if want is not None:
+        assert got is not None and got.dtype == np.int64 and np.array_equal(got, want)
 
 
 @settings(max_examples=examples(50), suppress_health_check=[HealthCheck.too_slow])

@@ -113,6 +113,20 @@ def test_ball_angles_are_the_articulation_in_the_sequence_asked(rng: np.random.G
     assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio
 
 
+def test_ball_angles_without_a_noise_level(rng: np.random.Generator) -> None:
+    """sigma NaN (rig.yaml records none): the same angles, every std NaN but 0 at the
+    reference, as the derivatives times NaN gave."""
+    n, k = 50, 7
+    D = random_rotations(rng, n, 170.0)
+    D[k] = np.eye(3)
+    D[3] = se3.matrix_from_rotvec([0.0, 0.0, 0.3])  # the sequence's gimbal lock
+    known, unknown = ball_angles(D, 0.2, k, "zxz"), ball_angles(D, float("nan"), k, "zxz")
+    assert np.array_equal(unknown.rotvec_deg, known.rotvec_deg)
+    assert np.array_equal(unknown.euler_deg, known.euler_deg)
+    for std in (unknown.rotvec_std_deg, unknown.euler_std_deg):
+        assert np.all(np.isnan(np.delete(std, k, axis=0))) and std[k].tolist() == [0.0] * 3
+
+
 def test_bad_angle_requests_are_input_errors(rng: np.random.Generator) -> None:
     D = random_rotations(rng, 5, 30.0)
     with pytest.raises(InputError, match="not a direction"):
