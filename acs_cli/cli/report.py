@@ -228,7 +228,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) 
     from acs_cli.io.rig import RigArtifact
     from acs_cli.io.trajectory import read_trajectory, write_tum
     from acs_cli.io.verdict import weak_marks
-    from acs_cli.stages.rig import trajectories_from_rig
+    from acs_cli.stages.rig import check_poses_fit_rig, trajectories_from_rig
     from acs_cli.stages.trajectory import rig_angles
 
     check_euler_sequence(euler, "--euler ")  # before anything is written
@@ -251,6 +251,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) 
         files[name] = Path(path)
     trajectories = {c: read_trajectory(p) for c, p in files.items()}
     paths = trajectories_from_rig(art, trajectories)
+    check_poses_fit_rig(art, paths)  # before anything is written
     marks = weak_marks(rig_file.name, art.verdict)
     warn(marks)
     if art.bundle_adjustment:

@@ -1311,6 +1311,51 @@ def trajectories_from_rig(
     return out
 
 
+#: Poses fit a rig's calibration when each ball or hinge joint's point, as its two bodies
+#: carry it, is at most this many times the calibration's residual RMS apart (median over the
+#: instants; plus 1% of the joint's distance from the bodies' origins).
+POSES_FIT_FACTOR = 5.0
+
+
+def check_poses_fit_rig(rig: RigArtifact, paths: dict[str, tuple[np.ndarray, FloatArray]]) -> None:
+    """Refuse poses that are not in the worlds ``rig.yaml`` calibrated.
+
+    :func:`trajectories_from_rig` maps each camera's poses by the calibration's
+    ``T_ref_world``: right for the calibration's own recording, silently wrong (metres off)
+    for another session of the same rig, whose cameras' worlds differ. There the joints come
+    apart: each ball or hinge joint's point as its two bodies carry it (``paths``) is compared
+    over their common instants with the calibration's residual (:data:`POSES_FIT_FACTOR`).
+
+    Raises
+    ------
+    InputError
+        A joint's bodies put its point further apart than that.
+    """
+    for name, j in rig.joints.items():
+        p, q = j.between
+        if not j.model.has_point or p not in paths or q not in paths:
+            continue
+        (tp, Tp), (tq, Tq) = paths[p], paths[q]
+        common, ip, iq = np.intersect1d(tp, tq, return_indices=True)
+        if common.size == 0:
+            continue
+        o_p, o_q = j.position_in[p], j.position_in[q]
+        gap = np.linalg.norm(
+            se3.transform_points(Tp[ip], o_p) - se3.transform_points(Tq[iq], o_q), axis=1
+        )
+        median = float(np.median(gap))
+        reach = max(float(np.linalg.norm(o_p)), float(np.linalg.norm(o_q)))
+        if median > POSES_FIT_FACTOR * j.residual_rms + 0.01 * reach:
+            raise InputError(
+                f"joint {name}: in these poses {p} and {q} put it {median:.3g} "
+                f"{rig.length_unit} apart (median over {common.size} instants), against a "
+                f"residual of {j.residual_rms:.3g} in the calibration: the poses are not in "
+                "the worlds it calibrated (--poses takes files of the calibration's own "
+                "recording; calibrate another recording with acscal run)",
+                path=rig.source,
+            )
+
+
 def joint_residuals(est: RigEstimate, times: np.ndarray) -> list[JointResiduals]:
     """Every joint's residual per frame, one series per joint and recording: the norms of
     its residual rows (:attr:`EdgeEstimate.frame_residuals

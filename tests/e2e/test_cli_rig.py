@@ -234,6 +234,22 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
     assert np.all(np.isfinite(angles["j02"]["euler_1_deg"]))
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr
+    # --poses: the calibration's own recording maps as before; another session of the rig
+    # (here cam2's world moved by 1 m and 30 deg) does not fit its worlds and is refused
+    from acs_cli.core import se3
+    from acs_cli.io.trajectory import write_tum
+
+    cam2 = read_trajectory(recording / "cam2.tum", "tum")
+    write_tum(tmp_path / "same.tum", cam2.timestamps, cam2.T_world_cam)
+    res = acscal("trajectory", "--rig", rig_file, "--poses", f"cam2={tmp_path / 'same.tum'}",
+                 "-o", tmp_path / "t3")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    moved = se3.transforms_from_rt(se3.matrix_from_rotvec(np.radians([0.0, 30.0, 0.0])), [1, 0, 0])
+    write_tum(tmp_path / "other.tum", cam2.timestamps, moved @ cam2.T_world_cam)
+    res = acscal("trajectory", "--rig", rig_file, "--poses", f"cam2={tmp_path / 'other.tum'}",
+                 "-o", tmp_path / "t4")  # fmt: skip
+    assert res.returncode == 2 and "not in the worlds it calibrated" in res.stderr
+    assert "joint j02" in res.stderr and not (tmp_path / "t4").exists()
 
 
 def test_a_rig_of_image_folders_calibrates_intrinsics_poses_and_rig(tmp_path: Path) -> None:
