@@ -276,13 +276,18 @@ def render_report(model: ReportModel, dpi: int = 100, max_frustums: int = 25) ->
     if section("angles", "Joint angles per frame", model.angles):
         pngs["angles"] = F.angles_figure(model.angles, dpi)
         rigid = [] if model.rig is None else [j[0] for j in model.rig.joints if j[4] is None]
+        source = (
+            "acscal trajectory --rig computes angles.csv, here from the run's trajectories/ "
+            "(after a bundle adjustment, its per-frame fit where it adjusted)"
+            if model.rig is not None
+            else "acscal trajectory computes angles.csv, from the recovered trajectory"
+        )
         page.figure(
             pngs["angles"],
             "How each ball and hinge joint bent over time, its second body relative to its "
-            "first, zero at the reference instant (dotted), computed as acscal trajectory --rig "
-            "computes angles.csv, here from the run's trajectories/ (after a bundle adjustment, "
-            "its per-frame fit where it adjusted): a hinge's angle about its axis, a ball's "
-            "rotation vector; frames the joint rejected as outliers are red crosses."
+            f"first, zero at the reference instant (dotted), computed as {source}: a hinge's "
+            "angle about its axis, a ball's rotation vector; frames the joint rejected as "
+            "outliers are red crosses."
             + (f" Rigid joints ({', '.join(rigid)}) have no angle." if rigid else ""),
             "Joint angles per frame",
         )

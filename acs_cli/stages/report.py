@@ -36,7 +36,12 @@ from acs_cli.core.acs_trajectory import (
     overlap_residuals,
     recover_trajectory,
 )
-from acs_cli.core.angles import HingeAngles
+from acs_cli.core.angles import (
+    BallAngles,
+    HingeAngles,
+    articulation_from_orientations,
+    ball_angles,
+)
 from acs_cli.core.quality import largest_std
 from acs_cli.errors import AcsError, InputError
 from acs_cli.io.atomic import (
@@ -69,7 +74,12 @@ from acs_cli.report.model import (
 )
 from acs_cli.report.render import FIGURE_NAMES, render_report
 from acs_cli.stages.common import PairedTrajectories, pair_loaded
-from acs_cli.stages.trajectory import recover_from_relpose, rig_angles
+from acs_cli.stages.trajectory import (
+    DEFAULT_EULER,
+    pair_angles,
+    recover_from_relpose,
+    rig_angles,
+)
 
 __all__ = [
     "FIGURE_NAMES",
@@ -383,33 +393,48 @@ def _rig_residuals(
     return series, rejected
 
 
+def _angle_panel(
+    joint: str,
+    p: str,
+    q: str,
+    angles: HingeAngles | BallAngles,
+    times: np.ndarray,
+    rejected: np.ndarray,
+    zero: float | None,
+) -> F.AngleSeries:
+    """One joint's angles over ``times`` as a panel of the angle figure: a hinge's angle
+    about its axis, a ball's rotation vector (``q`` relative to ``p``)."""
+    labels: tuple[str, ...]
+    if isinstance(angles, HingeAngles):
+        lo, hi = float(angles.angle_deg.min()), float(angles.angle_deg.max())
+        title = (f"{joint} (hinge, {p}-{q}): {q} turning about the axis in {p} "
+                 f"(right-hand rule), {lo:.1f} to {hi:.1f} deg")  # fmt: skip
+        values, labels = angles.angle_deg[:, None], ("angle",)
+    else:
+        title = (f"{joint} (ball, {p}-{q}): {q}'s rotation relative to {p}, as a "
+                 f"rotation vector in {p}'s frame")  # fmt: skip
+        values, labels = angles.rotvec_deg, ("x", "y", "z")
+    return F.AngleSeries(title, times, values, labels, rejected, zero)
+
+
 def _rig_angles(
     rig: RigArtifact, paths: dict[str, TimedPoses], rejected: dict[str, list[float]]
 ) -> dict[str, F.AngleSeries]:
     """Each ball and hinge joint's angles over time, by joint (as ``acscal trajectory --rig``
     computes them, :func:`~acs_cli.stages.trajectory.rig_angles`, here from the run's
     trajectories), the frames it rejected marked."""
-    out: dict[str, F.AngleSeries] = {}
-    labels: tuple[str, ...]
     cams = {c: paths[c] for c in rig.cameras if c in paths}
-    for s in rig_angles(rig, cams):
-        j = rig.joints[s.joint]
-        p, q = j.between
-        a = s.angles
-        if isinstance(a, HingeAngles):
-            lo, hi = float(a.angle_deg.min()), float(a.angle_deg.max())
-            title = (f"{s.joint} (hinge, {p}-{q}): {q} turning about the axis in {p} "
-                     f"(right-hand rule), {lo:.1f} to {hi:.1f} deg")  # fmt: skip
-            values, labels = a.angle_deg[:, None], ("angle",)
-        else:
-            title = (f"{s.joint} (ball, {p}-{q}): {q}'s rotation relative to {p}, as a "
-                     f"rotation vector in {p}'s frame")  # fmt: skip
-            values, labels = a.rotvec_deg, ("x", "y", "z")
-        zero = None if s.zero is None else float(s.times[s.zero])
-        out[s.joint] = F.AngleSeries(
-            title, s.times, values, labels, listed_mask(s.times, rejected.get(s.joint)), zero
+    return {
+        s.joint: _angle_panel(
+            s.joint,
+            *rig.joints[s.joint].between,
+            s.angles,
+            s.times,
+            listed_mask(s.times, rejected.get(s.joint)),
+            None if s.zero is None else float(s.times[s.zero]),
         )
-    return out
+        for s in rig_angles(rig, cams)
+    }
 
 
 def _rig_estimates(found: _Found, rig: RigArtifact) -> list[Estimate]:
@@ -533,13 +558,17 @@ def _views(found: _Found) -> tuple[F.CameraView, F.CameraView]:
 # --------------------------------------------------------------------------- sections
 
 
-def _trajectory(found: _Found) -> RigTrajectory:
-    """The rig's trajectory: from relpose.yaml, else from an overlap joint.yaml."""
+def _trajectory(found: _Found) -> tuple[F.AngleSeries, RigTrajectory]:
+    """The rig's trajectory (from relpose.yaml, else from an overlap joint.yaml) and its
+    joint's angles over time (as ``acscal trajectory`` writes them to ``angles.csv``)."""
     if found.relpose is not None:
         pair = _pair_as_recorded(found, found.relpose)
         rec = recover_from_relpose(found.relpose, pair)
         t = rec.trajectory
-        return RigTrajectory(
+        x = pair.a.timestamps
+        a = pair_angles(rec, found.relpose, DEFAULT_EULER)
+        angles = _angle_panel("the joint", "A", "B", a, x, rec.rejected, float(x[t.reference]))
+        return angles, RigTrajectory(
             "relpose.yaml: the joint from A and from B in camera A's reference frame",
             rec.length_unit,
             t.T_r_a,
@@ -562,7 +591,11 @@ def _trajectory(found: _Found) -> RigTrajectory:
         Ta, Tb = pair.a.T_world_cam, pair.b.T_world_cam
         t = recover_trajectory(Ta, Tb, overlap_relative_pose(Ta, Tb, 0), o_a, o_b, 0)
         frames = joint.quality.frames.get("ab")
-        return RigTrajectory(
+        x, rejected = pair.a.timestamps, _rejected(frames, pair.a.timestamps)
+        D = articulation_from_orientations(t.T_r_a[:, :3, :3], t.T_r_b[:, :3, :3], 0)
+        ball = ball_angles(D, float("nan"), 0, DEFAULT_EULER)
+        angles = _angle_panel("the joint", "A", "B", ball, x, rejected, float(x[0]))
+        return angles, RigTrajectory(
             "joint.yaml (overlap): the joint from A and from B in camera A's frame at frame 0",
             joint.joint.units or "m",
             t.T_r_a,
@@ -1197,7 +1230,9 @@ def _model(found: _Found, extra_warnings: Sequence[str]) -> ReportModel:
     # out (a rig has its own, :func:`_rig_sections`)
     pair_skip = model.skip if rig is None else _no_note
     try:
-        model.trajectory = _trajectory(found)
+        pair_angle, model.trajectory = _trajectory(found)
+        if rig is None:
+            model.angles = [pair_angle]
     except AcsError as exc:
         pair_skip("trajectory", f"Trajectory skipped: {exc.one_line()}")
 

@@ -46,9 +46,11 @@ from acs_cli.stages.common import (
 from acs_cli.stages.joint import read_joint
 
 __all__ = [
+    "DEFAULT_EULER",
     "OUTPUT_NAMES",
     "TrajectoryConfig",
     "TrajectoryRun",
+    "pair_angles",
     "read_relpose",
     "recover_from_relpose",
     "rig_angles",
@@ -63,6 +65,10 @@ OUTPUT_NAMES = {
     "angles": "angles.csv",
     "artifact": "trajectory.yaml",
 }
+
+
+#: The Euler sequence of a ball joint's angles unless the user gives another.
+DEFAULT_EULER = "ZXY"
 
 
 @dataclass(frozen=True)
@@ -87,7 +93,7 @@ class TrajectoryConfig:
     format_b: str = "auto"
     pair_by: str = "auto"
     max_dt: float | None = None
-    euler: str = "ZXY"
+    euler: str = DEFAULT_EULER
 
 
 @dataclass(frozen=True)
@@ -283,7 +289,7 @@ def angles_section(angles: HingeAngles | BallAngles, rec: RecoveredTrajectory) -
 
 
 def rig_angles(
-    rig: RigArtifact, paths: dict[str, tuple[np.ndarray, FloatArray]], euler: str = "ZXY"
+    rig: RigArtifact, paths: dict[str, tuple[np.ndarray, FloatArray]], euler: str = DEFAULT_EULER
 ) -> list[JointAngleSeries]:
     """Each ball and hinge joint's angles over the instants both its bodies have a pose
     (``paths``: :func:`acs_cli.stages.rig.trajectories_from_rig`), zero at the instant

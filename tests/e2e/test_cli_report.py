@@ -30,6 +30,7 @@ FIGURES = {
     "rig_trajectory.png",
     "rig_reference.png",
     "joint_residuals.png",
+    "joint_angles.png",
     "reprojection.png",
     "corner_errors.png",
     "coverage.png",
@@ -181,9 +182,23 @@ def test_trajectory_under_unknown_scale_is_in_a_units(tmp_path: Path) -> None:
     res = acscal("report", tmp_path, "-o", report)
     assert res.returncode == 0, res.stderr
     names = {p.name for p in (tmp_path / "report_files").iterdir()}
-    assert names == {"rig_trajectory.png", "rig_reference.png", "joint_residuals.png"}
+    assert names == {
+        "rig_trajectory.png",
+        "rig_reference.png",
+        "joint_residuals.png",
+        "joint_angles.png",
+    }
     html = report.read_text(encoding="utf-8")
-    assert len(DATA_IMG.findall(html)) == 3
+    assert len(DATA_IMG.findall(html)) == 4
+    # its angle panel is angles.csv's, zero at the reference frame (issue 22, item 1)
+    from acs_cli.io.angles import read_angles_csv
+    from acs_cli.stages.report import build_report
+
+    (panel,) = build_report(tmp_path).angles
+    csv = read_angles_csv(out / "angles.csv")["joint"]
+    got = np.column_stack([csv[f"rotvec_{c}_deg"] for c in "xyz"])
+    np.testing.assert_allclose(panel.values, got, atol=1e-6)
+    assert panel.zero == pytest.approx(float(csv["time"][3]))
     assert "phi_ba" in html and "No poses with corners" in html
 
 
