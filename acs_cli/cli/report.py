@@ -113,6 +113,15 @@ def trajectory(
             "(upper case intrinsic, lower case extrinsic).",
         ),
     ] = "ZXY",
+    zero_at: Annotated[
+        float | None,
+        typer.Option(
+            "--zero-at",
+            help="The time (camera A's, or the reference camera's; seconds, or frame numbers "
+            "for trajectories without times) whose nearest frame is each joint's zero angle in "
+            "angles.csv (default: the reference instant).",
+        ),
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Recover the ACS's trajectory in one frame: camera A's at the reference instant.
@@ -137,7 +146,7 @@ def trajectory(
             raise InputError(
                 "--rig replaces --relpose, --poses-a and --poses-b: give one or the other"
             )
-        _rig_trajectory(rig, poses or [], output, euler)
+        _rig_trajectory(rig, poses or [], output, euler, zero_at)
         return
     if relpose is None or poses_a is None or poses_b is None:
         missing = [n for n, v in (("--relpose", relpose), ("--poses-a", poses_a),
@@ -153,6 +162,7 @@ def trajectory(
         pair_by=pair_by.value,
         max_dt=max_dt,
         euler=euler,
+        zero_at=zero_at,
     )
     run = run_trajectory(relpose, poses_a, poses_b, output, cfg, joint=joint)
     rec = run.estimate
@@ -221,7 +231,9 @@ def report(
     )
 
 
-def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) -> None:
+def _rig_trajectory(
+    rig_file: Path, poses: list[str], output: Path, euler: str, zero_at: float | None
+) -> None:
     """``acscal trajectory --rig``: every camera and joint of a rig in the reference frame."""
     from acs_cli.core.angles import check_euler_sequence
     from acs_cli.io.angles import write_angles_csv
@@ -252,6 +264,7 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) 
     trajectories = {c: read_trajectory(p) for c, p in files.items()}
     paths = trajectories_from_rig(art, trajectories)
     check_poses_fit_rig(art, paths)  # before anything is written
+    angles = rig_angles(art, paths, euler, zero_at)
     marks = weak_marks(rig_file.name, art.verdict)
     warn(marks)
     if art.bundle_adjustment:
@@ -268,7 +281,6 @@ def _rig_trajectory(rig_file: Path, poses: list[str], output: Path, euler: str) 
         f = output / f"{name}.tum"
         write_tum(f, times, T, note="; ".join(marks) or None)
         written.append(f.name)
-    angles = rig_angles(art, paths, euler)
     if angles:
         write_angles_csv(output / "angles.csv", angles)
         written.append("angles.csv")

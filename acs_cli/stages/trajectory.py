@@ -55,6 +55,7 @@ __all__ = [
     "recover_from_relpose",
     "rig_angles",
     "run_trajectory",
+    "zero_index",
 ]
 
 #: Files ``run_trajectory`` writes into its output folder.
@@ -87,6 +88,9 @@ class TrajectoryConfig:
     euler : str
         The Euler sequence of a ball joint's angles in ``angles.csv``
         (:data:`acs_cli.core.angles.EULER_SEQUENCES`).
+    zero_at : float, optional
+        The time (camera A's clock, seconds or frame numbers as its trajectory has them) at
+        whose nearest frame the angles are zero; default: the reference instant.
     """
 
     format_a: str = "auto"
@@ -94,6 +98,7 @@ class TrajectoryConfig:
     pair_by: str = "auto"
     max_dt: float | None = None
     euler: str = DEFAULT_EULER
+    zero_at: float | None = None
 
 
 @dataclass(frozen=True)
@@ -254,24 +259,49 @@ def _check_inputs_match(
     return warnings
 
 
+def zero_index(times: np.ndarray, zero_at: float | None, default: int) -> int:
+    """The frame of ``times`` ``(n,)`` (sorted) nearest ``zero_at``, where a joint's angles
+    are zero; ``default`` when it is None.
+
+    Raises
+    ------
+    InputError
+        ``zero_at`` lies outside the frames' span by more than their median spacing.
+    """
+    if zero_at is None:
+        return default
+    t = np.asarray(times, dtype=float)
+    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    if not (np.isfinite(zero_at) and t[0] - step <= zero_at <= t[-1] + step):
+        raise InputError(
+            f"--zero-at {zero_at:g}: no frame near it (the frames run from {t[0]:g} to {t[-1]:g})"
+        )
+    return int(np.argmin(np.abs(t - zero_at)))
+
+
 def pair_angles(
-    rec: RecoveredTrajectory, relpose: RelposeArtifact, euler: str
+    rec: RecoveredTrajectory, relpose: RelposeArtifact, euler: str, zero: int | None = None
 ) -> HingeAngles | BallAngles:
-    """The joint's angles per paired frame (B relative to A since the reference instant):
-    a hinge's about its axis in A, a ball's as a rotation vector and Euler angles; stds from
-    ``relpose.yaml``'s estimated rotation noise of each camera (NaN when it has none)."""
+    """The joint's angles per paired frame (B relative to A since frame ``zero``, by default
+    the reference instant): a hinge's about its axis in A, a ball's as a rotation vector and
+    Euler angles; stds from ``relpose.yaml``'s estimated rotation noise of each camera (NaN
+    when it has none)."""
     traj = rec.trajectory
-    D = articulation_from_orientations(traj.T_r_a[:, :3, :3], traj.T_r_b[:, :3, :3], traj.reference)
+    k = traj.reference if zero is None else zero
+    D = articulation_from_orientations(traj.T_r_a[:, :3, :3], traj.T_r_b[:, :3, :3], k)
     noise = relpose.quality.estimated_pose_noise
     sigma = float("nan") if noise is None else float(noise.sigma_rot_deg)
     if rec.joint_type == "hinge" and rec.axis_in_a is not None:
-        return hinge_angles(D, rec.axis_in_a, sigma, traj.reference)
-    return ball_angles(D, sigma, traj.reference, euler)
+        return hinge_angles(D, rec.axis_in_a, sigma, k)
+    return ball_angles(D, sigma, k, euler)
 
 
-def angles_section(angles: HingeAngles | BallAngles, rec: RecoveredTrajectory) -> dict[str, Any]:
-    """``trajectory.yaml``'s ``angles``: what ``angles.csv`` holds and its zero."""
-    pair, k = rec.pair, rec.trajectory.reference
+def angles_section(
+    angles: HingeAngles | BallAngles, rec: RecoveredTrajectory, zero: int
+) -> dict[str, Any]:
+    """``trajectory.yaml``'s ``angles``: what ``angles.csv`` holds and its zero (frame
+    ``zero``)."""
+    pair, k = rec.pair, zero
     body: dict[str, Any] = {
         "file": OUTPUT_NAMES["angles"],
         "joint_type": rec.joint_type if isinstance(angles, HingeAngles) else "ball",
@@ -289,11 +319,15 @@ def angles_section(angles: HingeAngles | BallAngles, rec: RecoveredTrajectory) -
 
 
 def rig_angles(
-    rig: RigArtifact, paths: dict[str, tuple[np.ndarray, FloatArray]], euler: str = DEFAULT_EULER
+    rig: RigArtifact,
+    paths: dict[str, tuple[np.ndarray, FloatArray]],
+    euler: str = DEFAULT_EULER,
+    zero_at: float | None = None,
 ) -> list[JointAngleSeries]:
     """Each ball and hinge joint's angles over the instants both its bodies have a pose
     (``paths``: :func:`acs_cli.stages.rig.trajectories_from_rig`), zero at the instant
-    nearest the reference camera's reference frame. A hinge's std comes from its own
+    nearest ``zero_at`` (:func:`zero_index`; default: the reference camera's reference
+    frame). A hinge's std comes from its own
     off-axis wobble (on a true hinge the wobble is the relative rotation noise across the
     axis, which the angle carries along it: ``std^2 = mean(wobble^2) / 2``); a ball joint's
     std is left empty, rig.yaml recording no pose noise of its bodies."""
@@ -312,7 +346,7 @@ def rig_angles(
             if ref_times is None
             else ref_times[min(rig.reference_frame, ref_times.size - 1)]
         )
-        k = int(np.argmin(np.abs(common - t0)))
+        k = zero_index(common, zero_at, int(np.argmin(np.abs(common - t0))))
         D = articulation_from_orientations(Tp[ip, :3, :3], Tq[iq, :3, :3], k)
         angles: HingeAngles | BallAngles
         if j.type == "hinge" and p in j.axis_in:
@@ -371,6 +405,7 @@ def run_trajectory(
         warnings.append(f"{n_rej} frame(s) were rejected as outliers by relpose (marked)")
     marks = weak_marks(relpose.name, art.verdict)
     warnings += marks
+    zero = zero_index(pair.a.timestamps, cfg.zero_at, traj.reference)  # before any write
 
     for key, times, T in (
         ("cam_a", pair.a, traj.T_r_a),
@@ -381,8 +416,10 @@ def run_trajectory(
         note = "; ".join(notes) or None
         write_tum(outputs[key], times.timestamps, T, timestamps_ns=times.timestamps_ns, note=note)
 
-    angles = pair_angles(rec, art, cfg.euler)
-    write_angles_csv(outputs["angles"], [JointAngleSeries("joint", pair.a.timestamps, angles)])
+    angles = pair_angles(rec, art, cfg.euler, zero)
+    write_angles_csv(
+        outputs["angles"], [JointAngleSeries("joint", pair.a.timestamps, angles, zero)]
+    )
     d = traj.consistency
     used = ~rec.rejected if (~rec.rejected).any() else np.ones_like(rec.rejected)
     body: dict[str, Any] = {
@@ -405,7 +442,7 @@ def run_trajectory(
             "position_in_b": rec.position_in_b.tolist(),
         },
         "outputs": {key: name for key, name in OUTPUT_NAMES.items() if key != "artifact"},
-        "angles": angles_section(angles, rec),
+        "angles": angles_section(angles, rec, zero),
         "consistency": {
             "rms": float(np.sqrt(np.mean(d[used] ** 2))),
             "median": float(np.median(d[used])),

@@ -106,3 +106,30 @@ def test_an_unknown_euler_sequence_exits_2_and_writes_nothing(
     )
     assert res.returncode == 2 and "is not an Euler sequence" in res.stderr, res.stderr
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_angles_zero_where_the_user_says(ball, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Issue 22, item 1: zero at the reference instant unless the user gives another zero
+    (``--zero-at``: the frame nearest that time); a time outside the recording exits 2 and
+    writes nothing."""
+    rec, a, b, rel = ball
+    out = tmp_path / "traj"
+    at = float(rec.timestamps[40]) + 0.004  # nearest frame 40 (30 fps)
+    res = acscal("trajectory", "--relpose", rel, "--poses-a", a, "--poses-b", b, "-o", out,
+                 "--zero-at", str(at))  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    got = read_angles_csv(out / "angles.csv")["joint"]
+    zero = yaml.safe_load((out / "trajectory.yaml").read_text())["angles"]["zero"]
+    assert zero["index"] == 40 and zero["timestamp_a"] == pytest.approx(rec.timestamps[40])
+    rv = np.stack([got[f"rotvec_{c}_deg"] for c in "xyz"], axis=1)
+    assert np.all(rv[40] == 0.0) and np.abs(rv[0]).max() > 1.0
+    D = articulation_from_orientations(rec.T_W_c["a"][:, :3, :3], rec.T_W_c["b"][:, :3, :3], 40)
+    from scipy.spatial.transform import Rotation
+
+    truth = Rotation.from_matrix(D).as_rotvec(degrees=True)
+    assert np.abs(rv - truth).max() < 6 * 2 * SIGMA_ROT_DEG * 3
+    bad = tmp_path / "bad"
+    res = acscal("trajectory", "--relpose", rel, "--poses-a", a, "--poses-b", b, "-o", bad,
+                 "--zero-at", "1e6")  # fmt: skip
+    assert res.returncode == 2 and "--zero-at" in res.stderr, res.stderr
+    assert not bad.exists() or not any(bad.iterdir())

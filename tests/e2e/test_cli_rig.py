@@ -234,6 +234,18 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
     assert np.all(np.isfinite(angles["j02"]["euler_1_deg"]))
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr
+    # --zero-at: every joint's angles zero at the frame nearest that time
+    t10 = float(hinge["time"][10])
+    res = acscal("trajectory", "--rig", rig_file, "--zero-at", str(t10), "-o", tmp_path / "z")
+    assert res.returncode == 0, res.stderr
+    moved = read_angles_csv(tmp_path / "z" / "angles.csv")
+    assert moved["j23"]["angle_deg"][10] == 0.0
+    # a twist from another zero is the difference of the twists up to the off-axis wobble's
+    # second order (0.3 deg of noise here: about 0.01 deg)
+    np.testing.assert_allclose(
+        moved["j23"]["angle_deg"], hinge["angle_deg"] - hinge["angle_deg"][10], atol=0.05
+    )
+    assert np.all(np.stack([moved["j02"][f"rotvec_{c}_deg"] for c in "xyz"])[:, 10] == 0.0)
     # --poses: the calibration's own recording maps as before; another session of the rig
     # (here cam2's world moved by 1 m and 30 deg) does not fit its worlds and is refused
     from acs_cli.core import se3
