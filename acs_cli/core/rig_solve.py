@@ -406,6 +406,10 @@ class CameraEstimate:
     #: estimated (a rig of unknown scale), with its std; None elsewhere
     units_per_metre: float | None = None
     units_per_metre_std: float | None = None
+    #: its poses' rotation noise per axis (deg) as the solve fitted it from the rotation rows
+    #: of its joints (a hinge's axis, a rigid pair's rotation); NaN for a body in ball joints
+    #: only
+    sigma_rot_deg: float = float("nan")
 
     @property
     def rotation_std_deg(self) -> FloatArray:
@@ -600,6 +604,9 @@ class _State:
     frame_w: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     frame_A: FloatArray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     frame_l: FloatArray = field(default_factory=lambda: np.zeros(0))
+    # per camera: its poses' rotation noise per axis (rad) where rotation rows tell it (a
+    # hinge's axis, a rigid pair's rotation); NaN elsewhere
+    sigma_rot: dict[str, float] = field(default_factory=dict)
 
     def frames_of(self, c: str) -> np.ndarray:
         """``(n,)`` bool: the instants where camera ``c`` is on an edge."""
@@ -1084,6 +1091,9 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
     G = _all_poses(st, x)
     noise: dict[str, dict[str, float]] = {}
     cam_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
+    # what rotation rows alone tell (a ball's point fit trades rotation noise for
+    # translation noise along the lever arms: too loose to report)
+    told_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
     cam_trans: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
     share = n_params / max(sum(int(m.sum()) for m in st.mask.values()), 1)
     for j in st.topo.joints:
@@ -1117,6 +1127,7 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
             d["sigma_rot_deg"] = float(np.degrees(np.sqrt(v / 2.0)))
             for c in (p, q):
                 cam_rot[c].append(v / 2.0)
+                told_rot[c].append(v / 2.0)
         if "trans" in b:
             v = max(
                 float(np.mean(np.sum(b["trans"][m] ** 2, axis=1))) / 3.0,
@@ -1134,6 +1145,9 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
         # translation noise of the measured pose is in the camera's own units
         s = float(scales[st.widx[c][st.ref_frame]])
         st.w_delta[c] = np.array([1 / np.sqrt(vr)] * 3 + [s / np.sqrt(vt)] * 3)
+    st.sigma_rot = {
+        c: float(np.sqrt(np.mean(v))) if v else float("nan") for c, v in told_rot.items()
+    }
     return noise
 
 
@@ -1854,6 +1868,7 @@ def _assemble(
             tied,
             upm,
             upm_std,
+            float(np.degrees(st.sigma_rot.get(c, np.nan))),
         )
     worlds: list[WorldEstimate] = []
     for w in range(wg.root.size):

@@ -16,6 +16,9 @@ Keys (besides the header of :func:`acs_cli.io.artifacts.make_header`)::
         T_ref_world: 4x4                # the camera's trajectory world (x scale) -> ref frame
         time_offset_s, time_offset_s_std   # with estimate_time_offset: this camera's clock
                                         # minus the reference camera's, seconds
+        sigma_rotation_deg: float       # its poses' rotation noise per axis, fitted from its
+                                        # joints (its ball joints' angle std); absent where
+                                        # they do not tell it
         pose_only:                      # a body without corners in the bundle adjustment
           frames: int                   # (a robot's flange, a mocap segment, an INS)
           sigma_rotation_deg: float     # fitted noise of its measured poses, per axis
@@ -208,6 +211,9 @@ class RigCameraResult:
     invert: bool = False
     #: a body without corners in the rig's bundle adjustment (None: a camera, or no bundle)
     pose_only: PoseOnlySection | None = None
+    #: its poses' rotation noise per axis (deg) as the rig's solve fitted it from its joints
+    #: (the std of the angles of its ball joints); None where they do not tell it
+    sigma_rotation_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -433,6 +439,8 @@ class RigArtifact(YamlArtifact):
                 cams[c.name]["time_offset_s_std"] = c.time_offset_s_std
             if c.pose_only is not None:
                 cams[c.name]["pose_only"] = c.pose_only.to_plain()
+            if c.sigma_rotation_deg is not None:
+                cams[c.name]["sigma_rotation_deg"] = c.sigma_rotation_deg
         joints = {}
         for j in self.joints.values():
             d: dict[str, Any] = {"type": j.type, "between": list(j.between)}
@@ -584,6 +592,9 @@ class RigArtifact(YamlArtifact):
                 pose_only=None
                 if c.get("pose_only") is None
                 else PoseOnlySection.parse(c["pose_only"], f"{k}.pose_only", p),
+                sigma_rotation_deg=optional_number(
+                    c.get("sigma_rotation_deg"), f"{k}.sigma_rotation_deg", p, non_negative=True
+                ),
             )
         reference = str(ref["camera"])
         if reference not in cameras:

@@ -396,6 +396,7 @@ def rig_artifact(
             if e.T_cam_ref is None
             else T_ref_refworld @ e.world_to_reference_world,
             pose_only=_pose_only(e) if isinstance(e, PoseBodyEstimate) else None,
+            sigma_rotation_deg=float(e.sigma_rot_deg) if np.isfinite(e.sigma_rot_deg) else None,
         )
         for c, e in est.cameras.items()
     }

@@ -330,7 +330,9 @@ def rig_angles(
     frame). A hinge's std comes from its own
     off-axis wobble (on a true hinge the wobble is the relative rotation noise across the
     axis, which the angle carries along it: ``std^2 = mean(wobble^2) / 2``); a ball joint's
-    std is left empty, rig.yaml recording no pose noise of its bodies."""
+    from its two bodies' rotation noise as the rig's solve fitted it (``rig.yaml``'s
+    ``cameras.<c>.sigma_rotation_deg``), empty where a body has none (its joints do not tell
+    it, or a ``rig.yaml`` older than it)."""
     series: list[JointAngleSeries] = []
     ref_times = paths[rig.reference_camera][0] if rig.reference_camera in paths else None
     for name, j in rig.joints.items():
@@ -356,7 +358,12 @@ def rig_angles(
             std = np.where(others, 2.0 * sigma, 0.0)
             angles = HingeAngles(h.angle_deg, std, h.wobble_deg)
         else:
-            angles = ball_angles(D, float("nan"), k, euler)
+            # each body's rotation noise: D carries both bodies' (module acs_cli.core.angles)
+            sp, sq = (rig.cameras[c].sigma_rotation_deg for c in (p, q))
+            sigma = (
+                float("nan") if sp is None or sq is None else float(np.hypot(sp, sq) / np.sqrt(2))
+            )
+            angles = ball_angles(D, sigma, k, euler)
         series.append(JointAngleSeries(name, common, angles, k))
     return series
 

@@ -232,6 +232,15 @@ def test_trajectory_of_a_rig_from_rig_yaml(recording: Path, tmp_path: Path) -> N
     assert wobble is not None and 0.0 < wobble < 3.0
     assert art.joints["j02"].wobble_rms_deg is None
     assert np.all(np.isfinite(angles["j02"]["euler_1_deg"]))
+    # a ball joint's std (issue 22, item 1): from its bodies' rotation noise as the solve
+    # fitted it (cam0's from the rigid r01, cam2's from the hinge j23; the recording's is
+    # 0.3 deg per axis and pose), 2 sigma on each rotation-vector component, 0 at the zero
+    s0, s2 = (art.cameras[c].sigma_rotation_deg for c in ("cam0", "cam2"))
+    assert s0 is not None and s2 is not None and 0.2 < s0 < 0.45 and 0.2 < s2 < 0.45
+    std = angles["j02"]["rotvec_std_deg"]
+    assert np.sum(std == 0.0) == 1
+    np.testing.assert_allclose(std[std > 0], 2 * np.hypot(s0, s2) / np.sqrt(2), rtol=1e-5)
+    assert np.all(np.isfinite(angles["j02"]["euler_1_std_deg"]))
     bad = acscal("trajectory", "--rig", rig_file, "--poses-a", "x.tum", "-o", tmp_path / "t2")
     assert bad.returncode == 2 and "--rig replaces" in bad.stderr
     # --zero-at: every joint's angles zero at the frame nearest that time
