@@ -667,6 +667,9 @@ FULL_SEARCH_SPACING_PX = 20.0
 FULL_SEARCH_PROBE = 8
 #: Frames of a full search read (decoded) at a time: memory stays bounded.
 FULL_SEARCH_CHUNK = 16
+#: A frame's full search is cached under its key with this suffix (found or not), so that a
+#: rerun does not search it again.
+FULL_SEARCH_KEY = "+full"
 
 
 def _detect_full(gray: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
@@ -715,22 +718,41 @@ def _full_search_pass(
     ]
     if not failed or (spacings and float(np.median(spacings)) >= FULL_SEARCH_SPACING_PX):
         return fd
-    first = failed
+    store = read_detections(fd.cache) if fd.keys else {}
+    full = {i: fd.keys[i] + FULL_SEARCH_KEY for i in failed} if fd.keys else {}
+    got = {i: store[full[i]] for i in failed if full.get(i) in store}  # searched before
+
+    def search(todo: Sequence[int]) -> None:
+        new = [i for i in todo if i not in got]
+        if new:
+            got.update(_full_search(fd, new, cols, rows, workers))
+
     if not spacings:  # nothing found: a few probes before the whole input
         picks = np.unique(np.round(np.linspace(0, len(failed) - 1, FULL_SEARCH_PROBE)))
-        first = [failed[int(k)] for k in picks]
-    got = _full_search(fd, first, cols, rows, workers)
-    if not any(d.found for d in got.values()):
-        return fd
-    rest = [i for i in failed if i not in got]
-    if rest:
-        got.update(_full_search(fd, rest, cols, rows, workers))
-    dets = [got.get(i, d) for i, d in enumerate(fd.detections)]
-    if fd.keys:
-        store = read_detections(fd.cache)
-        store.update({fd.keys[i]: d for i, d in got.items()})
+        search([failed[int(k)] for k in picks])
+        if not any(d.found for d in got.values()):
+            _cache_full_search(fd, store, full, got)
+            return fd
+    search(failed)
+    _cache_full_search(fd, store, full, got)
+    return dataclasses.replace(fd, detections=[got.get(i, d) for i, d in enumerate(fd.detections)])
+
+
+def _cache_full_search(
+    fd: FolderDetections,
+    store: dict[str, Detection],
+    full: dict[int, str],
+    got: dict[int, Detection],
+) -> None:
+    """Each full search's result under its frame's full-search key, and a board it found
+    under the frame's own key too (the detection the stages use)."""
+    if not fd.keys:
+        return
+    new = {full[i]: d for i, d in got.items() if full[i] not in store}
+    new.update({fd.keys[i]: d for i, d in got.items() if d.found})
+    if new:
+        store.update(new)
         write_detections(fd.cache, store)
-    return dataclasses.replace(fd, detections=dets)
 
 
 def _common_size(images: Sequence[ImageRef], dets: Sequence[Detection]) -> tuple[int, int]:

@@ -217,7 +217,7 @@ def small_board_image(shift: int = 0) -> np.ndarray:
 
 
 def test_detect_folder_searches_the_failed_frames_again_when_boards_are_small(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Issue 21, item 6: boards of squares under about 16 px escape the quick check (the
     detector alone finds none here); the folder's failed frames are searched at full
@@ -235,8 +235,18 @@ def test_detect_folder_searches_the_failed_frames_again_when_boards_are_small(
     assert [d.found for d in first.detections] == [True, True, True, False]
     c = first.detections[1].corners
     assert c is not None and abs(c[0, 0] - (300 + 7 + 12 - 0.5)) < 0.1  # the first corner
+    import acs_cli.stages.intrinsics as stage
+
+    searched: list[int] = []
+    real = stage._full_search
+
+    def spy(fd: Any, todo: Any, cols: int, rows: int, workers: Any) -> Any:
+        searched.extend(todo)
+        return real(fd, todo, cols, rows, workers)
+
+    monkeypatch.setattr(stage, "_full_search", spy)
     second = detect_folder(folder, 24, 17, cache, workers=1)
-    assert second.cached == 4
+    assert second.cached == 4 and searched == []  # the blank frame's search is cached too
     assert [d.found for d in second.detections] == [True, True, True, False]
 
 
@@ -271,3 +281,6 @@ def test_the_full_search_runs_only_for_small_boards_or_none(
     assert not any(d.found for d in got.detections)
     assert len(calls) == 1 and len(calls[0]) == stage.FULL_SEARCH_PROBE
     assert calls[0][0] == 0 and calls[0][-1] == 11
+    # a rerun reads what the full search found (nothing) from the cache: no search
+    detect_folder(blank, 9, 6, tmp_path / "blank.npz", workers=1)
+    assert len(calls) == 1
