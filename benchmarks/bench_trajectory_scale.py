@@ -63,12 +63,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from acs_cli.core import se3
 from acs_cli.io.trajectory import read_trajectory, write_tum
 from sample_data_gen.rig_sim import RigRecording, rig_recording
-from sample_data_gen.writer import RIG_NOISE
+from sample_data_gen.writer import RIG_NOISE, rig_config_text
 
 HERE = Path(__file__).resolve().parents[1]
 FPS = 30.0
@@ -118,22 +117,8 @@ def write_recording(rec: RigRecording, folder: Path, n: int) -> None:
 def write_config(rec: RigRecording, folder: Path) -> Path:
     """``config.yaml`` of the recording in ``folder``, as ``python -m sample_data_gen OUT
     --rig`` writes it."""
-    topo = rec.topology
-    cameras: dict[str, dict[str, str]] = {}
-    for c in topo.cameras:
-        cameras[c] = {"poses": f"{c}.tum"}
-        if rec.unknown_scale[c]:
-            cameras[c]["scale"] = "unknown"
-    doc = {
-        "schema": "acscal/run-config",
-        "schema_version": 2,
-        "output": "out/",
-        "reference": {"camera": topo.reference, "frame": 0},
-        "cameras": cameras,
-        "joints": {j.name: {"between": list(j.between), "type": j.type} for j in topo.joints},
-    }
     path = folder / "config.yaml"
-    path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    path.write_text(rig_config_text(rec), encoding="utf-8")
     return path
 
 

@@ -50,6 +50,7 @@ __all__ = [
     "SAMPLE_MU_B",
     "SCENARIOS",
     "make_sequence",
+    "rig_config_text",
     "rig_for_seed",
     "rig_truth_body",
     "write_rig_recording",
@@ -342,7 +343,7 @@ def rig_truth_body(
     }
 
 
-def _rig_config_text(rec: RigRecording) -> str:
+def rig_config_text(rec: RigRecording) -> str:
     """``config.yaml``: the run config (version 2) of the written rig, paths relative."""
     topo = rec.topology
     cameras: dict[str, Any] = {}
@@ -451,7 +452,7 @@ def write_rig_recording(
     )
     body = rig_truth_body(rec, seed=seed, rot_noise_deg=rot_noise_deg, trans_noise=trans_noise)
     write_yaml_artifact(out / "truth.yaml", header, body)
-    atomic_write_text(out / "config.yaml", _rig_config_text(rec))
+    atomic_write_text(out / "config.yaml", rig_config_text(rec))
     return rec
 
 
