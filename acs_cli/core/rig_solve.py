@@ -407,8 +407,8 @@ class CameraEstimate:
     units_per_metre: float | None = None
     units_per_metre_std: float | None = None
     #: its poses' rotation noise per axis (deg) as the solve fitted it from the rotation rows
-    #: of its joints (a hinge's axis, a rigid pair's rotation); NaN for a body in ball joints
-    #: only
+    #: of its joints (a hinge's axis, a rigid pair's rotation), else from its ball joints'
+    #: point fits (as the two-camera commands do); NaN where those hit the noise floor
     sigma_rot_deg: float = float("nan")
 
     @property
@@ -604,8 +604,9 @@ class _State:
     frame_w: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     frame_A: FloatArray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     frame_l: FloatArray = field(default_factory=lambda: np.zeros(0))
-    # per camera: its poses' rotation noise per axis (rad) where rotation rows tell it (a
-    # hinge's axis, a rigid pair's rotation); NaN elsewhere
+    # per camera: its poses' rotation noise per axis (rad) from the rotation rows of its
+    # joints (a hinge's axis, a rigid pair's rotation), else its ball joints' point fits
+    # above the noise floor; NaN elsewhere
     sigma_rot: dict[str, float] = field(default_factory=dict)
 
     def frames_of(self, c: str) -> np.ndarray:
@@ -1091,8 +1092,8 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
     G = _all_poses(st, x)
     noise: dict[str, dict[str, float]] = {}
     cam_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
-    # what rotation rows alone tell (a ball's point fit trades rotation noise for
-    # translation noise along the lever arms: too loose to report)
+    # what rotation rows tell (a ball's point fit trades rotation noise for translation
+    # noise along the lever arms: used only where nothing else tells it)
     told_rot: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
     cam_trans: dict[str, list[float]] = {c: [] for c in st.topo.cameras}
     share = n_params / max(sum(int(m.sum()) for m in st.mask.values()), 1)
@@ -1145,8 +1146,13 @@ def _refit_weights(st: _State, x: FloatArray, n_params: int) -> dict[str, dict[s
         # translation noise of the measured pose is in the camera's own units
         s = float(scales[st.widx[c][st.ref_frame]])
         st.w_delta[c] = np.array([1 / np.sqrt(vr)] * 3 + [s / np.sqrt(vt)] * 3)
+    # a camera in ball joints only: its balls' point fits, as the two-camera commands report
+    # them, where above the noise floor (at the floor they tell nothing)
     st.sigma_rot = {
-        c: float(np.sqrt(np.mean(v))) if v else float("nan") for c, v in told_rot.items()
+        c: float(np.sqrt(np.mean(told_rot[c] or cam_rot[c])))
+        if told_rot[c] or (cam_rot[c] and min(cam_rot[c]) > 1.01 * NOISE_FLOOR_ROT**2)
+        else float("nan")
+        for c in st.topo.cameras
     }
     return noise
 

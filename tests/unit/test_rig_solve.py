@@ -286,3 +286,16 @@ def test_a_rigid_mount_whose_clocks_are_a_frame_apart_is_told_so(
     msg = err.value.message
     assert "clocks are offset by 1 frame" in msg and "cam1's 1 frame later" in msg, msg
     assert "a ball or a hinge" not in msg
+
+
+def test_each_camera_reports_its_rotation_noise(rng: np.random.Generator) -> None:
+    """Issue 22, item 1 (a ball joint's angle std): each camera's rotation noise from its
+    joints' rotation rows (a rigid mount, a hinge's axis), else from its ball joints' point
+    fits, as the two-camera commands report it; 0.3 deg here."""
+    joints = (("r01", ("c0", "c1"), "rigid"), ("b12", ("c1", "c2"), "ball"))
+    rec = rig_recording(rng, 120, joints=joints, reference="c0", sigma_rot_deg=0.3,
+                        sigma_trans=0.005, max_articulation_deg=60.0)  # fmt: skip
+    est = estimate_rig(rec.topology, _tracks(rec))
+    sig = {c: e.sigma_rot_deg for c, e in est.cameras.items()}
+    assert 0.25 < sig["c0"] < 0.35 and sig["c0"] == sig["c1"]  # the rigid rows
+    assert 0.15 < sig["c2"] < 0.5  # c2 is in the ball only
