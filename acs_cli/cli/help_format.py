@@ -13,9 +13,12 @@ This module imports no rich and nothing heavy: ``acscal --help`` stays fast.
 from __future__ import annotations
 
 import inspect
+from typing import Any
 
 from typer import _click
 from typer.core import TyperCommand, TyperGroup, TyperOption
+
+from acs_cli.cli.coercion import install
 
 __all__ = ["WORKFLOW", "AcsCommand", "AcsGroup", "keep_examples"]
 
@@ -57,8 +60,29 @@ def keep_examples(text: str) -> str:
     )
 
 
+def _help_false(option: TyperOption | None) -> TyperOption | None:
+    """A ``--help`` option with the default False rather than None.
+
+    Typer coerces an option's value through pydantic unless it is already a bool; a
+    ``--help`` left at None made ``acscal joint --help`` import pydantic (0.1-0.4 s) just to
+    read the group's options, and every command build a pydantic adapter for it.
+    """
+    if option is not None and option.default is None:
+        option.default = False
+    return option
+
+
 class AcsCommand(TyperCommand):
-    """A Typer command whose examples (indented paragraphs) are printed as written."""
+    """A Typer command whose examples (indented paragraphs) are printed as written, and
+    whose plain options are coerced without pydantic (:mod:`acs_cli.cli.coercion`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        install(self.params)
+
+    def get_help_option(self, ctx: _click.Context) -> TyperOption | None:
+        """``--help``, with the default False (:func:`_help_false`)."""
+        return _help_false(super().get_help_option(ctx))
 
     def format_help_text(self, ctx: _click.Context, formatter: _click.HelpFormatter) -> None:
         """Write the command's help text, examples kept on their own lines."""
@@ -79,16 +103,8 @@ class AcsGroup(TyperGroup):
         return sorted(names, key=lambda n: (rank.get(n, len(WORKFLOW)), names.index(n)))
 
     def get_help_option(self, ctx: _click.Context) -> TyperOption | None:
-        """``--help``, with the default False rather than None.
-
-        Typer coerces an option's value through pydantic unless it is already a bool; a
-        ``--help`` left at None made ``acscal joint --help`` import pydantic (0.1-0.4 s)
-        just to read the group's options.
-        """
-        option = super().get_help_option(ctx)
-        if option is not None and option.default is None:
-            option.default = False
-        return option
+        """``--help``, with the default False (:func:`_help_false`)."""
+        return _help_false(super().get_help_option(ctx))
 
     def format_commands(self, ctx: _click.Context, formatter: _click.HelpFormatter) -> None:
         """List each command with its first sentence, wrapped, never cut short."""
