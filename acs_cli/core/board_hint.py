@@ -14,6 +14,7 @@ a larger board out is it searched for.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import cv2
@@ -26,6 +27,7 @@ __all__ = [
     "HINT_WIDTH",
     "board_extension_scores",
     "board_size_hint",
+    "extension_score",
     "larger_board_sizes",
     "nearby_board_sizes",
 ]
@@ -197,3 +199,20 @@ def board_extension_scores(
         # about the side's own mean: an odd number of squares of a plain margin scores 0
         out[k] = float(np.mean((vals[good] - np.mean(vals[good])) * par)) / contrast
     return out
+
+
+def extension_score(
+    grey: NDArray[np.uint8], corners: NDArray[np.float64], cols: int, rows: int
+) -> float:
+    """The larger-board screen's score of one image: the highest of
+    :func:`board_extension_scores` over the four sides, a side the image cannot tell
+    counting 0 (a board mostly out of view there is not in view whole), and ``inf`` when
+    no side can be told at all (no checker pattern measured: only a search can tell).
+
+    Below :data:`EXTENSION_SCREEN`, the image rules out a board larger than
+    ``cols x rows``.
+    """
+    scores = board_extension_scores(grey, corners, cols, rows)
+    if np.all(np.isnan(scores)):
+        return math.inf
+    return float(np.max(np.nan_to_num(scores, nan=0.0)))

@@ -20,7 +20,7 @@ import yaml
 
 import acs_cli
 from acs_cli.errors import InputError
-from acs_cli.io.atomic import MAX_YAML_BYTES, atomic_write_text, read_input_bytes
+from acs_cli.io.atomic import MAX_YAML_BYTES, atomic_write_text, content_sha256, read_input_bytes
 from acs_cli.io.validate import short_repr
 
 __all__ = [
@@ -39,14 +39,7 @@ __all__ = [
 #: Version of the artifact schemas this acscal writes (and the newest it reads).
 SCHEMA_VERSION = 1
 
-_CHUNK = 1 << 20
 _MISSING: Any = object()
-
-
-def _hash_file(path: Path, h: Any) -> None:
-    with open(path, "rb") as fh:
-        while chunk := fh.read(_CHUNK):
-            h.update(chunk)
 
 
 def sha256_of(path: str | Path, *, exclude: Iterable[str | Path] = ()) -> str:
@@ -82,13 +75,9 @@ def sha256_of(path: str | Path, *, exclude: Iterable[str | Path] = ()) -> str:
                         files.append((f.relative_to(p).as_posix(), f))
             h = hashlib.sha256()
             for rel, f in sorted(files):
-                inner = hashlib.sha256()
-                _hash_file(f, inner)
-                h.update(rel.encode("utf-8", "surrogateescape") + b"\0" + inner.digest())
+                h.update(rel.encode("utf-8", "surrogateescape") + b"\0" + content_sha256(f))
             return h.hexdigest()
-        h = hashlib.sha256()
-        _hash_file(p, h)
-        return h.hexdigest()
+        return content_sha256(p).hex()
     except FileNotFoundError as exc:
         raise InputError("no such file", path=p) from exc
     except OSError as exc:

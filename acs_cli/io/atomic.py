@@ -16,6 +16,7 @@ import contextlib
 import errno
 import os
 import stat
+import time
 import uuid
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -335,24 +336,62 @@ def input_size(path: str | Path, what: str, max_bytes: int) -> int:
     return st.st_size
 
 
+#: Digests of the files hashed in this process, by what identifies a file's version
+#: (:func:`content_sha256`): a stage hashes its inputs for its cache keys and again for its
+#: artifact's header.
+_DIGESTS: dict[tuple[str, int, int, int, int], bytes] = {}
+#: How long before its hashing a file must have been last modified for its digest to be
+#: remembered (:func:`content_sha256`), nanoseconds.
+SETTLED_NS = 2_000_000_000
+
+
+def content_sha256(path: str | Path) -> bytes:
+    """SHA-256 (the raw digest) of a file's bytes, read in chunks of 1 MiB; a file hashed
+    before in this process, unchanged since (same device, inode, size and modification
+    time), is not read again.
+
+    Only a file last modified more than :data:`SETTLED_NS` before it was hashed is
+    remembered: a file system stamps modification times in ticks of milliseconds, so a
+    file rewritten (same size, same inode) within a tick of its hashing could keep its
+    time, as git's "racy" index entries do.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    import hashlib
+
+    st = os.stat(path)
+    key = (os.fspath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    known = _DIGESTS.get(key)
+    if known is not None:
+        return known
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            h.update(chunk)
+    digest = h.digest()
+    if time.time_ns() - st.st_mtime_ns <= SETTLED_NS:
+        return digest
+    if len(_DIGESTS) >= 100_000:  # a bound, for a process that hashes without end
+        _DIGESTS.clear()
+    _DIGESTS[key] = digest
+    return digest
+
+
 def file_sha256(path: str | Path, what: str) -> str:
-    """SHA-256 of a file's bytes, read in chunks of 1 MiB (a video of gigabytes too).
+    """SHA-256 (hex) of a file's bytes (:func:`content_sha256`: a video of gigabytes too).
 
     Raises
     ------
     InputError
         Unreadable, naming it as ``what`` (``"image"``, ``"video"``).
     """
-    import hashlib
-
-    h = hashlib.sha256()
     try:
-        with open(path, "rb") as fh:
-            while chunk := fh.read(1 << 20):
-                h.update(chunk)
+        return content_sha256(path).hex()
     except OSError as exc:
         raise InputError(f"cannot read {what} ({exc.strerror or exc})", path=path) from exc
-    return h.hexdigest()
 
 
 def read_input_bytes(path: str | Path, what: str, max_bytes: int) -> bytes:

@@ -12,7 +12,9 @@ Arrays of the NPZ (``n`` entries, ``m`` the largest corner count):
 - ``keys`` (n,) str, ``names`` (n,) str (file name, informative);
 - ``found`` (n,) bool, ``image_size`` (n, 2) int ``[w, h]`` pixels;
 - ``n_corners`` (n,) int and ``corners`` (n, m, 2) float64 pixels (NaN-padded; all NaN
-  when not found).
+  when not found);
+- ``extension`` (n,) float64, optional (caches written before it lack it): a checkerboard's
+  larger-board screen score (:attr:`Detection.extension`), NaN where not measured.
 """
 
 from __future__ import annotations
@@ -58,12 +60,18 @@ class Detection:
         ``(width, height)`` in pixels.
     corners : ndarray, shape (cols * rows, 2) or None
         Corners row by row in pixels, None when not found.
+    extension : float or None
+        A checkerboard found: how much the board seems to go on beyond its corners found
+        (:func:`acs_cli.core.board_hint.extension_score`), measured while the image was at
+        hand, so that the check for a larger board needs not read it again; None when not
+        measured.
     """
 
     name: str
     found: bool
     image_size: tuple[int, int]
     corners: NDArray[np.float64] | None
+    extension: float | None = None
 
 
 def detection_key(sha256: str, cols: int, rows: int, detector_version: str) -> str:
@@ -109,12 +117,17 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
             sizes = np.asarray(z["image_size"], np.int64).reshape(-1, 2)
             ncorn = np.asarray(z["n_corners"], np.int64)
             corners = np.asarray(z["corners"], np.float64)
+            ext = (
+                np.asarray(z["extension"], np.float64).ravel()
+                if "extension" in z.files
+                else np.full(len(keys), np.nan)
+            )
     except Exception:  # corrupt archives raise many types (zipfile, zlib, ValueError, ...)
         return {}
     n = len(keys)
     if not (
         found.ndim == ncorn.ndim == 1
-        and len(names) == found.shape[0] == sizes.shape[0] == ncorn.shape[0] == n
+        and len(names) == found.shape[0] == sizes.shape[0] == ncorn.shape[0] == ext.shape[0] == n
     ):
         return {}
     if n and (corners.ndim != 3 or corners.shape[0] != n or corners.shape[2] != 2):
@@ -135,7 +148,8 @@ def read_detections(path: str | Path) -> dict[str, Detection]:
                 continue
             if np.nanmax(np.abs(c), initial=0.0) > MAX_MAGNITUDE:  # pixels: a corrupt entry
                 continue
-        out[key] = Detection(names[i], bool(found[i]), (w, h), c)
+        e = float(ext[i]) if found[i] and not np.isnan(ext[i]) else None
+        out[key] = Detection(names[i], bool(found[i]), (w, h), c, e)
     return out
 
 
@@ -197,6 +211,9 @@ def write_detections(path: str | Path, detections: Mapping[str, Detection]) -> N
         ),
         "n_corners": ncorn,
         "corners": corners,
+        "extension": np.array(
+            [np.nan if (e := detections[k].extension) is None else e for k in keys], np.float64
+        ),
     }
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:

@@ -8,6 +8,7 @@ folder, in parallel, reusing and incrementally updating a detections cache;
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -230,8 +231,17 @@ def _detect_image(
         det = Detection(name, dense is not None, (int(w), int(h)), dense)
         return _target_key(sha, target), det, None
     corners = detect_checkerboard(img, cols, rows)
-    det = Detection(name, corners is not None, (int(w), int(h)), corners)
+    det = Detection(
+        name, corners is not None, (int(w), int(h)), corners, _extension(img, corners, cols, rows)
+    )
     return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
+
+
+def _extension(img: np.ndarray, corners: np.ndarray | None, cols: int, rows: int) -> float | None:
+    """A board's larger-board screen score (:attr:`Detection.extension`), or None."""
+    from acs_cli.core.board_hint import extension_score
+
+    return None if corners is None else extension_score(img, corners, cols, rows)
 
 
 def _target_key(sha: str, target: MarkerTarget) -> str:
@@ -323,24 +333,27 @@ def _size_in(
 
 
 def _larger_ruled_out(
-    greys: Sequence[np.ndarray], corners: Sequence[np.ndarray | None], cols: int, rows: int
-) -> bool:
-    """Whether the images' own pixels rule out a larger board than ``cols x rows`` in every
-    one of ``greys`` (with the ``corners`` found in each): every side's continuation score
-    below :data:`acs_cli.core.board_hint.EXTENSION_SCREEN`, so no search is needed."""
-    from acs_cli.core.board_hint import EXTENSION_SCREEN, board_extension_scores
+    images: Sequence[ImageRef], detections: Sequence[Detection], cols: int, rows: int
+) -> tuple[bool, list[np.ndarray] | None]:
+    """Whether the images' own pixels rule out a board larger than ``cols x rows`` in every
+    one of ``images`` (with their ``detections``): each one's
+    :func:`acs_cli.core.board_hint.extension_score` below
+    :data:`acs_cli.core.board_hint.EXTENSION_SCREEN`, so no search is needed.
 
-    for grey, c in zip(greys, corners, strict=True):
-        if c is None:
-            return False
-        # a side the image cannot tell (NaN: mostly out of view) hides no larger board the
-        # search could find here: that board is not in view whole
-        scores = board_extension_scores(grey, c, cols, rows)
-        if np.all(np.isnan(scores)):  # no checker pattern measured at all: search
-            return False
-        if float(np.max(np.nan_to_num(scores, nan=0.0))) >= EXTENSION_SCREEN:
-            return False
-    return True
+    The scores the detection measured are used; the images are read only where one is
+    missing (a cache written before they were kept), and then returned for the search.
+    """
+    from acs_cli.core.board_hint import EXTENSION_SCREEN, extension_score
+
+    scores = [d.extension if d.found else -math.inf for d in detections]
+    greys = None
+    if any(s is None for s in scores):
+        greys = read_images(images)
+        scores = [
+            extension_score(g, d.corners, cols, rows) if d.corners is not None else math.inf
+            for g, d in zip(greys, detections, strict=True)
+        ]
+    return all(s is not None and s < EXTENSION_SCREEN for s in scores), greys
 
 
 def few_boards(
@@ -377,9 +390,13 @@ def few_boards(
     if k >= need and k >= FEW_BOARDS * n:
         with_board = [i for i, f in enumerate(found) if f]
         tried = [with_board[i] for i in _spread(len(with_board))]
-        greys = read_images([images[i] for i in tried])  # read once: the screen, the search
-        if _larger_ruled_out(greys, [fd.detections[i].corners for i in tried], cols, rows):
+        ruled_out, greys = _larger_ruled_out(
+            [images[i] for i in tried], [fd.detections[i] for i in tried], cols, rows
+        )
+        if ruled_out:
             return None
+        if greys is None:
+            greys = read_images([images[i] for i in tried])
         larger = board_size_hint(greys, larger_board_sizes(cols, rows))
         if larger is None or 2 * larger[1] < len(tried):
             return None
@@ -672,9 +689,11 @@ FULL_SEARCH_CHUNK = 16
 FULL_SEARCH_KEY = "+full"
 
 
-def _detect_full(gray: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
-    """Worker: ``detect_checkerboard`` with the full-resolution search."""
-    return detect_checkerboard(gray, cols, rows, full_search=True)
+def _detect_full(gray: np.ndarray, cols: int, rows: int) -> tuple[np.ndarray | None, float | None]:
+    """Worker: ``detect_checkerboard`` with the full-resolution search; the corners and
+    their larger-board screen score (:attr:`Detection.extension`)."""
+    corners = detect_checkerboard(gray, cols, rows, full_search=True)
+    return corners, _extension(gray, corners, cols, rows)
 
 
 def _full_search(
@@ -696,9 +715,11 @@ def _full_search(
             greys = read_images([fd.images[i] for i in chunk])
             args = (greys, [cols] * len(chunk), [rows] * len(chunk))
             got = pool.map(_detect_full, *args) if pool is not None else map(_detect_full, *args)
-            for i, corners in zip(chunk, got, strict=True):
+            for i, (corners, extension) in zip(chunk, got, strict=True):
                 old = fd.detections[i]
-                out[i] = Detection(old.name, corners is not None, old.image_size, corners)
+                out[i] = Detection(
+                    old.name, corners is not None, old.image_size, corners, extension
+                )
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)

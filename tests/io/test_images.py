@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -114,7 +115,8 @@ def test_cache_round_trip(tmp_path: Path) -> None:
     dets = {
         "a:9x6:v": Detection("a.png", True, (640, 480), corners),
         "b:9x6:v": Detection("b.png", False, (640, 480), None),
-        "c:4x3:v": Detection("c.png", True, (320, 240), corners[:12]),
+        "c:4x3:v": Detection("c.png", True, (320, 240), corners[:12], 0.125),
+        "d:4x3:v": Detection("d.png", True, (320, 240), corners[:12], float("inf")),
     }
     path = tmp_path / "out.detections.npz"
     write_detections(path, dets)
@@ -122,12 +124,58 @@ def test_cache_round_trip(tmp_path: Path) -> None:
     assert set(back) == set(dets)
     for k, d in dets.items():
         assert back[k].name == d.name and back[k].found == d.found
-        assert back[k].image_size == d.image_size
+        assert back[k].image_size == d.image_size and back[k].extension == d.extension
         if d.corners is None:
             assert back[k].corners is None
         else:
             np.testing.assert_array_equal(back[k].corners, d.corners)
     assert cache_path_for(tmp_path / "cam" / "intrinsics.yaml").name == "intrinsics.detections.npz"
+
+
+def test_a_cache_without_the_screen_scores_reads_them_as_unmeasured(tmp_path: Path) -> None:
+    """Caches written before ``extension`` was kept still read, their scores None."""
+    corners = np.arange(108, dtype=float).reshape(54, 2)
+    path = tmp_path / "old.detections.npz"
+    write_detections(path, {"a:9x6:v": Detection("a.png", True, (640, 480), corners, 0.5)})
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files if k != "extension"}
+    np.savez_compressed(path, **arrays)
+    (back,) = read_detections(path).values()
+    assert back.found and back.extension is None
+    np.testing.assert_array_equal(back.corners, corners)
+
+
+def test_the_larger_board_check_uses_the_scores_the_detection_measured(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A whole board's score is measured where the image is decoded for detection: the check
+    for a larger board reads no image then; with a part of a board (8x6 of a 9x6), the score
+    says so and the search names the whole board."""
+    from acs_cli.core.board_hint import EXTENSION_SCREEN
+    from acs_cli.stages import intrinsics as stage
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(6):
+        cv2.imwrite(str(folder / f"img{i}.png"), board_image(shift=8 * i))
+    whole = detect_folder(folder, 9, 6, tmp_path / "w.npz", workers=1)
+    assert all(d.extension is not None and d.extension < EXTENSION_SCREEN for d in whole.detections)
+    read: list[int] = []
+    real = stage.read_images
+    monkeypatch.setattr(stage, "read_images", lambda refs: read.append(len(refs)) or real(refs))
+    assert stage.few_boards(folder, whole, 9, 6, 3, part_is_error=False) is None
+    assert read == []
+    # the same detections without their scores (an older cache): the images are read
+    old = [dataclasses.replace(d, extension=None) for d in whole.detections]
+    assert stage.few_boards(folder, dataclasses.replace(whole, detections=old), 9, 6, 3,
+                            part_is_error=False) is None  # fmt: skip
+    assert read == [4]
+
+    part = detect_folder(folder, 8, 6, tmp_path / "p.npz", workers=1)
+    assert all(d.found for d in part.detections)
+    assert all(d.extension is not None and d.extension > EXTENSION_SCREEN for d in part.detections)
+    note = stage.few_boards(folder, part, 8, 6, 3, part_is_error=False)
+    assert note is not None and "9x6 board" in note
 
 
 def test_bad_cache_reads_as_empty(tmp_path: Path) -> None:

@@ -193,3 +193,32 @@ def test_read_input_bytes_refuses_what_is_not_a_bounded_regular_file(tmp_path: P
     loop.symlink_to(loop)
     with pytest.raises(InputError, match="symlink loop"):
         read_input_bytes(loop, "a text", 100)
+
+
+def test_a_settled_file_is_hashed_once_and_a_changed_one_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import hashlib
+
+    from acs_cli.io import atomic
+
+    f = tmp_path / "img.png"
+    f.write_bytes(b"a" * 1000)
+    old = 1_000_000_000_000_000_000  # 2001: long settled
+    os.utime(f, ns=(old, old))
+    assert atomic.file_sha256(f, "image") == hashlib.sha256(b"a" * 1000).hexdigest()
+    opened: list[str] = []
+    real_open = open
+    monkeypatch.setattr(
+        "builtins.open", lambda p, *a, **k: opened.append(str(p)) or real_open(p, *a, **k)
+    )
+    assert atomic.file_sha256(f, "image") == hashlib.sha256(b"a" * 1000).hexdigest()
+    assert opened == []  # remembered
+    f.write_bytes(b"b" * 1000)  # same size and inode, a new modification time
+    assert atomic.file_sha256(f, "image") == hashlib.sha256(b"b" * 1000).hexdigest()
+    # modified just now: hashed, not remembered (a rewrite within the clock's tick)
+    f.write_bytes(b"c" * 1000)
+    assert atomic.file_sha256(f, "image") == hashlib.sha256(b"c" * 1000).hexdigest()
+    opened.clear()
+    assert atomic.file_sha256(f, "image") == hashlib.sha256(b"c" * 1000).hexdigest()
+    assert opened == [str(f)]

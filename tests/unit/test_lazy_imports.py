@@ -77,9 +77,10 @@ def test_options_are_read_without_pydantic() -> None:
     argv = ["intrinsics", "missing_dir", "-o", "x.yaml", "--board", "9x6", "--square", "0.02",
             "--workers", "2", "--model", "rational", "--every", "2", "--export", "ros",
             "--camera-name", "left"]  # fmt: skip
-    code = SCRIPT.format(argvs=[argv], heavy={"pydantic", "acs_cli.stages"})
+    code = SCRIPT.format(argvs=[argv], heavy={"pydantic", "rich.progress", "acs_cli.stages"})
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert "no such folder" in res.stderr  # read the options, then ran
+    # stderr is a pipe here: no progress bar, and rich's progress module is not imported
     assert json.loads(res.stdout.strip().splitlines()[-1]) == ["acs_cli.stages"]
 
 
@@ -109,3 +110,14 @@ def test_a_solving_command_leaves_scipy_s_heavy_packages_alone(tmp_path: Path) -
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "j.yaml").is_file(), res.stderr
     assert json.loads(res.stdout.strip().splitlines()[-1]) == ["acs_cli.stages"]
+
+
+def test_a_terminal_gets_the_progress_bar(monkeypatch: pytest.MonkeyPatch) -> None:
+    from rich.progress import Progress
+
+    from acs_cli.cli import images
+
+    monkeypatch.setattr(images.err, "_force_terminal", False)
+    assert isinstance(images._bar(), images._NoBar)
+    monkeypatch.setattr(images.err, "_force_terminal", True)
+    assert isinstance(images._bar(), Progress)
