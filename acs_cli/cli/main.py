@@ -8,6 +8,7 @@ bug too, each is fixed where it arises) is one line of acscal's, never Python's 
 
 from __future__ import annotations
 
+import gc
 import sys
 import warnings
 from enum import Enum
@@ -585,16 +586,27 @@ def _show_warning(
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``acscal`` console script."""
+    """Entry point of the ``acscal`` console script (``argv`` None: ``sys.argv``, and the
+    process ends after it).
+
+    As the console script, the objects the command leaves are frozen out of the garbage
+    collector when it ends (:func:`gc.freeze`): the interpreter's exit then skips its
+    collections over them, 0.08-0.1 s of every command with numpy and OpenCV loaded.
+    Everything else of the exit still runs (buffers flushed, ``atexit`` handlers).
+    """
     args = sys.argv[1:] if argv is None else argv
     if not args:  # a bare `acscal`: the help (the command list), as git and kubectl do
         args = ["--help"]
     reset()
-    # only how a warning is shown changes, not which are: `-W error` and pytest's
-    # filterwarnings still raise them
-    with warnings.catch_warnings():
-        warnings.showwarning = _show_warning
-        _main(args)
+    try:
+        # only how a warning is shown changes, not which are: `-W error` and pytest's
+        # filterwarnings still raise them
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            _main(args)
+    finally:
+        if argv is None:  # the process ends here (a caller's own argv: it goes on)
+            gc.freeze()
 
 
 def _main(args: list[str]) -> None:
