@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -186,3 +188,13 @@ def test_corner_residuals_of_a_perfect_fisheye_view_are_zero() -> None:
     got = corner_residuals(corners, P, T_board_cam, "fisheye", K, D)
     assert got.residual.shape == (3 * 54, 2)
     assert np.abs(got.residual).max() < 1e-6
+
+
+def test_the_thresholds_table_of_the_docs_is_the_report_s() -> None:
+    """``docs/formats.md`` lists the report's thresholds: the same limits, in order (its
+    table had drifted: 1 px where the report fails above 5 px)."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "formats.md").read_text()
+    head = "| check | pass | check | fail |\n| --- | --- | --- | --- |\n"
+    rows = text[text.index(head) + len(head) :].split("\n\n")[0].splitlines()
+    cells = [tuple(c.strip() for c in r.strip("|").split("|")[-3:]) for r in rows]
+    assert cells == [t.limits() for t in THRESHOLDS.values()]
