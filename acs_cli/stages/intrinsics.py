@@ -85,7 +85,7 @@ __all__ = [
 
 EXPORTS = ("ros", "opencv")
 #: Detections between two cache snapshots during a run.
-CACHE_EVERY = 8
+CACHE_EVERY = 16
 #: Images below which detection runs in this process (a pool costs more than it saves).
 MIN_IMAGES_PER_WORKER = 12
 
