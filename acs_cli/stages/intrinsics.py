@@ -250,13 +250,19 @@ def _target_key(sha: str, target: MarkerTarget) -> str:
     return f"{sha}:{label}:{TARGETS_DETECTOR_VERSION}"
 
 
-def _exit_with_parent(parent: int) -> None:
-    """Pool initializer: end this worker when its parent dies.
+def _init_worker(parent: int) -> None:
+    """Pool initializer: one OpenCV thread in this worker, and its end when its parent dies.
 
-    A killed ``acscal`` (SIGKILL, the OOM killer) cannot shut its pool down, and the
-    workers would otherwise wait for work forever.
+    The pool already has a worker per core: OpenCV's own threads in each would only contend
+    for the same cores (the corners are the same either way). A killed ``acscal`` (SIGKILL,
+    the OOM killer) cannot shut its pool down, and the workers would otherwise wait for work
+    forever.
     """
     import threading
+
+    import cv2
+
+    cv2.setNumThreads(1)
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -648,7 +654,7 @@ def _detect_each(
                 record(i, key, det)
         else:
             with ProcessPoolExecutor(
-                max_workers=n_workers, initializer=_exit_with_parent, initargs=(os.getpid(),)
+                max_workers=n_workers, initializer=_init_worker, initargs=(os.getpid(),)
             ) as pool:
                 pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
                     pool.submit(_detect_file, str(images[i]), cols, rows, target): i for i in todo
@@ -705,7 +711,7 @@ def _full_search(
     n_workers = min(n_workers, len(todo))
     out: dict[int, Detection] = {}
     pool = (
-        ProcessPoolExecutor(n_workers, initializer=_exit_with_parent, initargs=(os.getpid(),))
+        ProcessPoolExecutor(n_workers, initializer=_init_worker, initargs=(os.getpid(),))
         if n_workers > 1
         else None
     )
@@ -897,7 +903,7 @@ def _detect_video(
             if pool is None:
                 pool = ProcessPoolExecutor(
                     max_workers=n_workers,
-                    initializer=_exit_with_parent,
+                    initializer=_init_worker,
                     initargs=(os.getpid(),),
                 )
             pending[pool.submit(_detect_image, frame.image, ref.name, seed, cols, rows, target)] = i
