@@ -207,8 +207,16 @@ class IntrinsicsRun:
     warnings: list[str] = field(default_factory=list)
 
 
+#: Folders of at most this many images have each board's larger-board screen score
+#: (:attr:`Detection.extension`) measured by the detection (about 1.5 ms a large image),
+#: so that the check reads no image again (about 0.1 s for its four); larger folders skip
+#: it and the check reads its four images. Video frames are always measured: the check would
+#: seek and decode them again.
+MEASURE_EXTENSION_UP_TO = 100
+
+
 def _detect_file(
-    path: str, cols: int, rows: int, target: MarkerTarget | None = None
+    path: str, cols: int, rows: int, target: MarkerTarget | None = None, measure: bool = True
 ) -> tuple[str, Detection | None, str | None]:
     """Worker: read one image and detect the board (or ``target``, an AprilGrid or ChArUco:
     corners ``(m, 2)`` by id, NaN where unseen); errors come back as text."""
@@ -216,14 +224,20 @@ def _detect_file(
         img, sha = read_gray(path)
     except InputError as exc:
         return "", None, exc.one_line()
-    return _detect_image(img, Path(path).name, sha, cols, rows, target)
+    return _detect_image(img, Path(path).name, sha, cols, rows, target, measure)
 
 
 def _detect_image(
-    img: np.ndarray, name: str, sha: str, cols: int, rows: int, target: MarkerTarget | None
+    img: np.ndarray,
+    name: str,
+    sha: str,
+    cols: int,
+    rows: int,
+    target: MarkerTarget | None,
+    measure: bool = True,
 ) -> tuple[str, Detection | None, str | None]:
     """Worker: detect the board (or ``target``) in one greyscale image whose content key is
-    ``sha``."""
+    ``sha``; with ``measure``, a board's larger-board screen score too."""
     h, w = img.shape[:2]
     if target is not None:
         found = detect_target(img, target)
@@ -231,9 +245,8 @@ def _detect_image(
         det = Detection(name, dense is not None, (int(w), int(h)), dense)
         return _target_key(sha, target), det, None
     corners = detect_checkerboard(img, cols, rows)
-    det = Detection(
-        name, corners is not None, (int(w), int(h)), corners, _extension(img, corners, cols, rows)
-    )
+    score = _extension(img, corners, cols, rows) if measure else None
+    det = Detection(name, corners is not None, (int(w), int(h)), corners, score)
     return detection_key(sha, cols, rows, DETECTOR_VERSION), det, None
 
 
@@ -643,10 +656,11 @@ def _detect_each(
 
     n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
     n_workers = min(n_workers, max(1, len(todo) // MIN_IMAGES_PER_WORKER))
+    measure = len(images) <= MEASURE_EXTENSION_UP_TO
     try:
         if n_workers <= 1:
             for i in todo:
-                key, det, error = _detect_file(str(images[i]), cols, rows, target)
+                key, det, error = _detect_file(str(images[i]), cols, rows, target, measure)
                 if error is not None:
                     raise InputError(error)
                 if det is None:  # pragma: no cover - _detect_file's contract
@@ -657,7 +671,8 @@ def _detect_each(
                 max_workers=n_workers, initializer=_init_worker, initargs=(os.getpid(),)
             ) as pool:
                 pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
-                    pool.submit(_detect_file, str(images[i]), cols, rows, target): i for i in todo
+                    pool.submit(_detect_file, str(images[i]), cols, rows, target, measure): i
+                    for i in todo
                 }
                 try:
                     while pending:

@@ -171,6 +171,14 @@ def test_the_larger_board_check_uses_the_scores_the_detection_measured(
                             part_is_error=False) is None  # fmt: skip
     assert read == [4]
 
+    # a folder larger than MEASURE_EXTENSION_UP_TO: not measured (1.5 ms an image), read
+    monkeypatch.setattr(stage, "MEASURE_EXTENSION_UP_TO", 5)
+    large = detect_folder(folder, 9, 6, tmp_path / "l.npz", workers=1)
+    assert all(d.found and d.extension is None for d in large.detections)
+    assert stage.few_boards(folder, large, 9, 6, 3, part_is_error=False) is None
+    assert read == [4, 4]
+    monkeypatch.undo()
+
     part = detect_folder(folder, 8, 6, tmp_path / "p.npz", workers=1)
     assert all(d.found for d in part.detections)
     assert all(d.extension is not None and d.extension > EXTENSION_SCREEN for d in part.detections)
