@@ -339,7 +339,7 @@ def input_size(path: str | Path, what: str, max_bytes: int) -> int:
 #: Digests of the files hashed in this process, by what identifies a file's version
 #: (:func:`content_sha256`): a stage hashes its inputs for its cache keys and again for its
 #: artifact's header.
-_DIGESTS: dict[tuple[str, int, int, int, int], bytes] = {}
+_DIGESTS: dict[tuple[str, int, int, int, int, int], bytes] = {}
 #: How long before its hashing a file must have been last modified for its digest to be
 #: remembered (:func:`content_sha256`), nanoseconds.
 SETTLED_NS = 2_000_000_000
@@ -347,13 +347,14 @@ SETTLED_NS = 2_000_000_000
 
 def content_sha256(path: str | Path) -> bytes:
     """SHA-256 (the raw digest) of a file's bytes, read in chunks of 1 MiB; a file hashed
-    before in this process, unchanged since (same device, inode, size and modification
-    time), is not read again.
+    before in this process, unchanged since, is not read again.
 
-    Only a file last modified more than :data:`SETTLED_NS` before it was hashed is
-    remembered: a file system stamps modification times in ticks of milliseconds, so a
-    file rewritten (same size, same inode) within a tick of its hashing could keep its
-    time, as git's "racy" index entries do.
+    A file is the same when its device, inode, size, modification time and status-change
+    time are (the last one no tool sets back: a copy that restores the modification time,
+    ``cp -p`` or ``shutil.copy2``, still changes it). Only a file whose last change was more
+    than :data:`SETTLED_NS` before its hashing is remembered: a file system stamps times in
+    ticks of milliseconds, so a file rewritten within a tick of its hashing could keep them,
+    as git's "racy" index entries do.
 
     Raises
     ------
@@ -362,21 +363,23 @@ def content_sha256(path: str | Path) -> bytes:
     """
     import hashlib
 
-    st = os.stat(path)
-    key = (os.fspath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-    known = _DIGESTS.get(key)
+    def key(st: os.stat_result) -> tuple[str, int, int, int, int, int]:
+        return (os.fspath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+    known = _DIGESTS.get(key(os.stat(path)))
     if known is not None:
         return known
     h = hashlib.sha256()
     with open(path, "rb") as fh:
+        st = os.fstat(fh.fileno())  # the file read, whatever the path named before
         while chunk := fh.read(1 << 20):
             h.update(chunk)
     digest = h.digest()
-    if time.time_ns() - st.st_mtime_ns <= SETTLED_NS:
+    if time.time_ns() - max(st.st_mtime_ns, st.st_ctime_ns) <= SETTLED_NS:
         return digest
     if len(_DIGESTS) >= 100_000:  # a bound, for a process that hashes without end
         _DIGESTS.clear()
-    _DIGESTS[key] = digest
+    _DIGESTS[key(st)] = digest
     return digest
 
 

@@ -364,7 +364,7 @@ def _larger_ruled_out(
     """
     from acs_cli.core.board_hint import EXTENSION_SCREEN, extension_score
 
-    scores = [d.extension if d.found else -math.inf for d in detections]
+    scores = [d.extension if d.found else math.inf for d in detections]  # no board: search
     greys = None
     if any(s is None for s in scores):
         greys = read_images(images)
