@@ -264,18 +264,17 @@ def _target_key(sha: str, target: MarkerTarget) -> str:
 
 
 def _init_worker(parent: int) -> None:
-    """Pool initializer: one OpenCV thread in this worker, and its end when its parent dies.
+    """Pool initializer: end this worker when its parent dies.
 
-    The pool already has a worker per core: OpenCV's own threads in each would only contend
-    for the same cores (the corners are the same either way). A killed ``acscal`` (SIGKILL,
-    the OOM killer) cannot shut its pool down, and the workers would otherwise wait for work
-    forever.
+    A killed ``acscal`` (SIGKILL, the OOM killer) cannot shut its pool down, and the
+    workers would otherwise wait for work forever.
+
+    It must not touch OpenCV's threads (``cv2.setNumThreads``): a worker is forked from a
+    process whose OpenCV thread pool may be busy (a video's first frames are detected in
+    the process), and the fork's copy of that pool's lock then never opens (a worker that
+    set one thread hung without ever starting: `tests/io/test_images.py`).
     """
     import threading
-
-    import cv2
-
-    cv2.setNumThreads(1)
 
     def watch() -> None:
         while os.getppid() == parent:

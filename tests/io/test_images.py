@@ -340,3 +340,40 @@ def test_the_full_search_runs_only_for_small_boards_or_none(
     # a rerun reads what the full search found (nothing) from the cache: no search
     detect_folder(blank, 9, 6, tmp_path / "blank.npz", workers=1)
     assert len(calls) == 1
+
+
+def test_a_video_s_frames_go_through_the_pool_without_hanging(tmp_path: Path) -> None:
+    """A video's first frames are detected in the process (OpenCV's threads started), the
+    rest in a pool forked from it: the workers must start and find the same corners. (A
+    worker that reconfigured OpenCV's threads hung on the fork's copy of their lock.) Run
+    in a child process, so that a hang fails the test instead of the suite."""
+    import subprocess
+    import sys
+
+    from sample_data_gen.video import write_video
+
+    n = 30
+    video = write_video(
+        tmp_path / "board.mkv",
+        [board_image(shift=3 * i) for i in range(n)],
+        [0.1 * i for i in range(n)],
+    )
+    code = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from acs_cli.stages.intrinsics import detect_folder\n"
+        "fd = detect_folder(Path(sys.argv[1]), 9, 6, Path(sys.argv[2]), workers=2)\n"
+        "print(sum(d.found for d in fd.detections))\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(video), str(tmp_path / "pool.npz")],
+        capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split()[-1] == str(n)
+    pooled = read_detections(tmp_path / "pool.npz")
+    serial = detect_folder(video, 9, 6, tmp_path / "serial.npz", workers=1)
+    assert serial.cached == 0 and len(pooled) == n
+    for k, d in zip(serial.keys, serial.detections, strict=True):
+        assert d.corners is not None
+        np.testing.assert_array_equal(pooled[k].corners, d.corners)
