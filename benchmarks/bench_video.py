@@ -15,6 +15,7 @@ Issue 21's two figures, each from real ``acscal`` processes on rendered 1920x108
    - ``--every K --workers 1``: the kept frames grow with the length (12 and 120 at the
      defaults), one process holds everything;
    - ``--max-frames M --workers 1``: the same kept frames from both lengths;
+   - ``--max-frames M`` with the default workers: the same, detected in a pool;
    - ``--every K`` with the default workers: the short video's 12 frames run in the
      command's process, the long one's 120 in a pool (more than
      ``acs_cli.stages.intrinsics.MIN_IMAGES_PER_WORKER`` frames), whose worker, forked from
@@ -129,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
             f"--every {args.every} --workers 1": ["--every", str(args.every), "--workers", "1"],
             f"--max-frames {args.max_frames} --workers 1": [
                 "--max-frames", str(args.max_frames), "--workers", "1",
+            ],
+            f"--max-frames {args.max_frames} (default workers)": [
+                "--max-frames", str(args.max_frames),
             ],
             f"--every {args.every} (default workers)": ["--every", str(args.every)],
         }  # fmt: skip
