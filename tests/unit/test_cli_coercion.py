@@ -55,8 +55,8 @@ def test_every_plain_option_takes_the_fast_coercion() -> None:
     assert set(kinds.values()) == {"bool", "str", "int", "float", "path", "enum", "str_list"}
 
 
-@pytest.mark.parametrize(("name", "param"), PLAIN, ids=[n for n, _ in PLAIN])
-def test_the_same_value_or_message_as_typer(name: str, param: Any) -> None:
+def _both(param: Any) -> tuple[str, Any, Any]:
+    """A parameter's plain kind, our coercion of it and typer's own."""
     kind = coercion.plain_kind(param.type_descriptor)
     assert kind is not None
     ours = coercion._PlainParam(
@@ -65,7 +65,12 @@ def test_the_same_value_or_message_as_typer(name: str, param: Any) -> None:
         kind=kind,
         descriptor=param.type_descriptor,
     )
-    theirs = build_runtime_param(param.type_descriptor)
+    return kind, ours, build_runtime_param(param.type_descriptor)
+
+
+@pytest.mark.parametrize(("name", "param"), PLAIN, ids=[n for n, _ in PLAIN])
+def test_the_same_value_or_message_as_typer(name: str, param: Any) -> None:
+    kind, ours, theirs = _both(param)
     values: list[Any] = [(t,) for t in TEXTS] if kind == "str_list" else list(TEXTS)
     values += [None, param.default, *VALUES] + ([Path("a/b")] if kind == "path" else [])
     if kind == "str_list":
@@ -96,15 +101,8 @@ def test_bounds_are_printed_as_pydantic_prints_them() -> None:
 
     params = get_command(sub).params
     for p in params:
-        kind = coercion.plain_kind(p.type_descriptor)
+        kind, ours, theirs = _both(p)
         assert kind in ("int", "float")
-        ours = coercion._PlainParam(
-            parameter_info=p.type_descriptor.parameter_info,
-            annotation=p.type_descriptor.annotation,
-            kind=kind,
-            descriptor=p.type_descriptor,
-        )
-        theirs = build_runtime_param(p.type_descriptor)
         for v in ["-1", "1e-6", "0.3", "10", "nan", -1, 0.3, 10, "1e-30"]:
             assert _outcome(ours, v, p) == _outcome(theirs, v, p), (p.name, v)
 
