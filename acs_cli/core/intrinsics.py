@@ -479,11 +479,11 @@ def intrinsics_covariance(
     # pose perturbation Exp(d) R, t + e: d x_cam = -[R X]x d + e
     Jp = np.concatenate([-np.matmul(Dp, se3.skew(Rx)), Dp], axis=2)  # (k, 2, 6)
     n_views, p = len(used), len(free)
-    H_ii = np.einsum("kai,kaj->ij", Di, Di)
-    H_ip = np.zeros((n_views, p, 6))
-    H_pp = np.zeros((n_views, 6, 6))
-    np.add.at(H_ip, view, np.einsum("kai,kaj->kij", Di, Jp))
-    np.add.at(H_pp, view, np.einsum("kai,kaj->kij", Jp, Jp))
+    H_ii = Di.reshape(-1, p).T @ Di.reshape(-1, p)
+    # per view: sums over its points (consecutive, each view has some) of J_i^T J_p, J_p^T J_p
+    starts = np.concatenate([[0], np.cumsum([x.shape[0] for x in X])[:-1]])
+    H_ip = np.add.reduceat(np.matmul(np.swapaxes(Di, 1, 2), Jp), starts, axis=0)
+    H_pp = np.add.reduceat(np.matmul(np.swapaxes(Jp, 1, 2), Jp), starts, axis=0)
     S = H_ii - np.einsum("vij,vjk->ik", H_ip, np.linalg.solve(H_pp, np.swapaxes(H_ip, 1, 2)))
     dof = max(res.size - p - 6 * n_views, 1)
     sigma2 = float(np.sum(res**2) / dof)

@@ -343,11 +343,15 @@ _DIGESTS: dict[tuple[str, int, int, int, int, int], bytes] = {}
 #: How long before its hashing a file must have been last modified for its digest to be
 #: remembered (:func:`content_sha256`), nanoseconds.
 SETTLED_NS = 2_000_000_000
+#: Bytes :func:`content_sha256` reads at a time: memory stays bounded on a video of
+#: gigabytes. 1 MiB chunks hashed 30 images of 1 MB in 47-49 ms, 2-8 MiB ones in 28-29 ms
+#: (rwhe_kuka1).
+HASH_CHUNK = 4 << 20
 
 
 def content_sha256(path: str | Path) -> bytes:
-    """SHA-256 (the raw digest) of a file's bytes, read in chunks of 1 MiB; a file hashed
-    before in this process, unchanged since, is not read again.
+    """SHA-256 (the raw digest) of a file's bytes, read in chunks of :data:`HASH_CHUNK`; a
+    file hashed before in this process, unchanged since, is not read again.
 
     A file is the same when its device, inode, size, modification time and status-change
     time are (the last one no tool sets back: a copy that restores the modification time,
@@ -370,9 +374,9 @@ def content_sha256(path: str | Path) -> bytes:
     if known is not None:
         return known
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open(path, "rb", buffering=0) as fh:
         st = os.fstat(fh.fileno())  # the file read, whatever the path named before
-        while chunk := fh.read(1 << 20):
+        while chunk := fh.read(HASH_CHUNK):
             h.update(chunk)
     digest = h.digest()
     if time.time_ns() - max(st.st_mtime_ns, st.st_ctime_ns) <= SETTLED_NS:

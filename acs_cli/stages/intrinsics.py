@@ -284,6 +284,18 @@ def _init_worker(parent: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
+def _detection_pool(n_workers: int) -> ProcessPoolExecutor:
+    """A pool of ``n_workers`` detection processes (:func:`_init_worker`).
+
+    ``numpy.ma`` is imported here first: ``np.median`` imports it on its first call (25 ms),
+    which every forked worker would otherwise do on its first board; this process needs it
+    anyway (the outlier views' median).
+    """
+    import numpy.ma  # noqa: F401
+
+    return ProcessPoolExecutor(n_workers, initializer=_init_worker, initargs=(os.getpid(),))
+
+
 def _file_key(path: Path, cols: int, rows: int, target: MarkerTarget | None = None) -> str:
     sha = file_sha256(path, "image")
     if target is not None:
@@ -666,9 +678,7 @@ def _detect_each(
                     raise RuntimeError("detection worker returned nothing")
                 record(i, key, det)
         else:
-            with ProcessPoolExecutor(
-                max_workers=n_workers, initializer=_init_worker, initargs=(os.getpid(),)
-            ) as pool:
+            with _detection_pool(n_workers) as pool:
                 pending: dict[Future[tuple[str, Detection | None, str | None]], int] = {
                     pool.submit(_detect_file, str(images[i]), cols, rows, target, measure): i
                     for i in todo
@@ -724,11 +734,7 @@ def _full_search(
     n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
     n_workers = min(n_workers, len(todo))
     out: dict[int, Detection] = {}
-    pool = (
-        ProcessPoolExecutor(n_workers, initializer=_init_worker, initargs=(os.getpid(),))
-        if n_workers > 1
-        else None
-    )
+    pool = _detection_pool(n_workers) if n_workers > 1 else None
     try:
         for start in range(0, len(todo), FULL_SEARCH_CHUNK):
             chunk = list(todo[start : start + FULL_SEARCH_CHUNK])
@@ -915,11 +921,7 @@ def _detect_video(
                 record(i, *check(result), False)
                 continue
             if pool is None:
-                pool = ProcessPoolExecutor(
-                    max_workers=n_workers,
-                    initializer=_init_worker,
-                    initargs=(os.getpid(),),
-                )
+                pool = _detection_pool(n_workers)
             pending[pool.submit(_detect_image, frame.image, ref.name, seed, cols, rows, target)] = i
             while len(pending) >= FRAMES_IN_FLIGHT * n_workers:
                 ready, _ = wait(pending, return_when=FIRST_COMPLETED)

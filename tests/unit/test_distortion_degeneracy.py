@@ -63,6 +63,21 @@ def test_covariance_is_opencvs_where_it_gives_one(rng: np.random.Generator) -> N
         assert (std[8] == 0.0) == (model == "pinhole")
 
 
+def test_covariance_of_views_with_their_own_corners_is_opencvs(rng: np.random.Generator) -> None:
+    """Views of different sizes (a partly seen target): each view's poses are marginalised
+    over its own corners, as OpenCV's are."""
+    obj, img = _views(rng)
+    keep = [rng.permutation(len(o))[: int(rng.integers(12, len(o) + 1))] for o in obj]
+    obj = [o[k] for o, k in zip(obj, keep, strict=True)]
+    img = [v[k] for v, k in zip(img, keep, strict=True)]
+    assert len({len(o) for o in obj}) > 3
+    res = calibrate_robust(obj, img, (W, H), "pinhole")
+    std = np.sqrt(np.diag(intrinsics_covariance(res, obj, img)))
+    ocv = res.std_intrinsics
+    np.testing.assert_allclose(std[:4], [ocv[k] for k in ("fx", "fy", "cx", "cy")], rtol=0.05)
+    np.testing.assert_allclose(std[4:8], ocv["distortion"][:4], rtol=0.05)
+
+
 def test_the_rules() -> None:
     """A large coefficient whose std exceeds it; two large coefficients correlated beyond
     0.999; neither for small or well-determined coefficients."""
