@@ -638,11 +638,16 @@ def _detect_each(
         known.update(read_detections(extra))
     own = read_detections(cache)
     known.update(own)
-    keys = [_file_key(p, cols, rows, target) for p in images]
+    total = len(images)
+    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+    # With nothing cached, every image is detected: the workers start at once and this
+    # process hashes the images for their keys while they work (the hashes are remembered
+    # for the artifact's header). Otherwise the keys come first, to find what is cached.
+    early = not known and min(n_workers, total // MIN_IMAGES_PER_WORKER) > 1
+    keys = [] if early else [_file_key(p, cols, rows, target) for p in images]
     found: dict[int, Detection] = {i: known[k] for i, k in enumerate(keys) if k in known}
     cached = len(found)
-    todo = [i for i in range(len(images)) if i not in found]
-    total = len(images)
+    todo = [i for i in range(total) if i not in found]
     done = cached
     if progress is not None:
         progress(done, total)
@@ -665,9 +670,8 @@ def _detect_each(
             dirty = False
             last_save = time.monotonic()
 
-    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
     n_workers = min(n_workers, max(1, len(todo) // MIN_IMAGES_PER_WORKER))
-    measure = len(images) <= MEASURE_EXTENSION_UP_TO
+    measure = total <= MEASURE_EXTENSION_UP_TO
     try:
         if n_workers <= 1:
             for i in todo:
@@ -684,6 +688,8 @@ def _detect_each(
                     for i in todo
                 }
                 try:
+                    if early:  # before any result: an unreadable file fails as it always did
+                        keys = [_file_key(p, cols, rows, target) for p in images]
                     while pending:
                         ready, _ = wait(pending, return_when=FIRST_COMPLETED)
                         for fut in ready:
@@ -701,7 +707,7 @@ def _detect_each(
         if dirty:
             write_detections(cache, store)
 
-    dets = [found[i] for i in range(len(images))]
+    dets = [found[i] for i in range(total)]
     return FolderDetections(images, dets, _common_size(images, dets), cached, cache, keys=keys)
 
 

@@ -132,6 +132,60 @@ def test_cache_round_trip(tmp_path: Path) -> None:
     assert cache_path_for(tmp_path / "cam" / "intrinsics.yaml").name == "intrinsics.detections.npz"
 
 
+@pytest.mark.parametrize("found", [30, 22, 3])
+def test_a_cache_is_compressed_where_it_is_mostly_padding(tmp_path: Path, found: int) -> None:
+    """Whole boards are stored as they are (they hardly compress); a cache with a quarter or
+    more of its entries NaN-padded (boards not found) is compressed. Both read back."""
+    import zipfile
+
+    rng = np.random.default_rng(found)
+    dets = {
+        f"{i}:9x6:v": Detection(f"{i}.png", i < found, (640, 480), rng.normal(size=(54, 2)))
+        if i < found
+        else Detection(f"{i}.png", False, (640, 480), None)
+        for i in range(30)
+    }
+    path = tmp_path / "c.detections.npz"
+    write_detections(path, dets)
+    with zipfile.ZipFile(path) as zf:
+        kinds = {info.compress_type for info in zf.infolist()}
+    assert kinds == ({zipfile.ZIP_DEFLATED} if 30 - found >= 30 / 4 else {zipfile.ZIP_STORED})
+    back = read_detections(path)
+    for k, d in dets.items():
+        assert back[k].found == d.found
+        if d.corners is not None:
+            np.testing.assert_array_equal(back[k].corners, d.corners)
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_an_image_this_process_cannot_hash_fails_before_any_detection_counts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, cached: bool
+) -> None:
+    """With nothing cached the workers start while this process hashes the images; a file it
+    cannot read still ends the run with its own message, and no cache is written."""
+    import acs_cli.io.atomic as atomic
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(24):
+        cv2.imwrite(str(folder / f"img{i}.png"), board_image(shift=i))
+    cache = tmp_path / "c.detections.npz"
+    if cached:  # a cache of another image: the keys come first
+        write_detections(cache, {"x:9x6:v": Detection("x.png", False, (640, 480), None)})
+    before = cache.read_bytes() if cached else None
+    real = atomic.content_sha256
+
+    def unreadable(path: str | Path) -> bytes:
+        if Path(path).name == "img23.png":
+            raise PermissionError(13, "Permission denied")
+        return real(path)
+
+    monkeypatch.setattr(atomic, "content_sha256", unreadable)
+    with pytest.raises(InputError, match=r"cannot read image \(Permission denied\)"):
+        detect_folder(folder, 9, 6, cache, workers=2)
+    assert (cache.read_bytes() if cached else None) == before and cache.exists() == cached
+
+
 def test_a_cache_without_the_screen_scores_reads_them_as_unmeasured(tmp_path: Path) -> None:
     """Caches written before ``extension`` was kept still read, their scores None."""
     corners = np.arange(108, dtype=float).reshape(54, 2)
