@@ -466,6 +466,8 @@ def intrinsics_covariance(
     if len(used) != result.rvecs.shape[0]:
         raise ValueError(f"{len(used)} views used but {result.rvecs.shape[0]} poses")
     X = [np.asarray(object_points[i], dtype=float).reshape(-1, 3) for i in used]
+    if any(x.shape[0] == 0 for x in X):
+        raise ValueError("a view the calibration used has no points")
     view = np.repeat(np.arange(len(used)), [x.shape[0] for x in X])
     obj = np.concatenate(X)
     px = np.concatenate([np.asarray(image_points[i], dtype=float).reshape(-1, 2) for i in used])
@@ -480,7 +482,7 @@ def intrinsics_covariance(
     Jp = np.concatenate([-np.matmul(Dp, se3.skew(Rx)), Dp], axis=2)  # (k, 2, 6)
     n_views, p = len(used), len(free)
     H_ii = Di.reshape(-1, p).T @ Di.reshape(-1, p)
-    # per view: sums over its points (consecutive, each view has some) of J_i^T J_p, J_p^T J_p
+    # per view: sums over its points (consecutive, none empty) of J_i^T J_p and J_p^T J_p
     starts = np.concatenate([[0], np.cumsum([x.shape[0] for x in X])[:-1]])
     H_ip = np.add.reduceat(np.matmul(np.swapaxes(Di, 1, 2), Jp), starts, axis=0)
     H_pp = np.add.reduceat(np.matmul(np.swapaxes(Jp, 1, 2), Jp), starts, axis=0)

@@ -173,16 +173,16 @@ def _corner_count(key: str) -> int:
     return int(cols) * int(rows)
 
 
-#: Share of a cache's entries padded with NaN (boards not found, partial targets) from which
-#: :func:`write_detections` compresses the file. The corners themselves hardly compress
-#: (30 boards of 476 corners: 218 KB against 244 KB, 13 ms against 1 ms); the padding of a
-#: video whose frames mostly show no board does.
-COMPRESS_PADDED = 0.25
+#: Share of a cache's corner coordinates that are NaN (boards not found, padding, the unseen
+#: corners of partly seen targets) from which :func:`write_detections` compresses the file.
+#: The corners themselves hardly compress (30 boards of 476 corners: 218 KB against 244 KB,
+#: 13 ms against 1 ms); the NaN of a video whose frames mostly show no board do.
+COMPRESS_NAN = 0.25
 
 
 def write_detections(path: str | Path, detections: Mapping[str, Detection]) -> None:
     """Write a detections cache atomically (an NPZ, compressed when at least
-    :data:`COMPRESS_PADDED` of its corner entries are NaN padding).
+    :data:`COMPRESS_NAN` of its corner coordinates are NaN).
 
     Parameters
     ----------
@@ -223,8 +223,8 @@ def write_detections(path: str | Path, detections: Mapping[str, Detection]) -> N
             [np.nan if (e := detections[k].extension) is None else e for k in keys], np.float64
         ),
     }
-    padded = float(np.mean(ncorn < m)) if n and m else 0.0  # rows that are (partly) NaN
-    save = np.savez_compressed if padded >= COMPRESS_PADDED else np.savez
+    nan = float(np.isnan(corners).mean()) if corners.size else 0.0
+    save = np.savez_compressed if nan >= COMPRESS_NAN else np.savez
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             save(fh, **arrays)  # type: ignore[arg-type]

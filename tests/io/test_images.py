@@ -135,7 +135,7 @@ def test_cache_round_trip(tmp_path: Path) -> None:
 @pytest.mark.parametrize("found", [30, 22, 3])
 def test_a_cache_is_compressed_where_it_is_mostly_padding(tmp_path: Path, found: int) -> None:
     """Whole boards are stored as they are (they hardly compress); a cache with a quarter or
-    more of its entries NaN-padded (boards not found) is compressed. Both read back."""
+    more of its corner coordinates NaN (boards not found) is compressed. Both read back."""
     import zipfile
 
     rng = np.random.default_rng(found)
@@ -155,6 +155,25 @@ def test_a_cache_is_compressed_where_it_is_mostly_padding(tmp_path: Path, found:
         assert back[k].found == d.found
         if d.corners is not None:
             np.testing.assert_array_equal(back[k].corners, d.corners)
+
+
+def test_a_cache_of_partly_seen_targets_is_compressed(tmp_path: Path) -> None:
+    """A target's corners come whole, NaN where unseen: those NaN count too."""
+    import zipfile
+
+    corners = np.full((30, 80, 2), np.nan)
+    corners[:, :20] = np.random.default_rng(1).normal(size=(30, 20, 2))
+    dets = {
+        f"{i}:aprilgrid/6x6#80:v": Detection(f"{i}.png", True, (640, 480), corners[i])
+        for i in range(30)
+    }
+    path = tmp_path / "t.detections.npz"
+    write_detections(path, dets)
+    with zipfile.ZipFile(path) as zf:
+        assert {info.compress_type for info in zf.infolist()} == {zipfile.ZIP_DEFLATED}
+    back = read_detections(path)
+    for k, d in dets.items():
+        np.testing.assert_array_equal(back[k].corners, d.corners)
 
 
 @pytest.mark.parametrize("cached", [False, True])

@@ -64,14 +64,16 @@ def test_covariance_is_opencvs_where_it_gives_one(rng: np.random.Generator) -> N
 
 
 def test_covariance_of_views_with_their_own_corners_is_opencvs(rng: np.random.Generator) -> None:
-    """Views of different sizes (a partly seen target): each view's poses are marginalised
-    over its own corners, as OpenCV's are."""
+    """Views of different sizes (a partly seen target), one of them dropped as an outlier:
+    each used view's pose is marginalised over its own corners, as OpenCV's are."""
     obj, img = _views(rng)
     keep = [rng.permutation(len(o))[: int(rng.integers(12, len(o) + 1))] for o in obj]
     obj = [o[k] for o, k in zip(obj, keep, strict=True)]
     img = [v[k] for v, k in zip(img, keep, strict=True)]
+    img[3] = img[3] + rng.normal(0, 3.0, img[3].shape)  # an outlier view
     assert len({len(o) for o in obj}) > 3
     res = calibrate_robust(obj, img, (W, H), "pinhole")
+    assert res.dropped == (3,)
     std = np.sqrt(np.diag(intrinsics_covariance(res, obj, img)))
     ocv = res.std_intrinsics
     np.testing.assert_allclose(std[:4], [ocv[k] for k in ("fx", "fy", "cx", "cy")], rtol=0.05)
