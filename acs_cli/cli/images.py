@@ -96,7 +96,7 @@ def _bar() -> Progress | _NoBar:
 
     return Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-        TimeRemainingColumn(), console=err, transient=True,
+        TimeRemainingColumn(), console=err.rich, transient=True,
     )  # fmt: skip
 
 

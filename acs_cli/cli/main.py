@@ -476,8 +476,7 @@ def export(
         out.print(line)
     for cam, source in info["intrinsics"].items():
         out.print(f"intrinsics of {cam}: {source}")
-    for w in info["warnings"]:
-        err.print(f"[yellow]warning:[/] {w} (marked in the export)")
+    warn(f"{w} (marked in the export)" for w in info["warnings"])
     for path in info["written"]:
         out.print(f"wrote {path} ({info['format']})")
     emit(info, written=info["written"], warnings=info["warnings"])
@@ -524,7 +523,7 @@ def simulate(
     )
     with Progress(
         TextColumn("simulating"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-        TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal,
+        TimeRemainingColumn(), console=err.rich, transient=True, disable=not err.is_terminal,
     ) as bar:  # fmt: skip
         task = bar.add_task("trials", total=trials * levels)
 

@@ -2,7 +2,11 @@
 
 Human text goes through :data:`out` (stdout) and :data:`err` (stderr). Neither wraps nor
 cuts a line when its stream is not a terminal, so ``acscal ... | grep wrote`` finds a whole
-path however long it is.
+path however long it is; and neither reads rich's markup or emoji codes in what it prints,
+so a path such as ``run[v2]/intrinsics.yaml`` or ``a:smile:b`` is printed as it is (colour
+comes from :class:`rich.text.Text` styles, never from text). Off a terminal a line of plain
+text is written as it is, without importing rich (40-70 ms of every command's start):
+rich is imported for tables, styled text and terminals.
 
 With ``--json`` a command prints one JSON document on stdout and nothing else there: its
 human text moves to stderr (:func:`json_option_callback` redirects :data:`out` as soon as
@@ -21,15 +25,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
 import typer
-from rich.console import Console, ConsoleDimensions
-from rich.text import Text
+
+if TYPE_CHECKING:
+    from rich.console import Console
 
 __all__ = [
     "JSON_SCHEMA",
@@ -53,31 +59,128 @@ JSON_SCHEMA = "acscal/cli-result"
 UNWRAPPED_WIDTH = 1_000_000
 
 
-class StreamConsole(Console):
-    """A rich :class:`~rich.console.Console` that wraps only on a terminal.
+def _stream_console_class() -> type[Console]:
+    """The rich console class behind :class:`StreamConsole` (rich imported then)."""
+    from rich.console import Console, ConsoleDimensions
 
-    On a terminal it is rich's console (its width the terminal's). On a pipe or a file it
-    is :data:`UNWRAPPED_WIDTH` columns wide: a line of text stays one line and a table
-    takes its natural width, whatever ``COLUMNS`` says.
+    class UnwrappedConsole(Console):
+        """A rich :class:`~rich.console.Console` that wraps only on a terminal.
+
+        On a terminal it is rich's console (its width the terminal's). On a pipe or a file
+        it is :data:`UNWRAPPED_WIDTH` columns wide: a line of text stays one line and a
+        table takes its natural width, whatever ``COLUMNS`` says.
+        """
+
+        @property
+        def size(self) -> ConsoleDimensions:
+            """The console's width and height (:data:`UNWRAPPED_WIDTH` off a terminal)."""
+            dims = Console.size.fget(self)  # type: ignore[attr-defined]
+            if self.is_terminal:
+                return dims
+            return ConsoleDimensions(UNWRAPPED_WIDTH, dims.height)
+
+        @size.setter
+        def size(self, new_size: tuple[int, int]) -> None:
+            Console.size.fset(self, new_size)  # type: ignore[attr-defined]
+
+    return UnwrappedConsole
+
+
+#: What rich changes in plain text (tabs expanded, control codes stripped): text with any
+#: of them goes through rich.
+_RICH_CHANGES = frozenset("\t\x07\x08\x0b\x0c\r")
+
+
+class StreamConsole:
+    """A console on stdout or stderr: rich's :class:`~rich.console.Console` (no markup, no
+    emoji codes, no highlighting; unwrapped off a terminal), made when first needed.
+
+    :meth:`print` of plain text to a stream that is not a terminal writes the text itself,
+    as rich would, without importing rich; everything else (tables, styled text, other
+    options, a terminal) goes to the rich console: :attr:`rich`, whose attributes this
+    console also answers.
+
+    Parameters
+    ----------
+    stderr : bool
+        Print on stderr (else stdout).
     """
 
-    @property
-    def size(self) -> ConsoleDimensions:
-        """The console's width and height (width :data:`UNWRAPPED_WIDTH` off a terminal)."""
-        dims = Console.size.fget(self)  # type: ignore[attr-defined]
-        if self.is_terminal:
-            return dims
-        return ConsoleDimensions(UNWRAPPED_WIDTH, dims.height)
+    def __init__(self, stderr: bool = False) -> None:
+        self._stderr = stderr
+        self._file: TextIO | None = None
+        self._rich: Console | None = None
 
-    @size.setter
-    def size(self, new_size: tuple[int, int]) -> None:
-        Console.size.fset(self, new_size)  # type: ignore[attr-defined]
+    @property
+    def file(self) -> TextIO:
+        """The stream printed on: the one set, else the process's stdout or stderr, looked
+        up at each print."""
+        if self._file is not None:
+            return self._file
+        return sys.stderr if self._stderr else sys.stdout
+
+    @file.setter
+    def file(self, stream: TextIO | None) -> None:
+        self._file = stream
+        if self._rich is not None:
+            self._rich.file = stream  # type: ignore[assignment]  # rich: None is the default
+
+    @property
+    def rich(self) -> Console:
+        """The rich console (made, and rich imported, on first use)."""
+        if self._rich is None:
+            self._rich = _stream_console_class()(
+                stderr=self._stderr, highlight=False, markup=False, emoji=False
+            )
+            if self._file is not None:
+                self._rich.file = self._file
+        return self._rich
+
+    @property
+    def is_terminal(self) -> bool:
+        """Whether the stream takes a terminal's escape codes, as rich decides it
+        (``TTY_COMPATIBLE``, ``FORCE_COLOR``, else ``isatty``)."""
+        if self._rich is not None:
+            return bool(self._rich.is_terminal)
+        tty = os.environ.get("TTY_COMPATIBLE", "")
+        if tty in ("0", "1"):
+            return tty == "1"
+        force = os.environ.get("FORCE_COLOR")
+        if force is not None:
+            return force != ""
+        isatty = getattr(self.file, "isatty", None)
+        try:
+            return False if isatty is None else bool(isatty())
+        except ValueError:
+            return False
+
+    def print(self, *objects: Any, sep: str = " ", end: str = "\n", **options: Any) -> None:
+        """Print ``objects`` as rich's ``Console.print`` does (markup, emoji codes and
+        highlighting off unless asked for)."""
+        plain = (
+            not options.keys() - {"markup", "emoji", "highlight", "soft_wrap"}
+            and not any(options.get(k) for k in ("markup", "emoji", "highlight"))
+            and all(type(o) is str for o in objects)
+            and type(sep) is str
+            and end == "\n"
+            and not self.is_terminal
+        )
+        text = sep.join(objects) if plain else ""
+        if plain and _RICH_CHANGES.isdisjoint(text):
+            stream = self.file
+            stream.write(text + end)
+            stream.flush()
+            return
+        self.rich.print(*objects, sep=sep, end=end, **options)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.rich, name)
 
 
 #: Human output (stdout; stderr under ``--json``).
-out = StreamConsole(highlight=False)
+out = StreamConsole()
 #: Warnings, notes and progress (stderr).
-err = StreamConsole(stderr=True, highlight=False)
+err = StreamConsole(stderr=True)
 
 
 @dataclass
@@ -93,7 +196,7 @@ def reset() -> None:
     """Back to human output on stdout (the start of every :func:`acs_cli.cli.main.main`)."""
     _MODE.active = False
     _MODE.command = "acscal"
-    out.file = None  # type: ignore[assignment]  # rich: None is sys.stdout, looked up per print
+    out.file = None  # None: sys.stdout, looked up per print
 
 
 def json_option_callback(ctx: typer.Context, value: bool) -> bool:
@@ -162,7 +265,12 @@ def _print_document(doc: Mapping[str, Any]) -> None:
 def warn(warnings: Iterable[str], prefix: str = "warning") -> None:
     """Print each warning on stderr as ``warning: ...`` (``prefix`` replaces the label)."""
     for w in warnings:
-        err.print(Text.assemble((f"{prefix}:", "yellow"), " ", w))
+        if err.is_terminal:
+            from rich.text import Text
+
+            err.print(Text.assemble((f"{prefix}:", "yellow"), " ", w))
+        else:
+            err.print(f"{prefix}: {w}")
 
 
 def _document(exit_code: int, **body: Any) -> dict[str, Any]:

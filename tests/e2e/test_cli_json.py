@@ -241,6 +241,21 @@ def test_intrinsics_and_poses_json_on_photographs(tmp_path: Path) -> None:
     assert 0 < doc["result"]["reprojection_rms_px"]["median"] < 1.0
 
 
+def test_a_path_rich_would_read_as_markup_is_printed_as_it_is(
+    recording: dict[str, Path], tmp_path: Path
+) -> None:
+    """Brackets and colons in a path are the path's: rich's markup took ``[v2]`` for a style
+    (and printed the path without it) and a closing tag such as ``[/v2]`` for an error."""
+    out = tmp_path / "run[v2]" / "[/v2]" / "a:smile:b" / "joint.yaml"
+    res = acscal(
+        "joint", "--fixed-joint", "--poses-a", recording["fixed_a"],
+        "--poses-b", recording["fixed_b"], "-o", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert out.is_file()
+    assert [ln for ln in res.stdout.splitlines() if "wrote" in ln] == [f"wrote {out}"]
+
+
 def test_a_long_path_is_one_line_when_piped(recording: dict[str, Path], tmp_path: Path) -> None:
     """``acscal ... | grep wrote`` finds the whole path, whatever the terminal's width."""
     out = tmp_path / ("a_rather_long_folder_name_" * 8) / "joint.yaml"

@@ -25,6 +25,7 @@ HEAVY = (
     "matplotlib",
     "pydantic",
     "typer.rich_utils",
+    "rich.console",
     "rich.table",
     "rich.progress",
     "acs_cli.core",
@@ -82,10 +83,11 @@ def test_options_are_read_without_pydantic() -> None:
     argv = ["intrinsics", "missing_dir", "-o", "x.yaml", "--board", "9x6", "--square", "0.02",
             "--workers", "2", "--model", "rational", "--every", "2", "--export", "ros",
             "--camera-name", "left"]  # fmt: skip
-    code = SCRIPT.format(argvs=[argv], heavy={"pydantic", "rich.progress", "acs_cli.stages"})
+    heavy = {"pydantic", "rich.console", "rich.progress", "acs_cli.stages"}
+    code = SCRIPT.format(argvs=[argv], heavy=heavy)
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert "no such folder" in res.stderr  # read the options, then ran
-    # stderr is a pipe here: no progress bar, and rich's progress module is not imported
+    # stderr is a pipe here: no progress bar, and its one line needs no rich at all
     assert json.loads(res.stdout.strip().splitlines()[-1]) == ["acs_cli.stages"]
 
 
@@ -122,9 +124,9 @@ def test_a_terminal_gets_the_progress_bar(monkeypatch: pytest.MonkeyPatch) -> No
 
     from acs_cli.cli import images
 
-    monkeypatch.setattr(images.err, "_force_terminal", False)
+    monkeypatch.setattr(images.err.rich, "_force_terminal", False)
     assert isinstance(images._bar(), images._NoBar)
-    monkeypatch.setattr(images.err, "_force_terminal", True)
+    monkeypatch.setattr(images.err.rich, "_force_terminal", True)
     assert isinstance(images._bar(), Progress)
 
 
