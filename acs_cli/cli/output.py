@@ -165,12 +165,13 @@ class StreamConsole:
             and end == "\n"
             and not self.is_terminal
         )
-        text = sep.join(objects) if plain else ""
-        if plain and _RICH_CHANGES.isdisjoint(text):
-            stream = self.file
-            stream.write(text + end)
-            stream.flush()
-            return
+        if plain:
+            text = sep.join(objects)
+            if _RICH_CHANGES.isdisjoint(text):
+                stream = self.file
+                stream.write(text + end)
+                stream.flush()
+                return
         self.rich.print(*objects, sep=sep, end=end, **options)
 
     def __getattr__(self, name: str) -> Any:

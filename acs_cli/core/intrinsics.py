@@ -466,9 +466,10 @@ def intrinsics_covariance(
     if len(used) != result.rvecs.shape[0]:
         raise ValueError(f"{len(used)} views used but {result.rvecs.shape[0]} poses")
     X = [np.asarray(object_points[i], dtype=float).reshape(-1, 3) for i in used]
-    if any(x.shape[0] == 0 for x in X):
+    counts = np.array([x.shape[0] for x in X])
+    if np.any(counts == 0):
         raise ValueError("a view the calibration used has no points")
-    view = np.repeat(np.arange(len(used)), [x.shape[0] for x in X])
+    view = np.repeat(np.arange(len(used)), counts)
     obj = np.concatenate(X)
     px = np.concatenate([np.asarray(image_points[i], dtype=float).reshape(-1, 2) for i in used])
     R = se3.matrix_from_rotvec(result.rvecs)[view]
@@ -483,7 +484,7 @@ def intrinsics_covariance(
     n_views, p = len(used), len(free)
     H_ii = Di.reshape(-1, p).T @ Di.reshape(-1, p)
     # per view: sums over its points (consecutive, none empty) of J_i^T J_p and J_p^T J_p
-    starts = np.concatenate([[0], np.cumsum([x.shape[0] for x in X])[:-1]])
+    starts = np.cumsum(counts) - counts
     H_ip = np.add.reduceat(np.matmul(np.swapaxes(Di, 1, 2), Jp), starts, axis=0)
     H_pp = np.add.reduceat(np.matmul(np.swapaxes(Jp, 1, 2), Jp), starts, axis=0)
     S = H_ii - np.einsum("vij,vjk->ik", H_ip, np.linalg.solve(H_pp, np.swapaxes(H_ip, 1, 2)))

@@ -296,6 +296,16 @@ def _detection_pool(n_workers: int) -> ProcessPoolExecutor:
     return ProcessPoolExecutor(n_workers, initializer=_init_worker, initargs=(os.getpid(),))
 
 
+def _worker_count(workers: int | None) -> int:
+    """Detection processes asked for: ``workers``, by default one per core."""
+    return max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+
+
+def _pool_size(workers: int | None, n_images: int) -> int:
+    """Processes for ``n_images`` images to detect (1: no pool, they run in this process)."""
+    return min(_worker_count(workers), max(1, n_images // MIN_IMAGES_PER_WORKER))
+
+
 def _file_key(path: Path, cols: int, rows: int, target: MarkerTarget | None = None) -> str:
     sha = file_sha256(path, "image")
     if target is not None:
@@ -639,11 +649,10 @@ def _detect_each(
     own = read_detections(cache)
     known.update(own)
     total = len(images)
-    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
     # With nothing cached, every image is detected: the workers start at once and this
     # process hashes the images for their keys while they work (the hashes are remembered
     # for the artifact's header). Otherwise the keys come first, to find what is cached.
-    early = not known and min(n_workers, total // MIN_IMAGES_PER_WORKER) > 1
+    early = not known and _pool_size(workers, total) > 1
     keys = [] if early else [_file_key(p, cols, rows, target) for p in images]
     found: dict[int, Detection] = {i: known[k] for i, k in enumerate(keys) if k in known}
     cached = len(found)
@@ -670,7 +679,7 @@ def _detect_each(
             dirty = False
             last_save = time.monotonic()
 
-    n_workers = min(n_workers, max(1, len(todo) // MIN_IMAGES_PER_WORKER))
+    n_workers = _pool_size(workers, len(todo))
     measure = total <= MEASURE_EXTENSION_UP_TO
     try:
         if n_workers <= 1:
@@ -737,8 +746,7 @@ def _full_search(
 ) -> dict[int, Detection]:
     """The images ``todo`` of ``fd`` read again (a chunk at a time) and searched at full
     resolution; their new detections by index."""
-    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
-    n_workers = min(n_workers, len(todo))
+    n_workers = min(_worker_count(workers), len(todo))
     out: dict[int, Detection] = {}
     pool = _detection_pool(n_workers) if n_workers > 1 else None
     try:
@@ -890,7 +898,7 @@ def _detect_video(
         total = len(selection.indices(report.count) or ())
     elif report.estimate is not None:
         total = report.estimate
-    n_workers = max(1, int(workers if workers is not None else (os.cpu_count() or 1)))
+    n_workers = _worker_count(workers)
 
     def all_frames() -> Iterator[Any]:
         yield first
